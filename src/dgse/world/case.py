@@ -1,0 +1,209 @@
+"""A case: one steady scenario (layout, inlet/outlet, one source) and its file.
+
+The interchange file ``<name>.npz`` of spec section 2 is read and written
+losslessly by :meth:`Case.load` and :meth:`Case.save`; loading validates
+shapes, dtypes, units and the source position and raises
+:class:`~dgse.errors.CaseFileError` naming the problem.
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from dgse.errors import CaseFileError, InputDataError
+from dgse.world.grid import Grid
+from dgse.world.layout import Layout
+
+REQUIRED_KEYS = ("occupancy", "wind", "concentration", "source", "resolution", "meta")
+
+
+@dataclass(frozen=True, eq=False)
+class Case:
+    """One steady scenario.
+
+    Attributes:
+        occupancy: ``uint8 (H, W)``, 1 solid, 0 free.
+        wind: ``float32 (2, H, W)``, ``[u_x, u_y]`` in m/s, 0 in solid.
+        concentration: ``float32 (H, W)`` steady concentration in ppm, 0 in solid.
+        source: ``float32 (2,)`` source position ``(x, y)`` in m.
+        resolution: cell size in m.
+        meta: JSON-able dict (width_m, height_m, inlet/outlet, inlet_velocity,
+            release_rate_gps, walls, solver, timings, ...).
+        frames: optional ``float32 (T, H, W)`` time-varying concentration (ppm),
+            ``meta["frame_dt"]`` seconds apart.
+    """
+
+    occupancy: np.ndarray
+    wind: np.ndarray
+    concentration: np.ndarray
+    source: np.ndarray
+    resolution: float
+    meta: dict = field(default_factory=dict)
+    frames: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "occupancy", np.asarray(self.occupancy).astype(np.uint8))
+        object.__setattr__(self, "wind", np.asarray(self.wind, dtype=np.float32))
+        object.__setattr__(self, "concentration", np.asarray(self.concentration, dtype=np.float32))
+        object.__setattr__(self, "source", np.asarray(self.source, dtype=np.float32).reshape(-1))
+        object.__setattr__(self, "resolution", float(self.resolution))
+        if self.frames is not None:
+            object.__setattr__(self, "frames", np.asarray(self.frames, dtype=np.float32))
+        problems = validate_arrays(
+            self.occupancy, self.wind, self.concentration, self.source, self.resolution,
+            self.meta, self.frames,
+        )
+        if problems:
+            raise InputDataError("invalid case: " + "; ".join(problems))
+
+    # -- derived views ------------------------------------------------------------------
+    @property
+    def grid(self) -> Grid:
+        return Grid(self.occupancy.shape, self.resolution)
+
+    @property
+    def free(self) -> np.ndarray:
+        return self.occupancy == 0
+
+    @property
+    def name(self) -> str:
+        return str(self.meta.get("name", "case"))
+
+    @property
+    def source_cell(self) -> tuple[int, int]:
+        """``(i, j)`` of the source cell."""
+        return self.grid.cell_of(float(self.source[0]), float(self.source[1]))
+
+    @property
+    def inlet_velocity(self) -> float:
+        return float(self.meta["inlet_velocity"])
+
+    @property
+    def release_rate(self) -> float:
+        """Release rate in g/s."""
+        return float(self.meta["release_rate_gps"])
+
+    @property
+    def layout(self) -> Layout:
+        return Layout.from_meta(self.occupancy, self.meta, name=self.name)
+
+    def with_meta(self, **updates) -> Case:
+        return replace(self, meta={**self.meta, **updates})
+
+    # -- file I/O -----------------------------------------------------------------------
+    def save(self, path: str | Path) -> Path:
+        """Write the case file (compressed ``.npz``); returns the path written."""
+        path = Path(path)
+        if path.suffix != ".npz":
+            path = path.with_suffix(path.suffix + ".npz") if path.suffix else path.with_suffix(".npz")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        arrays = {
+            "occupancy": self.occupancy,
+            "wind": self.wind,
+            "concentration": self.concentration,
+            "source": self.source,
+            "resolution": np.float32(self.resolution),
+            "meta": np.array(json.dumps(self.meta)),
+        }
+        if self.frames is not None:
+            arrays["frames"] = self.frames
+        tmp = path.with_name(path.name + ".part")
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+        tmp.replace(path)
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> Case:
+        """Read and validate a case file; raises :class:`CaseFileError` naming the problem."""
+        path = Path(path)
+        if not path.exists():
+            raise CaseFileError(f"{path}: no such file")
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                arrays = {k: data[k] for k in data.files}
+        except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
+            raise CaseFileError(f"{path}: not a readable .npz case file ({e})") from None
+        return cls.from_arrays(arrays, origin=str(path))
+
+    @classmethod
+    def from_arrays(cls, arrays: dict, origin: str = "case") -> Case:
+        """A case from the arrays of a case file (as ``np.load`` gives them)."""
+        missing = [k for k in REQUIRED_KEYS if k not in arrays]
+        if missing:
+            raise CaseFileError(f"{origin}: missing key(s) {', '.join(missing)}")
+        occ = arrays["occupancy"]
+        problems = []
+        if occ.dtype != np.uint8:
+            problems.append(f"occupancy has dtype {occ.dtype}, expected uint8")
+        for key in ("wind", "concentration", "source") + (("frames",) if "frames" in arrays else ()):
+            if arrays[key].dtype != np.float32:
+                problems.append(f"{key} has dtype {arrays[key].dtype}, expected float32")
+        try:
+            meta = json.loads(str(arrays["meta"]))
+            if not isinstance(meta, dict):
+                raise ValueError("not a JSON object")
+        except ValueError as e:
+            raise CaseFileError(f"{origin}: meta is not a JSON object ({e})") from None
+        res = np.asarray(arrays["resolution"])
+        if res.shape != () or not np.issubdtype(res.dtype, np.floating):
+            problems.append(f"resolution must be a float scalar, got {res.dtype} {res.shape}")
+        if problems:
+            raise CaseFileError(f"{origin}: " + "; ".join(problems))
+        try:
+            return cls(
+                occ, arrays["wind"], arrays["concentration"], arrays["source"],
+                float(res), meta, arrays.get("frames"),
+            )
+        except InputDataError as e:
+            raise CaseFileError(f"{origin}: {e}") from None
+
+
+def validate_arrays(occ, wind, conc, source, resolution, meta, frames=None) -> list[str]:
+    """Problems (human-readable) with a case's arrays; empty when valid."""
+    p: list[str] = []
+    if occ.ndim != 2 or min(occ.shape, default=0) < 2:
+        return [f"occupancy must be a 2-D map, got shape {occ.shape}"]
+    H, W = occ.shape
+    if not np.isin(occ, (0, 1)).all():
+        p.append("occupancy must contain only 0 (free) and 1 (solid)")
+    if not (resolution > 0 and np.isfinite(resolution)):
+        p.append(f"resolution must be positive, got {resolution}")
+    if wind.shape != (2, H, W):
+        p.append(f"wind has shape {wind.shape}, expected (2, {H}, {W})")
+    elif not np.isfinite(wind).all():
+        p.append("wind has non-finite values")
+    elif np.abs(wind[:, occ == 1]).max(initial=0) > 0:
+        p.append("wind is not 0 in solid cells")
+    if conc.shape != (H, W):
+        p.append(f"concentration has shape {conc.shape}, expected ({H}, {W})")
+    elif not np.isfinite(conc).all():
+        p.append("concentration has non-finite values")
+    elif conc.min(initial=0) < 0:
+        p.append(f"concentration has negative values (min {conc.min():.3g} ppm)")
+    elif np.abs(conc[occ == 1]).max(initial=0) > 0:
+        p.append("concentration is not 0 in solid cells")
+    if frames is not None:
+        if frames.ndim != 3 or frames.shape[1:] != (H, W):
+            p.append(f"frames has shape {frames.shape}, expected (T, {H}, {W})")
+        elif "frame_dt" not in meta:
+            p.append("frames given but meta has no frame_dt")
+    if source.shape != (2,):
+        p.append(f"source has shape {source.shape}, expected (2,)")
+    elif resolution > 0:
+        x, y = float(source[0]), float(source[1])
+        j, i = int(np.floor(x / resolution)), int(np.floor(y / resolution))
+        if not (0 <= i < H and 0 <= j < W):
+            p.append(f"source ({x:.3f}, {y:.3f}) m lies outside the map")
+        elif occ[i, j] != 0:
+            p.append(f"source ({x:.3f}, {y:.3f}) m lies in a solid cell ({i}, {j})")
+    if isinstance(meta, dict) and resolution > 0:
+        for key, n in (("width_m", W), ("height_m", H)):
+            if key in meta and abs(float(meta[key]) - n * resolution) > 0.5 * resolution:
+                p.append(f"meta {key}={meta[key]} does not match {n} cells of {resolution} m")
+    return p

@@ -1,0 +1,122 @@
+"""The one grid type every module uses.
+
+Cell ``(i, j)`` of an ``(H, W)`` map has its centre at
+``x = (j + 0.5) * resolution``, ``y = (i + 0.5) * resolution``; row ``i``
+grows with ``y`` (plot with ``origin="lower"``).  See spec section 1.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from dgse.errors import InputDataError
+
+DEFAULT_RESOLUTION = 0.1
+
+
+@dataclass(frozen=True)
+class Grid:
+    """A uniform Cartesian grid of ``shape = (H, W)`` cells of side ``resolution`` m.
+
+    Example:
+        >>> g = Grid((98, 76))
+        >>> g.width_m, g.height_m
+        (7.6, 9.8)
+        >>> g.cell_of(0.05, 0.15)
+        (1, 0)
+    """
+
+    shape: tuple[int, int]
+    resolution: float = DEFAULT_RESOLUTION
+
+    def __post_init__(self) -> None:
+        if len(self.shape) != 2 or min(self.shape) < 1:
+            raise InputDataError(f"grid shape must be two positive ints, got {self.shape}")
+        object.__setattr__(self, "shape", (int(self.shape[0]), int(self.shape[1])))
+        if not (self.resolution > 0 and math.isfinite(self.resolution)):
+            raise InputDataError(f"grid resolution must be positive, got {self.resolution}")
+        object.__setattr__(self, "resolution", float(self.resolution))
+
+    @classmethod
+    def from_size(cls, width_m: float, height_m: float, resolution: float = DEFAULT_RESOLUTION):
+        """The grid covering a ``width_m x height_m`` rectangle, snapped to whole cells."""
+        return cls((round(height_m / resolution), round(width_m / resolution)), resolution)
+
+    @property
+    def height(self) -> int:
+        return self.shape[0]
+
+    @property
+    def width(self) -> int:
+        return self.shape[1]
+
+    @property
+    def width_m(self) -> float:
+        return round(self.width * self.resolution, 9)
+
+    @property
+    def height_m(self) -> float:
+        return round(self.height * self.resolution, 9)
+
+    @property
+    def cell_area(self) -> float:
+        return self.resolution**2
+
+    @property
+    def x(self) -> np.ndarray:
+        """Cell-centre x coordinates, shape ``(W,)``."""
+        return (np.arange(self.width) + 0.5) * self.resolution
+
+    @property
+    def y(self) -> np.ndarray:
+        """Cell-centre y coordinates, shape ``(H,)``."""
+        return (np.arange(self.height) + 0.5) * self.resolution
+
+    def meshgrid(self) -> tuple[np.ndarray, np.ndarray]:
+        """Cell-centre coordinates ``(X, Y)``, each of shape ``(H, W)``."""
+        return np.meshgrid(self.x, self.y)
+
+    def cell_of(self, x: float, y: float) -> tuple[int, int]:
+        """The ``(i, j)`` of the cell containing point ``(x, y)``; raises if outside."""
+        j = math.floor(x / self.resolution)
+        i = math.floor(y / self.resolution)
+        if not (0 <= i < self.height and 0 <= j < self.width):
+            raise InputDataError(
+                f"point ({x:.3f}, {y:.3f}) m lies outside the {self.width_m} x {self.height_m} m map"
+            )
+        return i, j
+
+    def center_of(self, i: int, j: int) -> tuple[float, float]:
+        """The ``(x, y)`` centre of cell ``(i, j)`` in metres."""
+        return (j + 0.5) * self.resolution, (i + 0.5) * self.resolution
+
+    def centers_of(self, cells: np.ndarray) -> np.ndarray:
+        """Centres ``(n, 2)`` as ``(x, y)`` of ``(n, 2)`` integer cells ``(i, j)``."""
+        cells = np.asarray(cells)
+        return np.stack([(cells[:, 1] + 0.5), (cells[:, 0] + 0.5)], axis=1) * self.resolution
+
+    # -- canvas embedding (network inputs, spec section 6) -------------------------------
+    def canvas_shape(self, minimum: int = 100, stride: int = 1) -> tuple[int, int]:
+        """Square canvas side: at least ``minimum`` and the map, a multiple of ``stride``."""
+        side = max(minimum, self.height, self.width)
+        side = int(math.ceil(side / stride) * stride)
+        return side, side
+
+    def embed(self, field: np.ndarray, canvas: tuple[int, int], fill: float = 0.0) -> np.ndarray:
+        """Place ``field`` (``(..., H, W)``) at the lower-left corner of a ``canvas``."""
+        if canvas[0] < self.height or canvas[1] < self.width:
+            raise InputDataError(f"canvas {canvas} is smaller than the map {self.shape}")
+        out = np.full((*field.shape[:-2], *canvas), fill, dtype=field.dtype)
+        out[..., : self.height, : self.width] = field
+        return out
+
+    def crop(self, canvas_field: np.ndarray) -> np.ndarray:
+        """The map part (``(..., H, W)``) of a canvas-sized field."""
+        return canvas_field[..., : self.height, : self.width]
+
+    def valid_mask(self, canvas: tuple[int, int]) -> np.ndarray:
+        """Boolean canvas mask, true on the map's cells."""
+        return self.embed(np.ones(self.shape, dtype=bool), canvas, fill=False)
