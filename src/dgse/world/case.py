@@ -51,7 +51,8 @@ class Case:
         object.__setattr__(self, "wind", np.asarray(self.wind, dtype=np.float32))
         object.__setattr__(self, "concentration", np.asarray(self.concentration, dtype=np.float32))
         object.__setattr__(self, "source", np.asarray(self.source, dtype=np.float32).reshape(-1))
-        object.__setattr__(self, "resolution", float(self.resolution))
+        # stored as float32: keep the decimal value it stands for (0.1, not 0.100000001)
+        object.__setattr__(self, "resolution", float(f"{float(self.resolution):.7g}"))
         if self.frames is not None:
             object.__setattr__(self, "frames", np.asarray(self.frames, dtype=np.float32))
         problems = validate_arrays(
