@@ -1,0 +1,590 @@
+"""The ``dgse`` command line: layouts, solves, figures and the scenario job.
+
+Commands (``dgse COMMAND --help`` for each):
+
+* ``layout``: draw a random layout and save it as a layout file;
+* ``import-floorplan``: a layout from a ROS map_server map or a floor plan image;
+* ``solve``: solve a layout file (with an inlet speed and a source) or re-solve a case file;
+* ``show``: the figure of a case (or a layout) file;
+* ``scenario`` (alias ``demo``): a random multi-room scenario with four sources, solved;
+* ``engines``: the physics engines and why a missing one is missing.
+
+Every error a user can cause (:class:`~dgse.errors.DGSEError`, or a file that
+cannot be written) is printed as one red line ``error: <message>`` and the
+exit status is 2; there is no traceback.
+"""
+
+from __future__ import annotations
+
+import math
+import secrets
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich import box
+from rich.console import Console
+from rich.markup import escape
+from rich.table import Table
+from rich.text import Text
+
+from dgse.errors import DGSEError, InputDataError, UnsupportedError
+from dgse.world.case import Case
+from dgse.world.layout import Layout, Opening
+
+__all__ = ["app", "main"]
+
+#: Engines the CLI reports on even when they are not registered.
+KNOWN_ENGINES = ("builtin", "openfoam")
+#: Exit status of every user-caused error.
+EXIT_USER_ERROR = 2
+
+console = Console(highlight=False)
+err_console = Console(stderr=True, highlight=False)
+
+app = typer.Typer(
+    name="dgse",
+    help="Indoor gas-leak scenarios: layouts, a RANS + gas transport solver, figures.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+
+
+_SEED_HELP = "Random seed (default: a fresh one, printed)."
+
+
+# -- helpers -----------------------------------------------------------------------------
+def _version_callback(value: bool) -> None:
+    if value:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            v = version("dgse")
+        except PackageNotFoundError:
+            v = "0.1.0 (not installed)"
+        console.print(f"dgse {v}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", callback=_version_callback, is_eager=True, help="Print the version."
+        ),
+    ] = False,
+) -> None:
+    """Indoor gas-leak scenarios: layouts, a RANS + gas transport solver, figures."""
+
+
+def _p(path: Path | str) -> str:
+    """A path, escaped for rich markup."""
+    return escape(str(path))
+
+
+def _new_seed() -> int:
+    return secrets.randbelow(2**31)
+
+
+def _engine(name: str):
+    from dgse.physics.engines import get_engine
+
+    return get_engine(name)
+
+
+def _opening_str(o: Opening) -> str:
+    return f"{o.side} {o.start_m:g}-{o.end_m:g} m"
+
+
+def _openings_str(layout: Layout) -> str:
+    ins = ", ".join(_opening_str(o) for o in layout.inlets)
+    outs = ", ".join(_opening_str(o) for o in layout.outlets)
+    s_in = "s" * (len(layout.inlets) > 1)
+    s_out = "s" * (len(layout.outlets) > 1)
+    return f"inlet{s_in} {ins}; outlet{s_out} {outs}"
+
+
+def _layout_summary(layout: Layout) -> str:
+    g = layout.grid
+    return (
+        f"{g.width_m:g} x {g.height_m:g} m ({g.width} x {g.height} cells of {g.resolution:g} m), "
+        f"{100 * layout.free.mean():.0f} % free; {_openings_str(layout)}"
+    )
+
+
+def _save_figure(fig, path: Path, dpi: int) -> Path:
+    """Save a figure; the format follows the suffix (png, pdf, svg, ...)."""
+    fmt = path.suffix.lstrip(".").lower()
+    supported = fig.canvas.get_supported_filetypes()
+    if fmt not in supported:
+        raise InputDataError(
+            f"cannot write a figure as {path.name!r}: use one of "
+            + ", ".join(f".{k}" for k in sorted(supported))
+        )
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi)
+    return path
+
+
+def _check_positive(value: float, what: str) -> float:
+    if not (math.isfinite(value) and value > 0):
+        raise InputDataError(f"{what} must be a positive number, got {value:g}")
+    return float(value)
+
+
+def _check_source(layout: Layout, x: float, y: float) -> None:
+    """Raise :class:`InputDataError` unless ``(x, y)`` m lies in a free cell of ``layout``."""
+    i, j = layout.grid.cell_of(x, y)
+    if layout.occupancy[i, j]:
+        raise InputDataError(
+            f"source ({x:g}, {y:g}) m lies in a wall: cell ({i}, {j}) of layout "
+            f"{layout.name!r} is solid"
+        )
+
+
+def _fmt_s(seconds: object) -> str:
+    return f"{float(seconds):.2f} s" if isinstance(seconds, int | float) else "-"
+
+
+def _ratio_text(ratio: object) -> Text:
+    if not isinstance(ratio, int | float):
+        return Text("-")
+    style = "green" if abs(ratio - 1.0) <= 0.01 else "yellow" if abs(ratio - 1.0) <= 0.05 else "red"
+    return Text(f"{ratio:.4f}", style=style)
+
+
+def _case_summary(case: Case, path: Path, seconds: float) -> Table:
+    """A two-column table of one solved case: scenario, solver facts, mass balance, timings."""
+    m = case.meta
+    t = Table.grid(padding=(0, 2))
+    t.add_column(style="bold")
+    t.add_column()
+    g = case.grid
+    t.add_row("case", f"{escape(case.name)} -> {_p(path)}")
+    t.add_row("engine", escape(str(m.get("solver", "?"))))
+    t.add_row("grid", f"{g.width} x {g.height} cells, {g.width_m:g} x {g.height_m:g} m")
+    t.add_row("inlet velocity", f"{case.inlet_velocity:.3g} m/s")
+    t.add_row(
+        "source",
+        f"({float(case.source[0]):.2f}, {float(case.source[1]):.2f}) m, "
+        f"{case.release_rate:.3g} g/s",
+    )
+    iters = (m.get("iterations") or {}).get("flow")
+    conv = m.get("flow_converged")
+    conv_txt = "[green]converged[/]" if conv else "[red]not converged[/]" if conv is False else "?"
+    t.add_row("flow", f"{iters if iters is not None else '?'} iterations, {conv_txt}")
+    ratio = (m.get("mass_balance") or {}).get("outlet_flux_ratio")
+    t.add_row("mass balance", Text("outlet flux / release rate = ").append(_ratio_text(ratio)))
+    t.add_row("max concentration", f"{float(case.concentration.max()):,.1f} ppm")
+    tm = m.get("timings") or {}
+    t.add_row(
+        "timings",
+        f"flow {_fmt_s(tm.get('flow'))}, gas {_fmt_s(tm.get('gas'))}, "
+        f"wall clock {seconds:.2f} s",
+    )
+    return t
+
+
+# -- commands ----------------------------------------------------------------------------
+@app.command("layout")
+def layout_cmd(
+    seed: Annotated[
+        int | None, typer.Option("--seed", "-s", help=_SEED_HELP)
+    ] = None,
+    ood: Annotated[
+        bool,
+        typer.Option(
+            "--ood", help="Out-of-domain layout: up to 15 x 10 m, several openings, obstacles."
+        ),
+    ] = False,
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", "-o", help="Layout file to write (default: ./<name>.npz)."),
+    ] = None,
+    plot: Annotated[
+        Path | None,
+        typer.Option("--plot", help="Also save a figure of the layout (png, pdf, ...)."),
+    ] = None,
+) -> None:
+    """Make a random multi-room layout and save it as a layout file (.npz)."""
+    from dgse.world.generate import random_layout, random_ood_layout
+    from dgse.world.layout_io import save_layout
+
+    seed = _new_seed() if seed is None else seed
+    layout = (random_ood_layout if ood else random_layout)(seed)
+    path = save_layout(layout, out if out is not None else Path(f"{layout.name}.npz"))
+    summary = escape(_layout_summary(layout))
+    console.print(f"[bold]{escape(layout.name)}[/] (seed {seed}): {summary}")
+    console.print(f"wrote layout [cyan]{_p(path)}[/]")
+    if plot is not None:
+        from dgse.viz.case import plot_layout
+
+        console.print(f"wrote figure [cyan]{_p(_save_figure(plot_layout(layout), plot, 150))}[/]")
+
+
+@app.command("import-floorplan")
+def import_floorplan_cmd(
+    floorplan: Annotated[
+        Path,
+        typer.Argument(
+            metavar="MAP", help="ROS map_server YAML (with its PGM/PNG) or a floor plan image."
+        ),
+    ],
+    inlet: Annotated[
+        tuple[str, float, float],
+        typer.Option(
+            "--inlet", metavar="SIDE START END",
+            help="Inlet on side west/east/south/north from START to END m along it "
+            "(x for south/north, y for west/east; m from the map's lower-left corner).",
+        ),
+    ],
+    outlet: Annotated[
+        tuple[str, float, float],
+        typer.Option("--outlet", metavar="SIDE START END", help="Outlet, as --inlet."),
+    ],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Layout file to write.")],
+    resolution: Annotated[
+        float, typer.Option("--resolution", "-r", help="Cell size of the layout in m.")
+    ] = 0.1,
+    pixel_size: Annotated[
+        float | None,
+        typer.Option(
+            "--pixel-size", help="Image pixel side in m (plain images; default: one cell)."
+        ),
+    ] = None,
+    width_m: Annotated[
+        float | None,
+        typer.Option("--width-m", help="Image width in m (plain images; instead of --pixel-size)."),
+    ] = None,
+    carve: Annotated[
+        float,
+        typer.Option(
+            "--carve", help="Cut the openings through an outer wall up to this depth in m."
+        ),
+    ] = 0.0,
+    name: Annotated[
+        str | None, typer.Option("--name", help="Layout name (default: the map's file name).")
+    ] = None,
+    plot: Annotated[
+        Path | None, typer.Option("--plot", help="Also save a figure of the layout.")
+    ] = None,
+) -> None:
+    """Make a layout from a floor plan (ROS map_server YAML, or PNG/PGM: dark is solid)."""
+    from dgse.world.floorplan import layout_from_floorplan, load_png_map, load_ros_map
+    from dgse.world.layout_io import save_layout
+
+    _check_positive(resolution, "--resolution")
+    if floorplan.suffix.lower() in (".yaml", ".yml"):
+        if pixel_size is not None or width_m is not None:
+            raise InputDataError(
+                "--pixel-size/--width-m apply to plain images; a ROS map's YAML gives its "
+                "resolution"
+            )
+        fp = load_ros_map(floorplan, resolution)
+        where = f", origin ({fp.origin[0]:g}, {fp.origin[1]:g}) m in the map frame"
+    else:
+        fp = load_png_map(floorplan, resolution, pixel_size=pixel_size, width_m=width_m)
+        where = ""
+    g = fp.grid
+    console.print(
+        f"floor plan [cyan]{_p(floorplan)}[/]: {g.width_m:g} x {g.height_m:g} m "
+        f"({g.width} x {g.height} cells){escape(where)}"
+    )
+    layout = layout_from_floorplan(
+        fp, None, [inlet], [outlet], name=name or floorplan.stem, carve_depth_m=carve
+    )
+    path = save_layout(layout, out)
+    console.print(f"[bold]{escape(layout.name)}[/]: {escape(_layout_summary(layout))}")
+    console.print(f"wrote layout [cyan]{_p(path)}[/]")
+    if plot is not None:
+        from dgse.viz.case import plot_layout
+
+        console.print(f"wrote figure [cyan]{_p(_save_figure(plot_layout(layout), plot, 150))}[/]")
+
+
+@app.command("solve")
+def solve_cmd(
+    input_file: Annotated[
+        Path, typer.Argument(metavar="CASE_OR_LAYOUT", help="A case file or a layout file (.npz).")
+    ],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Case file to write.")],
+    engine: Annotated[
+        str, typer.Option("--engine", "-e", help="Physics engine (see `dgse engines`).")
+    ] = "builtin",
+    inlet_velocity: Annotated[
+        float | None,
+        typer.Option("--inlet-velocity", "-v", help="Inlet speed in m/s (layout files)."),
+    ] = None,
+    source: Annotated[
+        tuple[float, float] | None,
+        typer.Option("--source", metavar="X Y", help="Source position in m (layout files)."),
+    ] = None,
+    rate: Annotated[
+        float | None, typer.Option("--rate", "-q", help="Release rate in g/s (layout files).")
+    ] = None,
+    seed: Annotated[
+        int | None,
+        typer.Option(
+            "--seed", "-s",
+            help="Draw what is not given (inlet speed, source, rate) from the training "
+            "distribution with this seed (layout files).",
+        ),
+    ] = None,
+    plot: Annotated[
+        Path | None, typer.Option("--plot", help="Also save the case figure.")
+    ] = None,
+) -> None:
+    """Solve flow and gas: re-solve a case file, or solve a layout file for one source.
+
+    A case file's scenario (layout, inlet speed, source, rate) is solved again
+    as it is.  A layout file needs --inlet-velocity, --source X Y and --rate Q,
+    or --seed S to draw the missing ones.
+    """
+    from dgse.physics.scenario import resolve_case, solve_cases
+    from dgse.world.layout_io import load_layout, npz_kind
+
+    eng = _engine(engine)
+    kind = npz_kind(input_file)
+    given = {
+        "--inlet-velocity": inlet_velocity, "--source": source, "--rate": rate, "--seed": seed,
+    }
+    t0 = time.perf_counter()
+    if kind == "case":
+        extra = [k for k, v in given.items() if v is not None]
+        if extra:
+            raise InputDataError(
+                f"{', '.join(extra)} apply to layout files only; {input_file} is a case file "
+                "and its scenario is re-solved as it is"
+            )
+        case = Case.load(input_file)
+        with console.status(f"re-solving {escape(case.name)} with {escape(engine)} ..."):
+            result = resolve_case(case, eng)
+    else:
+        layout = load_layout(input_file)
+        if seed is None:
+            missing = [k for k, v in given.items() if v is None and k != "--seed"]
+            if missing:
+                raise InputDataError(
+                    f"{input_file} is a layout file: give {', '.join(missing)} "
+                    "(or --seed S to draw them)"
+                )
+        else:
+            from dgse.world.generate import as_generator, random_inlet_velocity, random_sources
+
+            rng = as_generator(seed)  # always draw both, so a seed means one scenario
+            v_drawn = random_inlet_velocity(rng)
+            [(xy_drawn, q_drawn)] = random_sources(layout, rng, n=1)
+            inlet_velocity = v_drawn if inlet_velocity is None else inlet_velocity
+            source = xy_drawn if source is None else source
+            rate = q_drawn if rate is None else rate
+        assert inlet_velocity is not None and source is not None and rate is not None
+        _check_positive(inlet_velocity, "--inlet-velocity")
+        _check_positive(rate, "--rate")
+        _check_source(layout, *source)
+        with console.status(f"solving {escape(layout.name)} with {escape(engine)} ..."):
+            result = solve_cases(layout, inlet_velocity, [(source, rate)], eng)[0]
+    path = result.save(out)
+    console.print(_case_summary(result, path, time.perf_counter() - t0))
+    if plot is not None:
+        from dgse.viz.case import plot_case
+
+        console.print(f"wrote figure [cyan]{_p(_save_figure(plot_case(result), plot, 150))}[/]")
+
+
+@app.command("show")
+def show_cmd(
+    input_file: Annotated[
+        Path, typer.Argument(metavar="CASE", help="A case file (or a layout file).")
+    ],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Figure to write (png, pdf, svg, ...).")],
+    arrows: Annotated[
+        bool, typer.Option("--arrows/--no-arrows", help="Wind direction arrows.")
+    ] = True,
+    dpi: Annotated[int, typer.Option("--dpi", help="Resolution of raster figures.")] = 150,
+) -> None:
+    """Draw a case: layout with inlet/outlet, wind speed and direction, concentration."""
+    from dgse.viz.case import plot_case, plot_layout
+    from dgse.world.layout_io import load_layout, npz_kind
+
+    if dpi <= 0:
+        raise InputDataError(f"--dpi must be positive, got {dpi}")
+    if npz_kind(input_file) == "case":
+        fig = plot_case(Case.load(input_file), arrows=arrows)
+    else:
+        fig = plot_layout(load_layout(input_file))
+    console.print(f"wrote figure [cyan]{_p(_save_figure(fig, out, dpi))}[/]")
+
+
+_SCENARIO_HELP = (
+    "Make a random multi-room scenario, solve it for several sources, write case files "
+    "and figures.\n\n"
+    "A random layout of the training distribution (spec section 3), a random inlet "
+    "speed and --sources sources (default 4); one flow solve, one gas solve per source. "
+    "Writes <name>_src<n>.npz and <name>_src<n>.png per source into --out and prints "
+    "a summary with each source's mass balance."
+)
+
+
+def scenario_cmd(
+    seed: Annotated[
+        int | None, typer.Option("--seed", "-s", help=_SEED_HELP)
+    ] = None,
+    out: Annotated[
+        Path, typer.Option("--out", "-o", help="Directory for the case files and figures.")
+    ] = Path("dgse-out"),
+    engine: Annotated[
+        str, typer.Option("--engine", "-e", help="Physics engine (see `dgse engines`).")
+    ] = "builtin",
+    sources: Annotated[int, typer.Option("--sources", "-n", help="Number of sources.")] = 4,
+    size: Annotated[
+        tuple[float, float],
+        typer.Option(
+            "--size", metavar="MIN MAX",
+            help="Range of the domain's width and height in m (smaller solves faster).",
+        ),
+    ] = (5.0, 10.0),
+    figures: Annotated[
+        bool, typer.Option("--figures/--no-figures", help="Write a figure per case.")
+    ] = True,
+) -> None:
+    from dgse.physics.scenario import solve_cases
+    from dgse.world.generate import (
+        as_generator,
+        random_inlet_velocity,
+        random_layout,
+        random_sources,
+    )
+
+    if sources < 1:
+        raise InputDataError(f"--sources must be at least 1, got {sources}")
+    eng = _engine(engine)
+    seed = _new_seed() if seed is None else seed
+    t0 = time.perf_counter()
+    # the same draws, in the same order, as dgse.physics.scenario.random_cases
+    rng = as_generator(seed)
+    layout = random_layout(rng, width_range=size, height_range=size, name=f"random-{seed}")
+    v_in = random_inlet_velocity(rng)
+    srcs = random_sources(layout, rng, n=sources)
+    console.print(
+        f"[bold]{escape(layout.name)}[/] (seed {seed}): {escape(_layout_summary(layout))}; "
+        f"inlet velocity {v_in:.2f} m/s"
+    )
+    with console.status(f"solving flow and {len(srcs)} sources with {escape(engine)} ..."):
+        cases = solve_cases(layout, v_in, srcs, eng)
+    t_solve = time.perf_counter() - t0
+    out.mkdir(parents=True, exist_ok=True)
+    written: list[Path] = []
+    if figures:
+        from dgse.viz.case import plot_case
+    with console.status("writing case files and figures ..."):
+        for case in cases:
+            written.append(case.save(out / f"{case.name}.npz"))
+            if figures:
+                written.append(_save_figure(plot_case(case), out / f"{case.name}.png", 150))
+
+    m0 = cases[0].meta
+    tm = m0.get("timings") or {}
+    solver = escape(str(m0.get("solver")))
+    table = Table(
+        title=f"{escape(layout.name)}: inlet {v_in:.2f} m/s, engine {solver}",
+        title_justify="left",
+        box=box.SIMPLE_HEAD,
+    )
+    table.add_column("case", no_wrap=True)
+    table.add_column(escape("x [m]"), justify="right")
+    table.add_column(escape("y [m]"), justify="right")
+    table.add_column(escape("q [g/s]"), justify="right")
+    table.add_column(escape("max [ppm]"), justify="right")
+    table.add_column("outflux / q", justify="right")
+    table.add_column(escape("gas [s]"), justify="right")
+    per_source = tm.get("gas_per_source")
+    for case in cases:
+        ratio = (case.meta.get("mass_balance") or {}).get("outlet_flux_ratio")
+        table.add_row(
+            escape(case.name),
+            f"{float(case.source[0]):.2f}",
+            f"{float(case.source[1]):.2f}",
+            f"{case.release_rate:.3g}",
+            f"{float(case.concentration.max()):,.0f}",
+            _ratio_text(ratio),
+            f"{per_source:.2f}" if isinstance(per_source, int | float) else "-",
+        )
+    console.print(table)
+    iters = (m0.get("iterations") or {}).get("flow")
+    conv = m0.get("flow_converged")
+    conv_txt = "[green]converged[/]" if conv else "[red]not converged[/]" if conv is False else "?"
+    console.print(
+        f"flow: {iters if iters is not None else '?'} iterations, {conv_txt}, "
+        f"{_fmt_s(tm.get('flow'))}; gas {_fmt_s(tm.get('gas'))}; "
+        f"total {time.perf_counter() - t0:.2f} s (solve {t_solve:.2f} s)"
+    )
+    console.print(f"wrote {len(written)} files into [cyan]{_p(out)}[/]")
+
+
+app.command("scenario", help=_SCENARIO_HELP)(scenario_cmd)
+app.command(
+    "demo",
+    help="Alias of `dgse scenario` for now; it will become the full demo "
+    "(scenario, sensors, estimation, search).\n\n" + _SCENARIO_HELP,
+)(scenario_cmd)
+
+
+@app.command("engines")
+def engines_cmd() -> None:
+    """List the physics engines and why unavailable ones are missing."""
+    from dgse.physics.engines import engine_names, get_engine
+
+    available = engine_names()
+    table = Table(title="physics engines", title_justify="left", box=box.SIMPLE_HEAD)
+    table.add_column("engine", style="bold")
+    table.add_column("status")
+    table.add_column("notes")
+    for name in sorted(set(available) | set(KNOWN_ENGINES)):
+        if name in available:
+            note = "default" if name == "builtin" else ""
+            table.add_row(name, "[green]available[/]", note)
+            continue
+        try:
+            get_engine(name)
+            reason = ""
+        except UnsupportedError as e:
+            reason = str(e).removeprefix(f"engine {name!r} is not available: ")
+        table.add_row(name, "[red]unavailable[/]", escape(reason))
+    console.print(table)
+
+
+# -- entry point -------------------------------------------------------------------------
+def _print_error(message: str) -> None:
+    err_console.print(
+        Text("error: ", style="bold red") + Text(message.replace("\n", " "), style="red"),
+        soft_wrap=True,
+    )
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Run the CLI with ``args`` (default ``sys.argv[1:]``); returns the exit status.
+
+    User-caused errors print ``error: <message>`` in red and return 2.
+    """
+    try:
+        app(args=list(args) if args is not None else None, prog_name="dgse")
+    except SystemExit as e:
+        code = e.code
+        return code if isinstance(code, int) else (0 if code is None else 1)
+    except DGSEError as e:
+        _print_error(str(e))
+        return EXIT_USER_ERROR
+    except OSError as e:  # a file that cannot be written (permission, disk full, ...)
+        _print_error(f"{e.filename}: {e.strerror}" if e.filename and e.strerror else str(e))
+        return EXIT_USER_ERROR
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
