@@ -11,7 +11,7 @@ import pytest
 
 matplotlib.use("Agg")
 
-from dgse.world.layout import Layout, Opening  # noqa: E402
+from dgse.world.layout import Layout, Opening
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -8,7 +8,7 @@ import pytest
 from dgse.errors import ConvergenceError, DGSEError, InputDataError, UnsupportedError
 from dgse.physics.builtin import BuiltinEngine, flow_and_transport
 from dgse.physics.engines import Source, get_engine
-from dgse.physics.fv import INTERNAL, build_mesh
+from dgse.physics.fv import INLET, INTERNAL, OUTLET, build_mesh
 from dgse.physics.rans import FlowSettings
 from dgse.physics.scenario import resolve_case, solve_cases
 from dgse.physics.transport import TransportSolver
@@ -32,17 +32,20 @@ def test_flow_converges_and_is_zero_in_walls(solved):
 
 
 def test_volume_flux_is_conserved_cell_by_cell(solved):
-    layout, _, ts = solved
-    fx, fy = ts.phi_x, ts.phi_y
-    div = (fx[:, 1:] - fx[:, :-1]) + (fy[1:, :] - fy[:-1, :])
+    _, _, ts = solved
+    F, mesh = ts.F, ts.mesh
     inflow = 1.5 * 0.6  # v_in * inlet width (m^2/s per m depth)
-    assert np.abs(div[layout.free]).max() < 1e-4 * inflow
-    outflow = fx[:, -1].sum() - fx[:, 0].sum() + fy[-1, :].sum() - fy[0, :].sum()
-    assert outflow == pytest.approx(0.0, abs=1e-6)  # what comes in goes out
+    assert np.abs(F.sum(axis=1)).max() < 1e-4 * inflow  # continuity in every cell
+    # both cells of an internal face see the same flux, with opposite signs
+    internal = mesh.ft == INTERNAL
+    opposite = F[np.where(internal, mesh.nb, 0), np.array([1, 0, 3, 2])]
+    assert np.allclose(F[internal], -opposite[internal])
+    assert F[mesh.ft == INLET].sum() == pytest.approx(-inflow)
+    assert F[mesh.ft == OUTLET].sum() == pytest.approx(inflow, rel=1e-4)
 
 
 def test_scalar_outflow_equals_release_rate(solved):
-    layout, _, ts = solved
+    _, _, ts = solved
     q = 0.7
     c = ts.solve_cells([(5, 20)], [q])[0]
     out, inlet_loss = ts.outflow(c)
@@ -83,9 +86,10 @@ def test_mirror_symmetry(solved):
 
 @pytest.mark.parametrize("scheme", ["linearUpwind", "upwind"])
 def test_adjoint_reproduces_forward_solution(solved, scheme):
-    layout, flow, ts0 = solved
-    ts = TransportSolver.build(ts0.mesh, ts0.phi_x, ts0.phi_y, flow.nut, scheme=scheme,
-                               adjoint_scheme=scheme)
+    _, flow, ts0 = solved
+    ts = TransportSolver.build(
+        ts0.mesh, ts0.F, ts0.mesh.values(flow.nut), scheme=scheme, adjoint_scheme=scheme
+    )
     sensors = [(3, 4), (15, 25), (10, 16), (2, 28)]
     a = ts.adjoint(sensors)  # (4, H, W)
     source, q = (12, 6), 0.37
@@ -164,6 +168,9 @@ def test_opening_on_a_wall_is_rejected():
 
 def test_mesh_classifies_openings(two_rooms_layout):
     mesh = build_mesh(two_rooms_layout)
-    assert (mesh.xtype[:, 0] == 3).sum() == 6 and (mesh.xtype[:, -1] == 4).sum() == 6
-    # 31 x faces a row: 2 on the domain edge, 2 against the wall (none in the 4 door rows)
-    assert (mesh.xtype == INTERNAL).sum() == 20 * 27 + 4 * 2
+    assert mesh.n == 20 * 30 - 16
+    assert (mesh.ft == INLET).sum() == 6 and (mesh.ft == OUTLET).sum() == 6
+    assert (mesh.ft[:, 1] == INLET).sum() == 6  # on west faces
+    # 31 x faces a row: 2 on the domain edge, 2 against the wall (none in the 4 door rows);
+    # every internal face is seen from both of its cells
+    assert (mesh.ft[:, :2] == INTERNAL).sum() == 2 * (20 * 27 + 4 * 2)

@@ -80,7 +80,7 @@ def test_bad_case_files_name_the_problem(reference_cases_dir, tmp_path, mutate, 
 def test_not_an_npz_file(tmp_path):
     p = tmp_path / "junk.npz"
     p.write_text("hello")
-    with pytest.raises(CaseFileError, match="not a readable .npz"):
+    with pytest.raises(CaseFileError, match=r"not a readable \.npz"):
         Case.load(p)
     with pytest.raises(CaseFileError, match="no such file"):
         Case.load(tmp_path / "missing.npz")

@@ -41,9 +41,14 @@ def flow_and_transport(
     st, info = solve_flow(layout, mesh, v, physics, settings, progress)
     info.pop("history", None)
     flow = FlowField(
-        wind=np.stack([st.ux, st.uy]), k=st.k, epsilon=st.eps, nut=st.nut, pressure=st.p, info=info
+        wind=mesh.field(np.stack([st.ux, st.uy])),
+        k=mesh.field(st.k),
+        epsilon=mesh.field(st.eps),
+        nut=mesh.field(st.nut),
+        pressure=mesh.field(st.p),
+        info=info,
     )
-    return flow, TransportSolver.build(mesh, st.phi_x, st.phi_y, st.nut, physics)
+    return flow, TransportSolver.build(mesh, st.F, st.nut, physics)
 
 
 @dataclass

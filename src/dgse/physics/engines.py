@@ -69,8 +69,7 @@ class Engine(Protocol):
 
     name: str
 
-    def solve(self, layout: Layout, inlet_velocity: float, sources: Sequence[Source]) -> Solution:
-        ...
+    def solve(self, layout: Layout, inlet_velocity: float, sources: Sequence[Source]) -> Solution: ...
 
 
 _FACTORIES: dict[str, Callable[[], Engine]] = {}

@@ -2,171 +2,74 @@
 
 A collocated finite-volume solver on the layout's Cartesian grid that
 follows OpenFOAM's ``simpleFoam`` (v1912) discretization of spec section 4:
-Rhie-Chow face fluxes from the SIMPLEC pressure equation, bounded
-linear-upwind convection with cell-limited Gauss gradients (deferred
-correction), ``nutkWallFunction`` / ``epsilonWallFunction`` /
-``kqRWallFunction`` at walls, inlet turbulence from intensity and mixing
-length, and a fixed-pressure outlet.  Everything here is a pure function of
-arrays; the entry point is :func:`solve_flow`.
+Rhie-Chow face fluxes from the SIMPLEC ("consistent") pressure equation,
+bounded linear-upwind convection with cell-limited Gauss gradients
+(deferred correction), the explicit ``div(nuEff dev2(T(grad U)))`` stress,
+``nutkWallFunction`` / ``epsilonWallFunction`` / ``kqRWallFunction`` at walls,
+inlet turbulence from the intensity and mixing length, a fixed-pressure
+outlet.  Transport equations are relaxed implicitly and solved by symmetric
+Gauss-Seidel to a relative tolerance, as OpenFOAM's ``smoothSolver`` does;
+the pressure equation by conjugate gradients on stale sparse-LU factors.
+Everything is a function of arrays; the entry point is :func:`solve_flow`.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import scipy.sparse.linalg as spla
 
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
 from dgse.physics.fv import (
-    _AXIS,
-    _SIGN,
-    BC,
-    DIRS,
+    AXIS,
     INLET,
-    INTERNAL,
     OUTLET,
+    SIGN,
     WALL,
     Mesh,
     StencilMatrix,
-    face_types,
-    gauss_gradient,
-    ho_correction,
-    inlet_fluxes,
-    neighbour,
-    outward,
+    assemble,
+    bound,
+    gauss_seidel,
+    gradient,
+    ho_source,
+    neighbour_sum,
+    relax,
+    residual_norm,
+    row_dot,
+    row_sum,
 )
 from dgse.world.layout import Layout
 
+_jit = numba.njit(cache=True, nogil=True)
+
 
 @dataclass
-class Equation:
-    """Coefficients of ``aP phi_P - sum_d a[d] phi_d = b`` on the grid (``(H, W)`` each)."""
+class FlowSettings:
+    """Iteration controls of :func:`solve_flow`."""
 
-    aP: np.ndarray
-    a: dict[str, np.ndarray]
-    b: np.ndarray
-
-    def matrix(self, stencil: StencilMatrix):
-        return stencil.assemble(self.aP, self.a["E"], self.a["W"], self.a["N"], self.a["S"])
-
-    def residual_norm(self, phi: np.ndarray, mesh: Mesh) -> float:
-        """OpenFOAM's normalised residual of ``phi`` in this equation."""
-        f = mesh.free
-        Ax = self.aP * phi
-        Aavg = self.aP * phi[f].mean()
-        for d in DIRS:
-            Ax = Ax - self.a[d] * neighbour(phi, d)
-            Aavg = Aavg - self.a[d] * phi[f].mean()
-        r = np.abs(self.b - Ax)[f].sum()
-        norm = (np.abs(Ax - Aavg) + np.abs(self.b - Aavg))[f].sum() + 1e-20
-        return float(r / norm)
-
-
-def assemble_transport(
-    mesh: Mesh,
-    t: dict,
-    F: dict[str, np.ndarray],
-    gamma_cell: np.ndarray,
-    bc: BC,
-    *,
-    bounded: bool = True,
-) -> Equation:
-    """Upwind convection + central diffusion of ``div(F phi) - div(gamma grad phi)``.
-
-    ``F`` are outward face fluxes (m^2/s per m depth); ``gamma_cell`` the cell
-    diffusivity, linearly interpolated to internal faces.  With ``bounded``
-    the continuity error ``sum F`` is taken off the diagonal (OpenFOAM's
-    ``bounded Gauss``).
-    """
-    aP = np.zeros(mesh.shape)
-    b = np.zeros(mesh.shape)
-    a = {}
-    net = np.zeros(mesh.shape)
-    for d in DIRS:
-        Fd = F[d]
-        internal = t[d] == INTERNAL
-        bnd = t[d] >= WALL
-        g_face = 0.5 * (gamma_cell + neighbour(gamma_cell, d))
-        a[d] = np.where(internal, g_face + np.maximum(-Fd, 0.0), 0.0)
-        aP += np.where(internal, g_face + np.maximum(Fd, 0.0), 0.0)
-        fixed = bnd & bc.fixed[d]
-        zero_grad = bnd & ~bc.fixed[d]
-        g_b = bc.gamma.get(d, gamma_cell)
-        aP += np.where(fixed, 2.0 * g_b, 0.0) + np.where(zero_grad, Fd, 0.0)
-        b += np.where(fixed, (2.0 * g_b - Fd) * bc.value[d], 0.0)
-        net += np.where(internal | bnd, Fd, 0.0)
-    if bounded:
-        aP -= net
-    return Equation(aP, a, b)
-
-
-def bound(phi: np.ndarray, free: np.ndarray, t: dict, minimum: float) -> np.ndarray:
-    """OpenFOAM's ``bound``: values below ``minimum`` become the local face average."""
-    pos = np.maximum(phi, minimum)
-    acc = np.zeros_like(phi)
-    cnt = np.zeros_like(phi)
-    for d in DIRS:
-        internal = t[d] == INTERNAL
-        acc += np.where(internal, 0.5 * (pos + neighbour(pos, d)), pos)
-        cnt += 1.0
-    avg = acc / cnt
-    out = np.where(phi < minimum, np.maximum(avg, minimum), phi)
-    return np.where(free, out, 0.0)
-
-
-def relax(eq: Equation, phi: np.ndarray, alpha: float) -> Equation:
-    """OpenFOAM's implicit under-relaxation (with diagonal dominance enforced first)."""
-    sum_off = sum(np.abs(eq.a[d]) for d in DIRS)
-    D = np.maximum(np.abs(eq.aP), sum_off)
-    aP = D / alpha
-    b = eq.b + (aP - eq.aP) * phi
-    return Equation(aP, eq.a, b)
-
-
-class LinearSolvers:
-    """Inexact linear solves of the SIMPLEC loop (relative tolerances, as OpenFOAM).
-
-    Each equation's matrix changes slowly from one iteration to the next, so
-    a sparse LU factorization (SuperLU) made at some iteration is an almost
-    exact preconditioner for many later ones: Krylov solves (CG for the
-    symmetric pressure equation, BiCGStab otherwise) preconditioned by the
-    stale factors take one or two iterations, and the factorization is only
-    redone when they stop doing so.
-    """
-
-    def __init__(self, settings: FlowSettings) -> None:
-        self.s = settings
-        self._lu: dict[str, object] = {}
-        self.factorizations = 0
-
-    def solve(self, key: str, A, b: np.ndarray, x0: np.ndarray, rel_tol: float) -> np.ndarray:
-        if self.s.direct:
-            return spla.spsolve(A.tocsc(), b)
-        r0 = float(np.linalg.norm(b - A @ x0))
-        if r0 == 0.0:
-            return x0.copy()
-        krylov = spla.cg if key == "p" else spla.bicgstab
-        for attempt in range(2):
-            if key not in self._lu or attempt == 1:
-                self._lu[key] = spla.splu(A.tocsc())
-                self.factorizations += 1
-            lu = self._lu[key]
-            M = spla.LinearOperator(A.shape, matvec=lu.solve)
-            with np.errstate(all="ignore"):
-                x, info = krylov(
-                    A, b, x0=x0, rtol=0.0, atol=rel_tol * r0, maxiter=self.s.max_krylov, M=M
-                )
-            if info == 0 and np.isfinite(x).all():
-                return x
-        return spla.spsolve(A.tocsc(), b)
+    max_iterations: int = 1000
+    tolerance: float = 1e-4  #: on every normalised initial residual (OpenFOAM's residualControl)
+    alpha_u: float = 0.9
+    alpha_turb: float = 0.8
+    alpha_p: float = 1.0
+    high_order: bool = True
+    consistent: bool = True
+    rel_tol: float = 0.1  #: relative tolerance of the transport-equation solves
+    p_rel_tol: float = 0.05  #: relative tolerance of the pressure solve
+    max_sweeps: int = 50  #: Gauss-Seidel sweeps at most per transport solve
+    max_krylov: int = 8  #: CG iterations on stale pressure factors before refactorizing
+    max_seconds: float = math.inf  #: give up (not converged) after this wall time
 
 
 @dataclass
 class FlowState:
-    """Cell fields ``(H, W)`` and face fluxes of the SIMPLEC iteration."""
+    """Per-cell fields ``(n,)`` and outward face fluxes ``F (n, 4)`` of the iteration."""
 
     ux: np.ndarray
     uy: np.ndarray
@@ -174,45 +77,136 @@ class FlowState:
     k: np.ndarray
     eps: np.ndarray
     nut: np.ndarray
-    phi_x: np.ndarray
-    phi_y: np.ndarray
+    F: np.ndarray
 
 
-@dataclass
-class FlowSettings:
-    """Iteration controls of :func:`solve_flow`."""
+class PressureSolver:
+    """CG on the pressure equation, preconditioned by a stale SuperLU factorization.
 
-    max_iterations: int = 2000
-    tolerance: float = 1e-4  #: on every normalised initial residual (as OpenFOAM's residualControl)
-    alpha_u: float = 0.9
-    alpha_turb: float = 0.8
-    alpha_p: float = 1.0
-    high_order: bool = True
-    consistent: bool = True
-    direct: bool = False  #: exact sparse LU solves instead of the iterative ones
-    rel_tol: float = 0.1  #: relative tolerance of the transport-equation solves
-    p_rel_tol: float = 0.05  #: relative tolerance of the pressure solve
-    max_krylov: int = 4  #: Krylov iterations on stale factors before refactorizing
+    The pressure matrix changes slowly between iterations, so a factorization
+    made some iterations ago makes CG converge in one or two steps; it is
+    redone only when CG needs more than ``max_krylov`` iterations.
+    """
+
+    def __init__(self, max_krylov: int) -> None:
+        self.max_krylov = max_krylov
+        self._lu = None
+        self.factorizations = 0
+
+    def solve(self, A, b: np.ndarray, x0: np.ndarray, rel_tol: float) -> np.ndarray:
+        r0 = float(np.linalg.norm(b - A @ x0))
+        if r0 == 0.0:
+            return x0.copy()
+        for attempt in range(2):
+            if self._lu is None or attempt == 1:
+                # symmetric positive definite: minimum degree on A^T + A, no pivoting
+                self._lu = spla.splu(
+                    A.tocsc(),
+                    permc_spec="MMD_AT_PLUS_A",
+                    diag_pivot_thresh=0.0,
+                    options={"SymmetricMode": True},
+                )
+                self.factorizations += 1
+            M = spla.LinearOperator(A.shape, matvec=self._lu.solve)
+            with np.errstate(all="ignore"):
+                x, info = spla.cg(A, b, x0=x0, rtol=0.0, atol=rel_tol * r0, maxiter=self.max_krylov, M=M)
+            if info == 0 and np.isfinite(x).all():
+                return x
+        return spla.spsolve(A.tocsc(), b)
 
 
-def _openings_velocity(mesh: Mesh, v_in: float) -> tuple[dict, dict]:
-    """Inlet boundary velocity components per direction."""
-    t = face_types(mesh)
-    vx, vy = {}, {}
-    for d in DIRS:
-        inl = t[d] == INLET
-        # inflow velocity points against the outward normal
-        if _AXIS[d] == 0:
-            vx[d] = np.where(inl, -_SIGN[d] * v_in, 0.0)
-            vy[d] = np.zeros(mesh.shape)
-        else:
-            vx[d] = np.zeros(mesh.shape)
-            vy[d] = np.where(inl, -_SIGN[d] * v_in, 0.0)
-    return vx, vy
+@_jit
+def stress_source(nueff, gx, gy, nb, ft, h):
+    """``div(nuEff dev2(T(grad U)))`` per cell (integrated), components ``(n, 2)``.
+
+    ``gx``/``gy`` are the cell gradients ``(n, 2)`` of ``u_x``/``u_y``; face values
+    are linear interpolations (the cell's own value on boundary faces).
+    """
+    n = nueff.shape[0]
+    out = np.zeros((n, 2))
+    for c in range(n):
+        divc = gx[c, 0] + gy[c, 1]
+        for d in range(4):
+            t = ft[c, d]
+            if t == 0:
+                continue
+            sg = 1.0 if (d == 0 or d == 2) else -1.0
+            if t == 1:
+                o = nb[c, d]
+                nu_f = 0.5 * (nueff[c] + nueff[o])
+                divo = gx[o, 0] + gy[o, 1]
+                if d < 2:
+                    tx = 0.5 * (gx[c, 0] + gx[o, 0]) - (1.0 / 3.0) * (divc + divo)
+                    ty = 0.5 * (gx[c, 1] + gx[o, 1])
+                else:
+                    tx = 0.5 * (gy[c, 0] + gy[o, 0])
+                    ty = 0.5 * (gy[c, 1] + gy[o, 1]) - (1.0 / 3.0) * (divc + divo)
+            else:
+                nu_f = nueff[c]
+                if d < 2:
+                    tx = gx[c, 0] - (2.0 / 3.0) * divc
+                    ty = gx[c, 1]
+                else:
+                    tx = gy[c, 0]
+                    ty = gy[c, 1] - (2.0 / 3.0) * divc
+            out[c, 0] += sg * nu_f * tx * h
+            out[c, 1] += sg * nu_f * ty * h
+    return out
 
 
-def inlet_widths(layout: Layout) -> float:
-    return max(o.width_m for o in layout.inlets)
+@_jit
+def pressure_system(hbyax, hbyay, rAU, rAtU, p, ubx, uby, nb, ft, h, consistent):
+    """Rhie-Chow fluxes ``phiHbyA (n, 4)`` and the pressure Laplacian ``(lapP, lapA)``.
+
+    Fixed-velocity faces (inlets, walls) carry the boundary velocity
+    ``(ubx, uby)``; outlets the cell's ``HbyA`` with ``p = 0`` half a cell away.
+    """
+    n = p.shape[0]
+    phb = np.zeros((n, 4))
+    lapP = np.zeros(n)
+    lapA = np.zeros((n, 4))
+    for c in range(n):
+        diff_c = rAtU[c] - rAU[c]
+        for d in range(4):
+            t = ft[c, d]
+            if t == 0:
+                continue
+            sg = 1.0 if (d == 0 or d == 2) else -1.0
+            hb_c = hbyax[c] if d < 2 else hbyay[c]
+            if t == 1:
+                o = nb[c, d]
+                hb_o = hbyax[o] if d < 2 else hbyay[o]
+                flux = sg * 0.5 * (hb_c + hb_o) * h
+                if consistent:
+                    flux += 0.5 * (diff_c + rAtU[o] - rAU[o]) * (p[o] - p[c])
+                coef = 0.5 * (rAtU[c] + rAtU[o])
+                lapA[c, d] = coef
+                lapP[c] += coef
+            elif t == 4:
+                flux = sg * hb_c * h
+                if consistent:
+                    flux += diff_c * 2.0 * (0.0 - p[c])
+                lapP[c] += 2.0 * rAtU[c]
+            else:
+                ub = ubx[c, d] if d < 2 else uby[c, d]
+                flux = sg * ub * h
+            phb[c, d] = flux
+    return phb, lapP, lapA
+
+
+@_jit
+def corrected_flux(phb, lapA, rAtU, p, nb, ft):
+    """Face fluxes ``phiHbyA - rAtU snGrad(p) |S|`` after the pressure solve."""
+    n = p.shape[0]
+    F = phb.copy()
+    for c in range(n):
+        for d in range(4):
+            t = ft[c, d]
+            if t == 1:
+                F[c, d] -= lapA[c, d] * (p[nb[c, d]] - p[c])
+            elif t == 4:
+                F[c, d] -= 2.0 * rAtU[c] * (0.0 - p[c])
+    return F
 
 
 def solve_flow(
@@ -221,250 +215,166 @@ def solve_flow(
     inlet_velocity: float,
     physics: Physics = DEFAULT_PHYSICS,
     settings: FlowSettings | None = None,
-    progress=None,
+    progress: Callable[[int, dict], None] | None = None,
 ) -> tuple[FlowState, dict]:
     """Solve the steady RANS flow; returns the final state and an info dict.
 
     ``info`` holds ``iterations``, ``converged``, the last normalised initial
-    residuals per equation, and ``seconds``.
+    residuals per equation, ``seconds`` and the residual ``history``.
     """
     s = settings or FlowSettings()
     t0 = time.perf_counter()
-    H, W = mesh.shape
-    h = mesh.h
+    nb, ft, h = mesh.nb, mesh.ft, mesh.h
+    n = mesh.n
     V = h * h
-    f = mesh.free
-    t = face_types(mesh)
-    stencil = StencilMatrix(mesh)
-    solver = LinearSolvers(s)
     nu = physics.nu
     Cmu = physics.C_mu
     Cmu25, Cmu75 = Cmu**0.25, Cmu**0.75
     kappa, E = physics.kappa, physics.E
     ypl = physics.y_plus_lam
     y = 0.5 * h
-    k_in, eps_in = physics.inlet_turbulence(inlet_velocity, inlet_widths(layout))
-    max_length = max(mesh.shape) * h
-    n_limited = 0
+    k_in, eps_in = physics.inlet_turbulence(inlet_velocity, max(o.width_m for o in layout.inlets))
     nut_in = Cmu * k_in**2 / eps_in
+    max_length = max(mesh.shape) * h
 
-    bnd = {d: t[d] >= WALL for d in DIRS}
-    wall = {d: (t[d] == WALL) & f for d in DIRS}
-    inlet = {d: (t[d] == INLET) & f for d in DIRS}
-    outlet = {d: (t[d] == OUTLET) & f for d in DIRS}
-    n_wall = sum(wall[d].astype(float) for d in DIRS)
-    wall_cell = n_wall > 0
-    vx_in, vy_in = _openings_velocity(mesh, inlet_velocity)
-    zeros = np.zeros(mesh.shape)
+    wall = ft == WALL
+    inlet = ft == INLET
+    outlet = ft == OUTLET
+    wall_cell = wall.any(axis=1)
+    fixed_u = wall | inlet
+    # inflow velocity points against the outward normal of the inlet face
+    ubx = np.where(inlet & (AXIS == 0), -SIGN * inlet_velocity, 0.0)
+    uby = np.where(inlet & (AXIS == 1), -SIGN * inlet_velocity, 0.0)
+    zero4 = np.zeros((n, 4))
+    stencil = StencilMatrix(mesh)
+    psolver = PressureSolver(s.max_krylov)
 
-    phi_x, phi_y = inlet_fluxes(mesh, layout, inlet_velocity)
     st = FlowState(
-        ux=zeros.copy(), uy=zeros.copy(), p=zeros.copy(),
-        k=np.where(f, k_in, 0.0), eps=np.where(f, eps_in, 0.0), nut=zeros.copy(),
-        phi_x=phi_x, phi_y=phi_y,
+        ux=np.zeros(n),
+        uy=np.zeros(n),
+        p=np.zeros(n),
+        k=np.full(n, k_in),
+        eps=np.full(n, eps_in),
+        nut=np.full(n, Cmu * k_in**2 / eps_in),
+        F=np.where(inlet, -inlet_velocity * h, 0.0),
     )
-    st.nut = np.where(f, Cmu * st.k**2 / np.where(f, st.eps, 1.0), 0.0)
-
-    # pressure matrix pieces that never change
-    p_fixed = {d: outlet[d] for d in DIRS}
-
-    def nut_wall(k: np.ndarray) -> np.ndarray:
-        yplus = Cmu25 * y * np.sqrt(np.maximum(k, 0.0)) / nu
-        with np.errstate(divide="ignore", invalid="ignore"):
-            val = nu * (yplus * kappa / np.log(E * np.maximum(yplus, 1e-30)) - 1.0)
-        return np.where(yplus > ypl, val, 0.0)
-
     residuals: dict[str, float] = {}
-    history = []
+    history: list[dict[str, float]] = []
     converged = False
+    n_limited = 0
+    sweeps = {"U": 0, "k": 0, "epsilon": 0}
     it = 0
     for it in range(1, s.max_iterations + 1):
-        F = outward(st.phi_x, st.phi_y)
-        nueff = np.where(f, nu + st.nut, 0.0)
-        nutw = nut_wall(st.k)
-        # ---- momentum predictor ------------------------------------------------------
-        gam_b = {}
-        for d in DIRS:
-            gam_b[d] = np.where(wall[d], nu + nutw, np.where(inlet[d], nu + nut_in, nueff))
-        bc_ux = BC({d: wall[d] | inlet[d] for d in DIRS}, vx_in, gam_b)
-        bc_uy = BC({d: wall[d] | inlet[d] for d in DIRS}, vy_in, gam_b)
-        eq = assemble_transport(mesh, t, F, nueff, bc_ux, bounded=True)
-        # identical matrix for uy; only the boundary sources differ
-        eq_y = assemble_transport(mesh, t, F, nueff, bc_uy, bounded=True)
-        gux = gauss_gradient(st.ux, t, bc_ux, h, limited=False)
-        guy = gauss_gradient(st.uy, t, bc_uy, h, limited=False)
-        bx = eq.b.copy()
-        by = eq_y.b.copy()
-        # explicit part of the stress: div(nuEff dev2(T(grad U)))
-        divu = gux[0] + guy[1]
-        for d in DIRS:
-            internal = t[d] == INTERNAL
-            nu_f = np.where(internal, 0.5 * (nueff + neighbour(nueff, d)), nueff)
-
-            def fint(a):
-                return np.where(internal, 0.5 * (a + neighbour(a, d)), a)
-
-            sgn = _SIGN[d]
-            if _AXIS[d] == 0:
-                tx = fint(gux[0] - (2.0 / 3.0) * divu)  # d ux/dx
-                ty = fint(gux[1])  # d ux/dy  (T(gradU)_yx)
-            else:
-                tx = fint(guy[0])
-                ty = fint(guy[1] - (2.0 / 3.0) * divu)
-            active = internal | bnd[d]
-            bx += np.where(active, sgn * nu_f * tx * h, 0.0)
-            by += np.where(active, sgn * nu_f * ty * h, 0.0)
+        F = st.F
+        nueff = nu + st.nut
+        yplus = Cmu25 * y * np.sqrt(st.k) / nu
+        nutw = np.where(yplus > ypl, nu * (yplus * kappa / np.log(E * np.maximum(yplus, ypl)) - 1.0), 0.0)
+        # ---- momentum predictor ---------------------------------------------------------
+        gam_b = np.where(wall, (nu + nutw)[:, None], np.where(inlet, nu + nut_in, nueff[:, None]))
+        aP, a, cb = assemble(F, nueff, fixed_u, gam_b, nb, ft, True)
+        bx = row_dot(cb, ubx)
+        by = row_dot(cb, uby)
+        gux = gradient(st.ux, ubx, fixed_u, nb, ft, h, False)
+        guy = gradient(st.uy, uby, fixed_u, nb, ft, h, False)
+        stress = stress_source(nueff, gux, guy, nb, ft, h)
+        bx += stress[:, 0]
+        by += stress[:, 1]
         if s.high_order:
-            gxl = gauss_gradient(st.ux, t, bc_ux, h, limited=True)
-            gyl = gauss_gradient(st.uy, t, bc_uy, h, limited=True)
-            bx += ho_correction(st.ux, *gxl, t, F, h)
-            by += ho_correction(st.uy, *gyl, t, F, h)
-        eqx = relax(Equation(eq.aP, eq.a, bx), st.ux, s.alpha_u)
-        eqy = relax(Equation(eq.aP, eq.a, by), st.uy, s.alpha_u)
-        # pressure gradient (Gauss linear, p fixed 0 at outlets, zero gradient elsewhere)
-        bc_p = BC(p_fixed, {d: zeros for d in DIRS})
-        gpx, gpy = gauss_gradient(st.p, t, bc_p, h, limited=False)
-        residuals["Ux"] = Equation(eqx.aP, eqx.a, eqx.b - gpx * V).residual_norm(st.ux, mesh)
-        residuals["Uy"] = Equation(eqy.aP, eqy.a, eqy.b - gpy * V).residual_norm(st.uy, mesh)
-        A = eqx.matrix(stencil)
-        ux_star = np.zeros(mesh.shape)
-        uy_star = np.zeros(mesh.shape)
-        ux_star[f] = solver.solve("U", A, (eqx.b - gpx * V)[f], st.ux[f], s.rel_tol)
-        uy_star[f] = solver.solve("U", A, (eqy.b - gpy * V)[f], st.uy[f], s.rel_tol)
+            bx += ho_source(st.ux, gradient(st.ux, ubx, fixed_u, nb, ft, h, True), F, nb, ft, h)
+            by += ho_source(st.uy, gradient(st.uy, uby, fixed_u, nb, ft, h, True), F, nb, ft, h)
+        aPr, bx = relax(aP, a, bx, st.ux, s.alpha_u)
+        by = by + (aPr - aP) * st.uy
+        gp = gradient(st.p, zero4, outlet, nb, ft, h, False)
+        rhs_x = bx - gp[:, 0] * V
+        rhs_y = by - gp[:, 1] * V
+        residuals["Ux"] = residual_norm(aPr, a, rhs_x, nb, st.ux)
+        residuals["Uy"] = residual_norm(aPr, a, rhs_y, nb, st.uy)
+        ux_star = st.ux.copy()
+        uy_star = st.uy.copy()
+        sweeps["U"] += gauss_seidel(aPr, a, rhs_x, nb, ux_star, s.rel_tol, s.max_sweeps)
+        sweeps["U"] += gauss_seidel(aPr, a, rhs_y, nb, uy_star, s.rel_tol, s.max_sweeps)
 
-        # ---- SIMPLEC pressure equation -----------------------------------------------
-        aP = eqx.aP
-        sum_a = sum(eqx.a[d] for d in DIRS)
-        hx = eqx.b.copy()
-        hy = eqy.b.copy()
-        for d in DIRS:
-            hx += eqx.a[d] * neighbour(ux_star, d)
-            hy += eqy.a[d] * neighbour(uy_star, d)
-        safe = np.where(f, aP, 1.0)
-        hbyax = np.where(f, hx / safe, 0.0)
-        hbyay = np.where(f, hy / safe, 0.0)
-        rAU = np.where(f, V / safe, 0.0)
+        # ---- SIMPLEC pressure equation ---------------------------------------------------
+        hbyax = (bx + neighbour_sum(a, ux_star, nb)) / aPr
+        hbyay = (by + neighbour_sum(a, uy_star, nb)) / aPr
+        rAU = V / aPr
+        rAtU = V / (aPr - row_sum(a)) if s.consistent else rAU
+        phb, lapP, lapA = pressure_system(hbyax, hbyay, rAU, rAtU, st.p, ubx, uby, nb, ft, h, s.consistent)
         if s.consistent:
-            rAtU = np.where(f, V / np.where(f, aP - sum_a, 1.0), 0.0)
-        else:
-            rAtU = rAU
-        phb = {}
-        lap_a = {}
-        lap_P = np.zeros(mesh.shape)
-        for d in DIRS:
-            internal = t[d] == INTERNAL
-            hb = hbyax if _AXIS[d] == 0 else hbyay
-            sgn = _SIGN[d]
-            nb_hb = neighbour(hb, d)
-            vb = (vx_in if _AXIS[d] == 0 else vy_in)[d]
-            val = np.where(internal, 0.5 * (hb + nb_hb), np.where(outlet[d], hb, vb))
-            flux = sgn * val * h
-            diff = rAtU - rAU
-            nb_p = neighbour(st.p, d)
-            if s.consistent:
-                flux = flux + np.where(internal, 0.5 * (diff + neighbour(diff, d)) * (nb_p - st.p), 0.0)
-                flux = flux + np.where(outlet[d], diff * 2.0 * (0.0 - st.p), 0.0)
-            phb[d] = np.where(internal | bnd[d], flux, 0.0)
-            coef = np.where(internal, 0.5 * (rAtU + neighbour(rAtU, d)), 0.0)
-            lap_a[d] = coef
-            lap_P += coef + np.where(outlet[d], 2.0 * rAtU, 0.0)
-        if s.consistent:
-            hbyax = hbyax - (rAU - rAtU) * gpx
-            hbyay = hbyay - (rAU - rAtU) * gpy
-        div_phb = sum(phb[d] for d in DIRS)
-        peq = Equation(lap_P, lap_a, -div_phb)
-        residuals["p"] = peq.residual_norm(st.p, mesh)
-        P = peq.matrix(stencil)
-        p_new = np.zeros(mesh.shape)
-        p_new[f] = solver.solve("p", P, peq.b[f], st.p[f], s.p_rel_tol)
-        # corrected face fluxes
-        Fn = {}
-        for d in DIRS:
-            nb_p = neighbour(p_new, d)
-            Fn[d] = phb[d] - np.where(t[d] == INTERNAL, lap_a[d] * (nb_p - p_new), 0.0)
-            Fn[d] = Fn[d] - np.where(outlet[d], 2.0 * rAtU * (0.0 - p_new), 0.0)
-        st.phi_x, st.phi_y = _faces_from_outward(Fn, mesh)
-        st.p = s.alpha_p * p_new + (1 - s.alpha_p) * st.p
-        gpx, gpy = gauss_gradient(st.p, t, bc_p, h, limited=False)
-        st.ux = np.where(f, hbyax - rAtU * gpx, 0.0)
-        st.uy = np.where(f, hbyay - rAtU * gpy, 0.0)
+            hbyax = hbyax - (rAU - rAtU) * gp[:, 0]
+            hbyay = hbyay - (rAU - rAtU) * gp[:, 1]
+        p_rhs = -row_sum(phb)
+        residuals["p"] = residual_norm(lapP, lapA, p_rhs, nb, st.p)
+        p_new = psolver.solve(stencil.assemble(lapP, lapA), p_rhs, st.p, s.p_rel_tol)
+        st.F = corrected_flux(phb, lapA, rAtU, p_new, nb, ft)
+        st.p = s.alpha_p * p_new + (1.0 - s.alpha_p) * st.p
+        gp = gradient(st.p, zero4, outlet, nb, ft, h, False)
+        st.ux = hbyax - rAtU * gp[:, 0]
+        st.uy = hbyay - rAtU * gp[:, 1]
 
-        # ---- k-epsilon -----------------------------------------------------------------
-        F = outward(st.phi_x, st.phi_y)
-        bc_ux.fixed = {d: wall[d] | inlet[d] for d in DIRS}
-        gux = gauss_gradient(st.ux, t, bc_ux, h, limited=False)
-        guy = gauss_gradient(st.uy, t, bc_uy, h, limited=False)
-        divu = gux[0] + guy[1]
+        # ---- k-epsilon ---------------------------------------------------------------------
+        F = st.F
+        gux = gradient(st.ux, ubx, fixed_u, nb, ft, h, False)
+        guy = gradient(st.uy, uby, fixed_u, nb, ft, h, False)
+        divu = gux[:, 0] + guy[:, 1]
         G = st.nut * (
-            2.0 * gux[0] ** 2 + 2.0 * guy[1] ** 2 + (gux[1] + guy[0]) ** 2 - (2.0 / 3.0) * divu**2
+            2.0 * gux[:, 0] ** 2 + 2.0 * guy[:, 1] ** 2 + (gux[:, 1] + guy[:, 0]) ** 2 - (2.0 / 3.0) * divu**2
         )
-        k_old = np.where(f, st.k, 1.0)
-        eps_old = np.where(f, st.eps, 1.0)
-        yplus = Cmu25 * y * np.sqrt(k_old) / nu
-        umag = np.hypot(st.ux, st.uy)
+        k_old, eps_old = st.k, st.eps
         log_region = yplus > ypl
+        umag = np.hypot(st.ux, st.uy)
         G0 = (nutw + nu) * (umag / y) * Cmu25 * np.sqrt(k_old) / (kappa * y)
-        eps0 = np.where(log_region, Cmu75 * k_old**1.5 / (kappa * y), 2.0 * k_old * nu / y**2)
+        eps_wall = np.where(log_region, Cmu75 * k_old**1.5 / (kappa * y), 2.0 * k_old * nu / y**2)
         G = np.where(wall_cell, np.where(log_region, G0, 0.0), G)
+        fixed_t = inlet | (outlet & (F < 0))  # inletOutlet at outlets
 
-        turb_fixed_out = {d: outlet[d] & (F[d] < 0) for d in DIRS}
-        # epsilon
-        deff = np.where(f, nu + st.nut / physics.sigma_eps, 0.0)
-        g_in = nu + nut_in / physics.sigma_eps
-        bc_e = BC(
-            {d: inlet[d] | turb_fixed_out[d] for d in DIRS},
-            {d: np.full(mesh.shape, eps_in) for d in DIRS},
-            {d: np.where(inlet[d], g_in, deff) for d in DIRS},
-        )
-        eq = assemble_transport(mesh, t, F, deff, bc_e, bounded=True)
+        deff = nu + st.nut / physics.sigma_eps
+        gam_b = np.where(inlet, nu + nut_in / physics.sigma_eps, deff[:, None])
+        aP, a, cb = assemble(F, deff, fixed_t, gam_b, nb, ft, True)
+        b = row_sum(cb) * eps_in + physics.C_1 * G * eps_old / k_old * V
+        aP = aP + physics.C_2 * eps_old / k_old * V
         if s.high_order:
-            eq.b += ho_correction(st.eps, *gauss_gradient(st.eps, t, bc_e, h), t, F, h)
-        eq.b += physics.C_1 * G * eps_old / k_old * V
-        eq.aP += physics.C_2 * eps_old / k_old * V
-        eq = relax(eq, st.eps, s.alpha_turb)
-        # wall cells take the wall-function value
-        eq.aP = np.where(wall_cell, 1.0, eq.aP)
-        eq.b = np.where(wall_cell, eps0, eq.b)
-        for d in DIRS:
-            eq.a[d] = np.where(wall_cell, 0.0, eq.a[d])
-        residuals["epsilon"] = eq.residual_norm(st.eps, mesh)
-        eps_new = np.zeros(mesh.shape)
-        eps_new[f] = solver.solve("eps", eq.matrix(stencil), eq.b[f], st.eps[f], s.rel_tol)
-        eps_new = bound(eps_new, f, t, 1e-15)
-        # k
-        dk = np.where(f, nu + st.nut / physics.sigma_k, 0.0)
-        g_in = nu + nut_in / physics.sigma_k
-        bc_k = BC(
-            {d: inlet[d] | turb_fixed_out[d] for d in DIRS},
-            {d: np.full(mesh.shape, k_in) for d in DIRS},
-            {d: np.where(inlet[d], g_in, dk) for d in DIRS},
-        )
-        eq = assemble_transport(mesh, t, F, dk, bc_k, bounded=True)
+            bval = np.full((n, 4), eps_in)
+            b += ho_source(st.eps, gradient(st.eps, bval, fixed_t, nb, ft, h, True), F, nb, ft, h)
+        aP, b = relax(aP, a, b, st.eps, s.alpha_turb)
+        # wall cells take the wall-function value (OpenFOAM's setValues)
+        aP = np.where(wall_cell, 1.0, aP)
+        b = np.where(wall_cell, eps_wall, b)
+        a = np.where(wall_cell[:, None], 0.0, a)
+        residuals["epsilon"] = residual_norm(aP, a, b, nb, st.eps)
+        eps_new = st.eps.copy()
+        sweeps["epsilon"] += gauss_seidel(aP, a, b, nb, eps_new, s.rel_tol, s.max_sweeps)
+        eps_new = bound(eps_new, nb, ft, 1e-15)
+
+        dk = nu + st.nut / physics.sigma_k
+        gam_b = np.where(inlet, nu + nut_in / physics.sigma_k, dk[:, None])
+        aP, a, cb = assemble(F, dk, fixed_t, gam_b, nb, ft, True)
+        b = row_sum(cb) * k_in + G * V
+        aP = aP + eps_new / k_old * V
         if s.high_order:
-            eq.b += ho_correction(st.k, *gauss_gradient(st.k, t, bc_k, h), t, F, h)
-        eq.b += G * V
-        eq.aP += eps_new / k_old * V
-        eq = relax(eq, st.k, s.alpha_turb)
-        residuals["k"] = eq.residual_norm(st.k, mesh)
-        k_new = np.zeros(mesh.shape)
-        k_new[f] = solver.solve("k", eq.matrix(stencil), eq.b[f], st.k[f], s.rel_tol)
-        st.k = bound(k_new, f, t, 1e-15)
-        # realizability guard: the turbulence length scale Cmu^0.75 k^1.5 / eps
-        # cannot exceed the domain; without it a transient dip of epsilon to
-        # its lower bound gives an unbounded nu_t and the iteration blows up
+            bval = np.full((n, 4), k_in)
+            b += ho_source(st.k, gradient(st.k, bval, fixed_t, nb, ft, h, True), F, nb, ft, h)
+        aP, b = relax(aP, a, b, st.k, s.alpha_turb)
+        residuals["k"] = residual_norm(aP, a, b, nb, st.k)
+        k_new = st.k.copy()
+        sweeps["k"] += gauss_seidel(aP, a, b, nb, k_new, s.rel_tol, s.max_sweeps)
+        st.k = bound(k_new, nb, ft, 1e-15)
+        # realizability guard: the length scale Cmu^0.75 k^1.5 / eps cannot exceed the
+        # domain; without it a transient dip of epsilon gives an unbounded nu_t
         eps_floor = Cmu75 * st.k**1.5 / max_length
-        limited = f & (eps_new < eps_floor)
+        limited = eps_new < eps_floor
         n_limited = int(limited.sum())
         st.eps = np.where(limited, eps_floor, eps_new)
-        st.nut = np.where(f, Cmu * st.k**2 / np.where(f, st.eps, 1.0), 0.0)
+        st.nut = Cmu * st.k**2 / st.eps
 
         history.append(dict(residuals))
         if progress is not None:
             progress(it, residuals)
-        if max(residuals.values()) < s.tolerance:
+        finite = all(math.isfinite(v) for v in residuals.values()) and np.isfinite(st.ux).all()
+        if finite and max(residuals.values()) < s.tolerance:
             converged = True
             break
-        if not all(math.isfinite(v) for v in residuals.values()) or not np.isfinite(st.ux).all():
+        if not finite or time.perf_counter() - t0 > s.max_seconds:
             break
     info = {
         "iterations": it,
@@ -472,23 +382,8 @@ def solve_flow(
         "residuals": dict(residuals),
         "seconds": time.perf_counter() - t0,
         "length_scale_limited_cells": n_limited,
-        "factorizations": solver.factorizations,
+        "pressure_factorizations": psolver.factorizations,
+        "gauss_seidel_sweeps": sweeps,
         "history": history,
     }
     return st, info
-
-
-def _faces_from_outward(F: dict[str, np.ndarray], mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
-    """Face flux arrays from per-cell outward fluxes (each face taken from one owner)."""
-    H, W = mesh.shape
-    fx = np.zeros((H, W + 1))
-    fy = np.zeros((H + 1, W))
-    f = mesh.free
-    # east faces from their west cell, west boundary faces from the cell east of them
-    fx[:, 1:] = np.where(f, F["E"], 0.0)
-    west_only = (mesh.tW >= WALL) & f
-    fx[:, :-1] = np.where(west_only, -F["W"], fx[:, :-1])
-    fy[1:, :] = np.where(f, F["N"], 0.0)
-    south_only = (mesh.tS >= WALL) & f
-    fy[:-1, :] = np.where(south_only, -F["S"], fy[:-1, :])
-    return fx, fy

@@ -20,115 +20,78 @@ import scipy.sparse.linalg as spla
 from dgse.errors import InputDataError
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
 from dgse.physics.fv import (
-    BC,
     INLET,
     INTERNAL,
     OUTLET,
     Mesh,
-    face_types,
-    gauss_gradient,
-    ho_correction,
-    outward,
+    gradient,
+    ho_source,
 )
 
 SCHEMES = ("limitedLinearUpwind", "linearUpwind", "upwind")
 
-_DIRS = (
-    ("E", 0, 1.0, (0, 1)),
-    ("W", 0, -1.0, (0, -1)),
-    ("N", 1, 1.0, (1, 0)),
-    ("S", 1, -1.0, (-1, 0)),
-)
-
 
 def transport_matrix(
-    mesh: Mesh,
-    phi_x: np.ndarray,
-    phi_y: np.ndarray,
-    diffusivity: np.ndarray,
-    scheme: str = "linearUpwind",
+    mesh: Mesh, F: np.ndarray, diffusivity: np.ndarray, scheme: str = "linearUpwind"
 ) -> sp.csr_matrix:
     """The ``(n, n)`` steady transport operator on the free cells.
 
     Args:
         mesh: the layout's mesh.
-        phi_x, phi_y: face fluxes ``(H, W + 1)``, ``(H + 1, W)`` (m^2/s per m depth).
-        diffusivity: ``(H, W)`` cell diffusivity ``D_eff`` (m^2/s).
-        scheme: ``"linearUpwind"`` (second order, default) or ``"upwind"``.
+        F: ``(n, 4)`` outward face fluxes (m^2/s per m depth).
+        diffusivity: ``(n,)`` cell diffusivity ``D_eff`` (m^2/s).
+        scheme: ``"linearUpwind"`` (implicit, unlimited, second order) or ``"upwind"``.
     """
     if scheme not in ("linearUpwind", "upwind"):
         raise InputDataError(f"no linear operator for convection scheme {scheme!r}")
-    free = mesh.free
-    idx = mesh.index
-    H, W = mesh.shape
-    t = face_types(mesh)
-    F = outward(phi_x, phi_y)
-    ii, jj = np.nonzero(free)
-    P = idx[ii, jj]
-    rows: list[np.ndarray] = []
-    cols: list[np.ndarray] = []
-    vals: list[np.ndarray] = []
+    n = mesh.n
+    nb, ft = mesh.nb, mesh.ft
+    P = np.arange(n)
+    internal = ft == INTERNAL
+    nbi = np.where(internal, nb, P[:, None])  # the cell itself where there is no neighbour
+    rows, cols, vals = [], [], []
 
     def add(r, c, v):
         rows.append(r)
         cols.append(c)
         vals.append(v)
 
-    # half gradient along each axis of every cell: 0.5 (f_plus - f_minus) as terms
-    # (cell itself, plus neighbour, minus neighbour), face values linear inside,
-    # the cell value at zero-gradient faces, 0 at inlets (c = 0 there).
-    def side_weights(d: str) -> tuple[np.ndarray, np.ndarray]:
-        td = t[d][ii, jj]
-        w_self = np.where(td == INTERNAL, 0.5, np.where(td == INLET, 0.0, 1.0))
-        w_nb = np.where(td == INTERNAL, 0.5, 0.0)
-        return w_self, w_nb
-
-    def nb_index(di: int, dj: int, mask_internal: np.ndarray) -> np.ndarray:
-        ni = np.clip(ii + di, 0, H - 1)
-        nj = np.clip(jj + dj, 0, W - 1)
-        return np.where(mask_internal, idx[ni, nj], P)
-
-    half = {}
-    for axis, (plus, minus) in ((0, ("E", "W")), (1, ("N", "S"))):
-        wsp, wnp = side_weights(plus)
-        wsm, wnm = side_weights(minus)
-        sh_p = _DIRS[0][3] if axis == 0 else _DIRS[2][3]
-        sh_m = _DIRS[1][3] if axis == 0 else _DIRS[3][3]
-        np_idx = nb_index(*sh_p, t[plus][ii, jj] == INTERNAL)
-        nm_idx = nb_index(*sh_m, t[minus][ii, jj] == INTERNAL)
-        half[axis] = (0.5 * (wsp - wsm), np_idx, 0.5 * wnp, nm_idx, -0.5 * wnm)
-    # lookup from a cell's unknown number to its position in (ii, jj)
-    pos = np.empty(mesh.n, dtype=np.int64)
-    pos[P] = np.arange(P.size)
-
-    for d, axis, sign, (di, dj) in _DIRS:
-        td = t[d][ii, jj]
-        Fd = F[d][ii, jj]
-        internal = td == INTERNAL
-        N = nb_index(di, dj, internal)
-        gam = diffusivity[ii, jj]
-        gam_nb = diffusivity[np.clip(ii + di, 0, H - 1), np.clip(jj + dj, 0, W - 1)]
-        gam_f = np.where(internal, 0.5 * (gam + gam_nb), gam)
-        # diffusion
-        add(P, P, np.where(internal, gam_f, 0.0))
-        add(P, N, np.where(internal, -gam_f, 0.0))
-        inlet = td == INLET
-        add(P, P, np.where(inlet, 2.0 * gam, 0.0))  # c = 0 at the inlet, half a cell away
-        # convection, upwind part
+    # half a cell of gradient along each axis, 0.5 (f_plus - f_minus), as weights on
+    # (cell, plus neighbour, minus neighbour): linear face values inside, the cell
+    # value at zero-gradient faces, 0 at inlets (c = 0 there)
+    w_self = np.where(internal, 0.5, np.where(ft == INLET, 0.0, 1.0))
+    w_nb = np.where(internal, 0.5, 0.0)
+    half = [
+        (
+            0.5 * (w_self[:, plus] - w_self[:, minus]),
+            nbi[:, plus],
+            0.5 * w_nb[:, plus],
+            nbi[:, minus],
+            -0.5 * w_nb[:, minus],
+        )
+        for plus, minus in ((0, 1), (2, 3))
+    ]
+    for d in range(4):
+        Fd = F[:, d]
+        inn = internal[:, d]
+        Nd = nbi[:, d]
+        g_f = np.where(inn, 0.5 * (diffusivity + diffusivity[Nd]), 0.0)
+        add(P, P, g_f)
+        add(P, Nd, -g_f)
+        add(P, P, np.where(ft[:, d] == INLET, 2.0 * diffusivity, 0.0))
         out = Fd > 0
-        add(P, P, np.where((internal & out) | (td == OUTLET), Fd, 0.0))
-        add(P, N, np.where(internal & ~out, Fd, 0.0))
+        add(P, P, np.where((inn & out) | (ft[:, d] == OUTLET), Fd, 0.0))
+        add(P, Nd, np.where(inn & ~out, Fd, 0.0))
         if scheme == "linearUpwind":
-            # correction F * (+/-) half-gradient of the upwind cell along this axis
-            w_c, i_p, w_p, i_m, w_m = half[axis]
-            up = np.where(out, P, N)
-            up_pos = pos[up]
-            coef = np.where(internal, Fd * np.where(out, sign, -sign), 0.0)
-            add(P, up, coef * w_c[up_pos])
-            add(P, i_p[up_pos], coef * w_p[up_pos])
-            add(P, i_m[up_pos], coef * w_m[up_pos])
+            sign = 1.0 if d in (0, 2) else -1.0
+            w_c, i_p, w_p, i_m, w_m = half[0 if d < 2 else 1]
+            up = np.where(out, P, Nd)
+            coef = np.where(inn, Fd * np.where(out, sign, -sign), 0.0)
+            add(P, up, coef * w_c[up])
+            add(P, i_p[up], coef * w_p[up])
+            add(P, i_m[up], coef * w_m[up])
     A = sp.coo_matrix(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(mesh.n, mesh.n)
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
     ).tocsr()
     A.eliminate_zeros()
     return A
@@ -146,14 +109,13 @@ class TransportSolver:
     (``adjoint_scheme``, default ``"linearUpwind"``) and is exact for it.
 
     Example:
-        >>> ts = TransportSolver.build(mesh, phi_x, phi_y, nut)      # doctest: +SKIP
+        >>> ts = TransportSolver.build(mesh, F, nut)                  # doctest: +SKIP
         >>> c = ts.solve_cells([(31, 20)], [0.5])   # (1, H, W) g/m^3  # doctest: +SKIP
         >>> a = ts.adjoint([(10, 12), (40, 7)])     # (2, H, W)        # doctest: +SKIP
     """
 
     mesh: Mesh
-    phi_x: np.ndarray
-    phi_y: np.ndarray
+    F: np.ndarray
     diffusivity: np.ndarray
     physics: Physics
     scheme: str = "limitedLinearUpwind"
@@ -172,19 +134,19 @@ class TransportSolver:
     def build(
         cls,
         mesh: Mesh,
-        phi_x: np.ndarray,
-        phi_y: np.ndarray,
+        F: np.ndarray,
         nut: np.ndarray,
         physics: Physics = DEFAULT_PHYSICS,
         scheme: str = "limitedLinearUpwind",
         **options,
     ) -> TransportSolver:
-        D = np.where(mesh.free, physics.D_m + nut / physics.Sc_t, 0.0)
-        return cls(mesh, phi_x, phi_y, D, physics, scheme, **options)
+        """From outward face fluxes ``F (n, 4)`` and the cell ``nu_t (n,)`` of a flow."""
+        D = physics.D_m + nut / physics.Sc_t
+        return cls(mesh, F, D, physics, scheme, **options)
 
     def matrix(self, scheme: str) -> sp.csr_matrix:
         """The linear operator of ``scheme`` (``"upwind"`` or ``"linearUpwind"``)."""
-        return transport_matrix(self.mesh, self.phi_x, self.phi_y, self.diffusivity, scheme)
+        return transport_matrix(self.mesh, self.F, self.diffusivity, scheme)
 
     def factor(self, scheme: str):
         if scheme not in self._lu:
@@ -207,41 +169,36 @@ class TransportSolver:
             cells: ``(i, j)`` source cells.
             rates: release rates in g/s.
         """
-        m = self.mesh
         B = self._rhs(cells, rates)
         if self.scheme != "limitedLinearUpwind":
             X = self.factor(self.scheme).solve(B)
             self.info = {"outer_iterations": 1, "converged": True}
         else:
             X = self._deferred_correction(B)
-        out = np.zeros((B.shape[1], *m.shape))
-        out[:, m.free] = X.T
-        return out
+        return self.mesh.field(X.T)
 
     def _deferred_correction(self, B: np.ndarray) -> np.ndarray:
         m = self.mesh
         lu = self.factor("upwind")
-        t = face_types(m)
-        F = outward(self.phi_x, self.phi_y)
-        fixed = {d: (t[d] == INLET) & m.free for d in t}
-        bc = BC(fixed, {d: np.zeros(m.shape) for d in t})
+        fixed = m.ft == INLET  # c = 0 at inlets; zero gradient elsewhere
+        bval = np.zeros((m.n, 4))
         X = lu.solve(B)
-        C = np.zeros((B.shape[1], *m.shape))
         change = np.inf
         it = 0
-        for it in range(1, self.max_outer + 1):
-            C[:, m.free] = X.T
-            gx, gy = gauss_gradient(C, t, bc, m.h, limited=True)
-            S = ho_correction(C, gx, gy, t, F, m.h)
-            X_new = lu.solve(B + S[:, m.free].T)
+        while it < self.max_outer:
+            it += 1
+            S = np.empty_like(X)
+            for k in range(X.shape[1]):
+                x = np.ascontiguousarray(X[:, k])
+                g = gradient(x, bval, fixed, m.nb, m.ft, m.h, True)
+                S[:, k] = ho_source(x, g, self.F, m.nb, m.ft, m.h)
+            X_new = lu.solve(B + S)
             scale = np.abs(X_new).max(axis=0) + 1e-300
             change = float((np.abs(X_new - X).max(axis=0) / scale).max())
             X = X_new
             if change < self.tolerance:
                 break
-        self.info = {
-            "outer_iterations": it, "converged": change < self.tolerance, "last_change": change,
-        }
+        self.info = {"outer_iterations": it, "converged": change < self.tolerance, "last_change": change}
         return X
 
     def outflow(self, conc: np.ndarray) -> tuple[float, float]:
@@ -251,13 +208,9 @@ class TransportSolver:
             conc: ``(H, W)`` concentration in g/m^3.
         """
         m = self.mesh
-        F = outward(self.phi_x, self.phi_y)
-        t = face_types(m)
-        out = 0.0
-        inl = 0.0
-        for d in t:
-            out += float((F[d] * conc)[(t[d] == OUTLET) & m.free].sum())
-            inl += float((2.0 * self.diffusivity * conc)[(t[d] == INLET) & m.free].sum())
+        c = m.values(conc)
+        out = float((self.F * (m.ft == OUTLET) * c[:, None]).sum())
+        inl = float((2.0 * (self.diffusivity * c)[:, None] * (m.ft == INLET)).sum())
         return out, inl
 
     def adjoint(self, sensor_cells) -> np.ndarray:
@@ -276,6 +229,4 @@ class TransportSolver:
         E = np.zeros((m.n, len(cells)))
         E[m.index[cells[:, 0], cells[:, 1]], np.arange(len(cells))] = 1.0
         X = self.factor(self.adjoint_scheme).solve(E, trans="T") / self.physics.slab_depth
-        out = np.zeros((len(cells), *m.shape))
-        out[:, m.free] = X.T
-        return out
+        return m.field(X.T)

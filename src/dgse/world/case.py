@@ -56,8 +56,13 @@ class Case:
         if self.frames is not None:
             object.__setattr__(self, "frames", np.asarray(self.frames, dtype=np.float32))
         problems = validate_arrays(
-            self.occupancy, self.wind, self.concentration, self.source, self.resolution,
-            self.meta, self.frames,
+            self.occupancy,
+            self.wind,
+            self.concentration,
+            self.source,
+            self.resolution,
+            self.meta,
+            self.frames,
         )
         if problems:
             raise InputDataError("invalid case: " + "; ".join(problems))
@@ -158,8 +163,13 @@ class Case:
             raise CaseFileError(f"{origin}: " + "; ".join(problems))
         try:
             return cls(
-                occ, arrays["wind"], arrays["concentration"], arrays["source"],
-                float(res), meta, arrays.get("frames"),
+                occ,
+                arrays["wind"],
+                arrays["concentration"],
+                arrays["source"],
+                float(res),
+                meta,
+                arrays.get("frames"),
             )
         except InputDataError as e:
             raise CaseFileError(f"{origin}: {e}") from None
