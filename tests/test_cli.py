@@ -55,7 +55,10 @@ def _subprocess(*args: str) -> subprocess.CompletedProcess:
     path = os.pathsep.join(filter(None, [str(SRC), os.environ.get("PYTHONPATH")]))
     env = {**os.environ, "PYTHONPATH": path}
     return subprocess.run(
-        [sys.executable, "-m", "dgse.cli.main", *args], env=env, capture_output=True, text=True,
+        [sys.executable, "-m", "dgse.cli.main", *args],
+        env=env,
+        capture_output=True,
+        text=True,
         timeout=120,
     )
 
@@ -66,8 +69,20 @@ def solved(tmp_path_factory) -> dict[str, Path]:
     d = tmp_path_factory.mktemp("cli")
     layout = save_layout(_tiny_layout(), d / "tiny.npz")
     case = d / "tiny_case.npz"
-    code = main(["solve", str(layout), "-o", str(case), "--inlet-velocity", "1.0",
-                 "--source", *SOURCE, "--rate", "0.5"])
+    code = main(
+        [
+            "solve",
+            str(layout),
+            "-o",
+            str(case),
+            "--inlet-velocity",
+            "1.0",
+            "--source",
+            *SOURCE,
+            "--rate",
+            "0.5",
+        ]
+    )
     assert code == 0
     return {"dir": d, "layout": layout, "case": case}
 
@@ -98,8 +113,9 @@ def test_no_command_shows_usage(capsys):
 
 # -- layout -> solve -> show ------------------------------------------------------------
 def test_layout_command_writes_a_layout_and_figure(capsys, tmp_path):
-    code, out, _ = _run(capsys, "layout", "--seed", "3", "-o", tmp_path / "l.npz",
-                        "--plot", tmp_path / "l.png")
+    code, out, _ = _run(
+        capsys, "layout", "--seed", "3", "-o", tmp_path / "l.npz", "--plot", tmp_path / "l.png"
+    )
     assert code == 0, out
     lay = load_layout(tmp_path / "l.npz")
     assert lay.name == "random-3" and "random-3" in out and "seed 3" in out
@@ -135,12 +151,17 @@ def test_resolve_case_file_and_show(solved, capsys):
 
 def test_scenario_writes_cases_figures_and_a_summary(capsys, tmp_path):
     out_dir = tmp_path / "out"
-    code, out, err = _run(capsys, "scenario", "--seed", "2", "--size", "3", "3.5",
-                          "--sources", "2", "-o", out_dir)
+    code, out, err = _run(
+        capsys, "scenario", "--seed", "2", "--size", "3", "3.5", "--sources", "2", "-o", out_dir
+    )
     assert code == 0, err
     names = sorted(p.name for p in out_dir.iterdir())
-    assert names == ["random-2_src0.npz", "random-2_src0.png",
-                     "random-2_src1.npz", "random-2_src1.png"]
+    assert names == [
+        "random-2_src0.npz",
+        "random-2_src0.png",
+        "random-2_src1.npz",
+        "random-2_src1.png",
+    ]
     for n in range(2):
         c = Case.load(out_dir / f"random-2_src{n}.npz")
         assert c.meta["mass_balance"]["outlet_flux_ratio"] == pytest.approx(1.0, abs=0.02)
@@ -161,17 +182,43 @@ def test_import_floorplan(capsys, tmp_path):
     img[:, 19:21] = 0
     img[10:20, 19:21] = 255  # a doorway
     Image.fromarray(img).save(tmp_path / "plan.png")
-    code, out, err = _run(capsys, "import-floorplan", tmp_path / "plan.png",
-                          "--inlet", "west", "0.5", "1.5", "--outlet", "east", "1.5", "2.5",
-                          "-o", tmp_path / "plan.npz", "--plot", tmp_path / "plan_fig.png")
+    code, out, err = _run(
+        capsys,
+        "import-floorplan",
+        tmp_path / "plan.png",
+        "--inlet",
+        "west",
+        "0.5",
+        "1.5",
+        "--outlet",
+        "east",
+        "1.5",
+        "2.5",
+        "-o",
+        tmp_path / "plan.npz",
+        "--plot",
+        tmp_path / "plan_fig.png",
+    )
     assert code == 0, err
     lay = load_layout(tmp_path / "plan.npz")
     assert lay.occupancy.shape == (30, 40) and lay.name == "plan"
     assert lay.inlets == (Opening("west", 0.5, 1.5),)
     assert (tmp_path / "plan_fig.png").exists()
-    code, out, err = _run(capsys, "import-floorplan", tmp_path / "plan.png",
-                          "--inlet", "up", "0.5", "1.5", "--outlet", "east", "1.5", "2.5",
-                          "-o", tmp_path / "x.npz")
+    code, out, err = _run(
+        capsys,
+        "import-floorplan",
+        tmp_path / "plan.png",
+        "--inlet",
+        "up",
+        "0.5",
+        "1.5",
+        "--outlet",
+        "east",
+        "1.5",
+        "2.5",
+        "-o",
+        tmp_path / "x.npz",
+    )
     _assert_user_error(code, out, err, "unknown boundary side 'up'")
 
 
@@ -179,23 +226,27 @@ def test_import_floorplan(capsys, tmp_path):
 def test_solve_not_an_npz(capsys, tmp_path):
     bad = tmp_path / "bad.npz"
     bad.write_text("not a zip")
-    _assert_user_error(*_run(capsys, "solve", bad, "-o", tmp_path / "o.npz"),
-                       str(bad), "not an .npz file")
-    _assert_user_error(*_run(capsys, "solve", tmp_path / "missing.npz", "-o", tmp_path / "o.npz"),
-                       "no such file")
+    _assert_user_error(
+        *_run(capsys, "solve", bad, "-o", tmp_path / "o.npz"), str(bad), "not an .npz file"
+    )
+    _assert_user_error(
+        *_run(capsys, "solve", tmp_path / "missing.npz", "-o", tmp_path / "o.npz"), "no such file"
+    )
 
 
 def test_solve_missing_keys(capsys, solved, tmp_path):
     only_occ = tmp_path / "occ.npz"
     np.savez(only_occ, occupancy=np.zeros((5, 5), np.uint8))
-    _assert_user_error(*_run(capsys, "solve", only_occ, "-o", tmp_path / "o.npz"),
-                       "missing key(s) meta")
+    _assert_user_error(
+        *_run(capsys, "solve", only_occ, "-o", tmp_path / "o.npz"), "missing key(s) meta"
+    )
     with np.load(solved["case"]) as data:
         arrays = {k: data[k] for k in data.files if k != "concentration"}
     no_conc = tmp_path / "no_conc.npz"
     np.savez(no_conc, **arrays)
-    _assert_user_error(*_run(capsys, "solve", no_conc, "-o", tmp_path / "o.npz"),
-                       "missing key(s) concentration")
+    _assert_user_error(
+        *_run(capsys, "solve", no_conc, "-o", tmp_path / "o.npz"), "missing key(s) concentration"
+    )
 
 
 def test_solve_source_in_a_wall_or_outside(capsys, solved, tmp_path):
@@ -211,42 +262,73 @@ def test_solve_case_file_with_a_source_in_a_wall(capsys, solved, tmp_path):
     arrays["source"] = np.array([float(WALL[0]), float(WALL[1])], np.float32)
     bad = tmp_path / "wall_case.npz"
     np.savez(bad, **arrays)
-    _assert_user_error(*_run(capsys, "solve", bad, "-o", tmp_path / "o.npz"),
-                       "lies in a solid cell")
+    _assert_user_error(
+        *_run(capsys, "solve", bad, "-o", tmp_path / "o.npz"), "lies in a solid cell"
+    )
 
 
 def test_solve_bad_arguments(capsys, solved, tmp_path):
     out = tmp_path / "o.npz"
-    _assert_user_error(*_run(capsys, "solve", solved["layout"], "-o", out),
-                       "layout file", "--inlet-velocity", "--seed")
-    _assert_user_error(*_run(capsys, "solve", solved["layout"], "-o", out, "-v", "-1",
-                             "--source", *SOURCE, "-q", "1"), "--inlet-velocity", "positive")
-    _assert_user_error(*_run(capsys, "solve", solved["case"], "-o", out, "--rate", "2"),
-                       "--rate", "layout files only")
+    _assert_user_error(
+        *_run(capsys, "solve", solved["layout"], "-o", out),
+        "layout file",
+        "--inlet-velocity",
+        "--seed",
+    )
+    _assert_user_error(
+        *_run(
+            capsys, "solve", solved["layout"], "-o", out, "-v", "-1", "--source", *SOURCE, "-q", "1"
+        ),
+        "--inlet-velocity",
+        "positive",
+    )
+    _assert_user_error(
+        *_run(capsys, "solve", solved["case"], "-o", out, "--rate", "2"),
+        "--rate",
+        "layout files only",
+    )
 
 
 def test_unknown_engine(capsys, solved, tmp_path):
-    _assert_user_error(*_run(capsys, "solve", solved["case"], "-o", tmp_path / "o.npz",
-                             "--engine", "nope"), "unknown engine 'nope'", "builtin")
-    _assert_user_error(*_run(capsys, "scenario", "--engine", "nope", "-o", tmp_path),
-                       "unknown engine 'nope'")
+    _assert_user_error(
+        *_run(capsys, "solve", solved["case"], "-o", tmp_path / "o.npz", "--engine", "nope"),
+        "unknown engine 'nope'",
+        "builtin",
+    )
+    _assert_user_error(
+        *_run(capsys, "scenario", "--engine", "nope", "-o", tmp_path), "unknown engine 'nope'"
+    )
 
 
 def test_show_bad_format_and_meta(capsys, solved, tmp_path):
-    _assert_user_error(*_run(capsys, "show", solved["case"], "-o", tmp_path / "f.xyz"),
-                       "cannot write a figure", ".png")
+    _assert_user_error(
+        *_run(capsys, "show", solved["case"], "-o", tmp_path / "f.xyz"),
+        "cannot write a figure",
+        ".png",
+    )
     with np.load(solved["case"]) as data:
         arrays = {k: data[k] for k in data.files}
     arrays["meta"] = np.array(json.dumps([1, 2]))
     bad = tmp_path / "bad_meta.npz"
     np.savez(bad, **arrays)
-    _assert_user_error(*_run(capsys, "show", bad, "-o", tmp_path / "f.png"),
-                       "meta is not a JSON object")
+    _assert_user_error(
+        *_run(capsys, "show", bad, "-o", tmp_path / "f.png"), "meta is not a JSON object"
+    )
 
 
 def test_errors_in_a_real_process(solved, tmp_path):
-    r = _subprocess("solve", str(solved["layout"]), "-o", str(tmp_path / "o.npz"), "-v", "1",
-                    "-q", "1", "--source", *WALL)
+    r = _subprocess(
+        "solve",
+        str(solved["layout"]),
+        "-o",
+        str(tmp_path / "o.npz"),
+        "-v",
+        "1",
+        "-q",
+        "1",
+        "--source",
+        *WALL,
+    )
     assert r.returncode == 2
     assert r.stderr.strip().startswith("error: ") and "Traceback" not in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1

@@ -29,8 +29,13 @@ def _case(layout: Layout) -> Case:
     wind = np.stack([np.where(free, 1.0, 0.0), np.where(free, 0.2 * np.sin(X), 0.0)])
     src = (0.55, 0.55)
     ppm = np.where(free, 800.0 * np.exp(-((X - src[0]) ** 2 + (Y - src[1]) ** 2)), 0.0)
-    meta = {"name": "tiny_src0", **layout.meta(), "inlet_velocity": 1.25,
-            "release_rate_gps": 0.5, "solver": "analytic"}
+    meta = {
+        "name": "tiny_src0",
+        **layout.meta(),
+        "inlet_velocity": 1.25,
+        "release_rate_gps": 0.5,
+        "solver": "analytic",
+    }
     return Case(layout.occupancy, wind, ppm, src, layout.resolution, meta)
 
 

@@ -38,8 +38,13 @@ def test_case_file_is_read_as_its_layout(tmp_path):
     lay = random_layout(4)
     H, W = lay.occupancy.shape
     src = lay.grid.center_of(*np.argwhere(lay.free)[0])
-    meta = {"name": "c_src0", "layout": lay.name, **lay.meta(), "inlet_velocity": 1.0,
-            "release_rate_gps": 0.5}
+    meta = {
+        "name": "c_src0",
+        "layout": lay.name,
+        **lay.meta(),
+        "inlet_velocity": 1.0,
+        "release_rate_gps": 0.5,
+    }
     case = Case(lay.occupancy, np.zeros((2, H, W)), np.zeros((H, W)), src, lay.resolution, meta)
     path = case.save(tmp_path / "c.npz")
     assert npz_kind(path) == "case"
@@ -52,8 +57,12 @@ def _write(path, **arrays):
 
 
 def _meta(**kw) -> np.ndarray:
-    m = {"resolution": 0.1, "inlet": {"side": "west", "start_m": 0.2, "end_m": 0.8},
-         "outlet": {"side": "east", "start_m": 0.2, "end_m": 0.8}, **kw}
+    m = {
+        "resolution": 0.1,
+        "inlet": {"side": "west", "start_m": 0.2, "end_m": 0.8},
+        "outlet": {"side": "east", "start_m": 0.2, "end_m": 0.8},
+        **kw,
+    }
     return np.array(json.dumps(m))
 
 
@@ -68,10 +77,14 @@ OCC = np.zeros((10, 12), np.uint8)
         ({"occupancy": OCC[0], "meta": _meta()}, "must be a 2-D map"),
         ({"occupancy": OCC, "meta": np.array("{not json")}, "meta is not a JSON object"),
         ({"occupancy": OCC, "meta": _meta(width_m=3.0)}, "width_m=3.0 does not match 12 cells"),
-        ({"occupancy": OCC, "meta": _meta(inlet={"side": "west", "start_m": 0.5, "end_m": 2})},
-         "runs outside the west side"),
-        ({"occupancy": OCC, "meta": _meta(inlet={"side": "up", "start_m": 0, "end_m": 1})},
-         "unknown boundary side 'up'"),
+        (
+            {"occupancy": OCC, "meta": _meta(inlet={"side": "west", "start_m": 0.5, "end_m": 2})},
+            "runs outside the west side",
+        ),
+        (
+            {"occupancy": OCC, "meta": _meta(inlet={"side": "up", "start_m": 0, "end_m": 1})},
+            "unknown boundary side 'up'",
+        ),
         ({"occupancy": OCC, "meta": _meta(outlet=None)}, "bad opening"),
         ({"occupancy": OCC, "meta": _meta(inlets=[])}, "at least one inlet"),
         ({"occupancy": OCC, "meta": np.array("{}")}, "meta has no 'inlet'"),

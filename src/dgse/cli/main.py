@@ -185,8 +185,7 @@ def _case_summary(case: Case, path: Path, seconds: float) -> Table:
     tm = m.get("timings") or {}
     t.add_row(
         "timings",
-        f"flow {_fmt_s(tm.get('flow'))}, gas {_fmt_s(tm.get('gas'))}, "
-        f"wall clock {seconds:.2f} s",
+        f"flow {_fmt_s(tm.get('flow'))}, gas {_fmt_s(tm.get('gas'))}, wall clock {seconds:.2f} s",
     )
     return t
 
@@ -194,9 +193,7 @@ def _case_summary(case: Case, path: Path, seconds: float) -> Table:
 # -- commands ----------------------------------------------------------------------------
 @app.command("layout")
 def layout_cmd(
-    seed: Annotated[
-        int | None, typer.Option("--seed", "-s", help=_SEED_HELP)
-    ] = None,
+    seed: Annotated[int | None, typer.Option("--seed", "-s", help=_SEED_HELP)] = None,
     ood: Annotated[
         bool,
         typer.Option(
@@ -239,7 +236,8 @@ def import_floorplan_cmd(
     inlet: Annotated[
         tuple[str, float, float],
         typer.Option(
-            "--inlet", metavar="SIDE START END",
+            "--inlet",
+            metavar="SIDE START END",
             help="Inlet on side west/east/south/north from START to END m along it "
             "(x for south/north, y for west/east; m from the map's lower-left corner).",
         ),
@@ -331,14 +329,13 @@ def solve_cmd(
     seed: Annotated[
         int | None,
         typer.Option(
-            "--seed", "-s",
+            "--seed",
+            "-s",
             help="Draw what is not given (inlet speed, source, rate) from the training "
             "distribution with this seed (layout files).",
         ),
     ] = None,
-    plot: Annotated[
-        Path | None, typer.Option("--plot", help="Also save the case figure.")
-    ] = None,
+    plot: Annotated[Path | None, typer.Option("--plot", help="Also save the case figure.")] = None,
 ) -> None:
     """Solve flow and gas: re-solve a case file, or solve a layout file for one source.
 
@@ -352,7 +349,10 @@ def solve_cmd(
     eng = _engine(engine)
     kind = npz_kind(input_file)
     given = {
-        "--inlet-velocity": inlet_velocity, "--source": source, "--rate": rate, "--seed": seed,
+        "--inlet-velocity": inlet_velocity,
+        "--source": source,
+        "--rate": rate,
+        "--seed": seed,
     }
     t0 = time.perf_counter()
     if kind == "case":
@@ -432,9 +432,7 @@ _SCENARIO_HELP = (
 
 
 def scenario_cmd(
-    seed: Annotated[
-        int | None, typer.Option("--seed", "-s", help=_SEED_HELP)
-    ] = None,
+    seed: Annotated[int | None, typer.Option("--seed", "-s", help=_SEED_HELP)] = None,
     out: Annotated[
         Path, typer.Option("--out", "-o", help="Directory for the case files and figures.")
     ] = Path("dgse-out"),
@@ -445,7 +443,8 @@ def scenario_cmd(
     size: Annotated[
         tuple[float, float],
         typer.Option(
-            "--size", metavar="MIN MAX",
+            "--size",
+            metavar="MIN MAX",
             help="Range of the domain's width and height in m (smaller solves faster).",
         ),
     ] = (5.0, 10.0),

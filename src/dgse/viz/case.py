@@ -43,9 +43,7 @@ def _new_figure(n_panels: int, width_m: float, height_m: float) -> Figure:
     map_w = 3.5 if n_panels > 1 else 5.5  # inches of one map panel
     map_h = min(max(map_w * height_m / width_m, 2.0), 8.0)
     colorbars = 1.1 * (n_panels - 1)
-    fig = Figure(
-        figsize=(n_panels * (map_w + 0.7) + colorbars, map_h + 1.7), layout="constrained"
-    )
+    fig = Figure(figsize=(n_panels * (map_w + 0.7) + colorbars, map_h + 1.7), layout="constrained")
     FigureCanvasAgg(fig)
     return fig
 
@@ -75,8 +73,13 @@ def _segment(o: Opening, width_m: float, height_m: float) -> tuple[list[float], 
 
 
 def _draw_openings(
-    ax: Axes, inlets: Sequence[Opening], outlets: Sequence[Opening], width_m: float,
-    height_m: float, *, thick: bool = True,
+    ax: Axes,
+    inlets: Sequence[Opening],
+    outlets: Sequence[Opening],
+    width_m: float,
+    height_m: float,
+    *,
+    thick: bool = True,
 ) -> None:
     """Inlets (green) and outlets (red) as bars on the boundary with a flow-direction arrow."""
     lw = 6.0 if thick else 3.5
@@ -90,7 +93,10 @@ def _draw_openings(
             inner = (mx + nx * arrow, my + ny * arrow)
             tail, head = ((mx, my), inner) if kind == "inlet" else (inner, (mx, my))
             ax.annotate(
-                "", xy=head, xytext=tail, zorder=7,
+                "",
+                xy=head,
+                xytext=tail,
+                zorder=7,
                 arrowprops={"arrowstyle": "-|>", "color": color, "lw": 1.8, "mutation_scale": 12},
             )
 
@@ -110,7 +116,12 @@ def _draw_occupancy(
     ax: Axes, occupancy: np.ndarray, extent: tuple[float, float, float, float]
 ) -> None:
     ax.imshow(
-        occupancy, cmap=_OCC_CMAP, vmin=0, vmax=1, origin="lower", extent=extent,
+        occupancy,
+        cmap=_OCC_CMAP,
+        vmin=0,
+        vmax=1,
+        origin="lower",
+        extent=extent,
         interpolation="nearest",
     )
 
@@ -119,8 +130,13 @@ def _add_legend(fig: Figure, ax: Axes, handles: list, own: bool) -> None:
     """The key: below the panels on a figure of our own, else inside ``ax``."""
     if own:
         fig.legend(
-            handles=handles, loc="outside lower center", ncol=len(handles), frameon=False,
-            fontsize=9, handlelength=1.6, columnspacing=1.4,
+            handles=handles,
+            loc="outside lower center",
+            ncol=len(handles),
+            frameon=False,
+            fontsize=9,
+            handlelength=1.6,
+            columnspacing=1.4,
         )
     else:
         ax.legend(handles=handles, loc="upper right", fontsize=7, framealpha=0.85)
@@ -160,9 +176,7 @@ def _as_axes(ax: Axes | Sequence[Axes] | None, n: int, what: str) -> list[Axes] 
 
 
 # -- public ------------------------------------------------------------------------------
-def plot_case(
-    case: Case, *, ax: Sequence[Axes] | None = None, arrows: bool = True
-) -> Figure:
+def plot_case(case: Case, *, ax: Sequence[Axes] | None = None, arrows: bool = True) -> Figure:
     """Three panels of a case: layout, wind speed, log concentration.
 
     1. Layout: solid cells dark grey, inlets green and outlets red on the
@@ -206,8 +220,13 @@ def plot_case(
     # 2. wind speed + direction
     speed = np.hypot(case.wind[0], case.wind[1])
     im = a_wind.imshow(
-        np.ma.masked_where(solid, speed), cmap=_field_cmap("viridis"), origin="lower",
-        extent=extent, interpolation="nearest", vmin=0.0, vmax=max(float(speed.max()), 1e-6),
+        np.ma.masked_where(solid, speed),
+        cmap=_field_cmap("viridis"),
+        origin="lower",
+        extent=extent,
+        interpolation="nearest",
+        vmin=0.0,
+        vmax=max(float(speed.max()), 1e-6),
     )
     fig.colorbar(im, ax=a_wind, shrink=0.9, pad=0.02, label="wind speed [m/s]")
     if arrows:
@@ -219,8 +238,13 @@ def plot_case(
     logc = np.log1p(np.maximum(case.concentration, 0.0))
     vmax = max(float(logc.max()), 1.0)
     im = a_gas.imshow(
-        np.ma.masked_where(solid, logc), cmap=_field_cmap("inferno"), origin="lower",
-        extent=extent, interpolation="nearest", vmin=0.0, vmax=vmax,
+        np.ma.masked_where(solid, logc),
+        cmap=_field_cmap("inferno"),
+        origin="lower",
+        extent=extent,
+        interpolation="nearest",
+        vmin=0.0,
+        vmax=vmax,
     )
     cb = fig.colorbar(im, ax=a_gas, shrink=0.9, pad=0.02)
     ticks, labels = _log_ppm_ticks(vmax)
@@ -231,8 +255,15 @@ def plot_case(
     _style_map_axes(a_gas, "Gas concentration", W_m, H_m)
     peak = float(case.concentration.max())
     a_gas.text(
-        0.02, 0.98, f"max {peak:,.0f} ppm" if peak >= 10 else f"max {peak:.3g} ppm",
-        transform=a_gas.transAxes, ha="left", va="top", fontsize=8, color="white", zorder=9,
+        0.02,
+        0.98,
+        f"max {peak:,.0f} ppm" if peak >= 10 else f"max {peak:.3g} ppm",
+        transform=a_gas.transAxes,
+        ha="left",
+        va="top",
+        fontsize=8,
+        color="white",
+        zorder=9,
         bbox={"boxstyle": "round,pad=0.25", "fc": "black", "alpha": 0.55, "ec": "none"},
     )
 
@@ -265,12 +296,14 @@ def plot_layout(layout: Layout, *, ax: Axes | None = None) -> Figure:
     _draw_openings(a, layout.inlets, layout.outlets, W_m, H_m)
     n_in, n_out = len(layout.inlets), len(layout.outlets)
     openings = (
-        "1 inlet, 1 outlet" if n_in == n_out == 1
+        "1 inlet, 1 outlet"
+        if n_in == n_out == 1
         else f"{n_in} inlet{'s' * (n_in > 1)}, {n_out} outlet{'s' * (n_out > 1)}"
     )
     free = 100.0 * float(layout.free.mean())
-    _style_map_axes(a, f"{layout.name}: {W_m:g} x {H_m:g} m, {openings}, {free:.0f} % free",
-                    W_m, H_m)
+    _style_map_axes(
+        a, f"{layout.name}: {W_m:g} x {H_m:g} m, {openings}, {free:.0f} % free", W_m, H_m
+    )
     _add_legend(fig, a, _layout_handles(with_source=False), own)
     return fig
 
@@ -297,10 +330,22 @@ def _quiver(ax: Axes, case: Case, speed: np.ndarray) -> None:
     res = case.resolution
     length = 0.7 * step * res  # m
     ax.quiver(
-        (jj + 0.5) * res, (ii + 0.5) * res, case.wind[0][ii, jj] / s, case.wind[1][ii, jj] / s,
-        angles="xy", scale_units="xy", scale=1.0 / length, pivot="mid", color="white",
-        edgecolor="black", linewidth=0.3, width=0.0045, headwidth=4, headlength=4.5,
-        headaxislength=4, zorder=5,
+        (jj + 0.5) * res,
+        (ii + 0.5) * res,
+        case.wind[0][ii, jj] / s,
+        case.wind[1][ii, jj] / s,
+        angles="xy",
+        scale_units="xy",
+        scale=1.0 / length,
+        pivot="mid",
+        color="white",
+        edgecolor="black",
+        linewidth=0.3,
+        width=0.0045,
+        headwidth=4,
+        headlength=4.5,
+        headaxislength=4,
+        zorder=5,
     )
 
 
