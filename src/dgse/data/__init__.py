@@ -1,0 +1,1 @@
+"""Training data: rasterized network inputs and targets, symmetry augmentation, datasets."""
