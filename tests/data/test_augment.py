@@ -59,8 +59,9 @@ def test_names_and_indices():
 def test_group_laws():
     a = np.random.default_rng(0).normal(size=SHAPE)
     r = Symmetry.ROT90
-    assert np.array_equal(transform_field(transform_field(transform_field(
-        transform_field(a, r), r), r), r), a)  # rot90^4 = id
+    assert np.array_equal(
+        transform_field(transform_field(transform_field(transform_field(a, r), r), r), r), a
+    )  # rot90^4 = id
     assert compose(compose(r, r), compose(r, r)) is Symmetry.IDENTITY
     assert inverse(Symmetry.ROT90) is Symmetry.ROT270
     assert Symmetry.FLIP_X.inverse is Symmetry.FLIP_X
@@ -86,8 +87,7 @@ def test_composition_matches_the_array_operations(k1, k2):
     p = rng.uniform(0, 1, size=(6, 2)) * size
     p1 = transform_points(p, k1, size)
     size1 = transform_points(np.array(size), k1, (0.0, 0.0))
-    np.testing.assert_allclose(transform_points(p1, k2, np.abs(size1)),
-                               transform_points(p, k12, size))
+    np.testing.assert_allclose(transform_points(p1, k2, np.abs(size1)), transform_points(p, k12, size))
 
 
 def test_rot90_on_arrays_follows_the_convention():
@@ -97,15 +97,20 @@ def test_rot90_on_arrays_follows_the_convention():
     for i, j in itertools.product(range(2), range(3)):
         assert r[j, 2 - 1 - i] == a[i, j]  # (i, j) -> (j, H - 1 - i)
     # a point to the east of the origin ends up north of it: (x, y) -> (H_m - y, x)
-    np.testing.assert_allclose(transform_points([[0.25, 0.05]], Symmetry.ROT90, (0.3, 0.2)),
-                               [[0.15, 0.25]])
+    np.testing.assert_allclose(transform_points([[0.25, 0.05]], Symmetry.ROT90, (0.3, 0.2)), [[0.15, 0.25]])
     assert transform_cells(np.array([[0, 2]]), Symmetry.ROT90, (2, 3)).tolist() == [[2, 1]]
 
 
 @pytest.mark.parametrize(
     ("k", "expect"),
-    [(Symmetry.IDENTITY, (1, 0)), (Symmetry.ROT90, (0, 1)), (Symmetry.ROT180, (-1, 0)),
-     (Symmetry.ROT270, (0, -1)), (Symmetry.FLIP_X, (-1, 0)), (Symmetry.FLIP_Y, (1, 0))],
+    [
+        (Symmetry.IDENTITY, (1, 0)),
+        (Symmetry.ROT90, (0, 1)),
+        (Symmetry.ROT180, (-1, 0)),
+        (Symmetry.ROT270, (0, -1)),
+        (Symmetry.FLIP_X, (-1, 0)),
+        (Symmetry.FLIP_Y, (1, 0)),
+    ],
 )
 def test_uniform_wind_rotates_as_a_vector(k, expect):
     w = np.zeros((2, *SHAPE))
@@ -157,12 +162,10 @@ def test_transform_layout_moves_the_openings():
         t = transform_layout(layout, k)
         # the opening cells are the transformed opening cells
         for kind in ("inlet", "outlet"):
-            np.testing.assert_array_equal(t.opening_mask(kind),
-                                          transform_field(layout.opening_mask(kind), k))
+            np.testing.assert_array_equal(t.opening_mask(kind), transform_field(layout.opening_mask(kind), k))
         back = transform_layout(t, inverse(k))
         assert np.array_equal(back.occupancy, layout.occupancy)
-        for o, o0 in zip(back.inlets + back.outlets, layout.inlets + layout.outlets,
-                         strict=True):
+        for o, o0 in zip(back.inlets + back.outlets, layout.inlets + layout.outlets, strict=True):
             assert o.side == o0.side
             assert (o.start_m, o.end_m) == pytest.approx((o0.start_m, o0.end_m), abs=1e-9)
 

@@ -45,8 +45,16 @@ def boxed_case(H: int, W: int) -> Case:
 
 @pytest.mark.parametrize(
     ("shape", "side"),
-    [((20, 30), 100), ((100, 100), 100), ((100, 60), 100), ((102, 102), 112),
-     ((150, 50), 160), ((50, 150), 160), ((100, 101), 112), ((128, 10), 128)],
+    [
+        ((20, 30), 100),
+        ((100, 100), 100),
+        ((100, 60), 100),
+        ((102, 102), 112),
+        ((150, 50), 160),
+        ((50, 150), 160),
+        ((100, 101), 112),
+        ((128, 10), 128),
+    ],
 )
 def test_canvas_sizes(shape, side):
     assert canvas_shape_for(shape) == (side, side)
@@ -126,10 +134,10 @@ def test_targets(shape):
     assert t.wind.shape == (2, *S) and t.log_concentration.shape == S and t.source.shape == S
     assert t.wind.dtype == t.log_concentration.dtype == t.source.dtype == np.float32
     np.testing.assert_array_equal(crop(t.wind, shape), case.wind)
-    np.testing.assert_allclose(crop(t.log_concentration, shape), np.log1p(case.concentration),
-                               rtol=1e-6)
-    np.testing.assert_allclose(log_to_ppm(crop(t.log_concentration, shape)), case.concentration,
-                               rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(crop(t.log_concentration, shape), np.log1p(case.concentration), rtol=1e-6)
+    np.testing.assert_allclose(
+        log_to_ppm(crop(t.log_concentration, shape)), case.concentration, rtol=1e-5, atol=1e-6
+    )
     assert t.source.sum() == 1.0 and t.source[case.source_cell] == 1.0
     assert t.source_cell == case.source_cell
     assert int(np.argmax(t.source)) == t.source_index == cell_to_index(case.source_cell, S)

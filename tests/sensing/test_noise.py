@@ -25,8 +25,7 @@ def test_drawn_parameters_cover_table_one_ranges():
     rng = np.random.default_rng(1)
     cbar = 12.0
     ps = [draw_noise_params(rng, cbar) for _ in range(3000)]
-    for name, hi in (("alpha_g", 1.0), ("sigma_env", 0.5 * cbar), ("alpha_w", 0.5),
-                     ("sigma_a_deg", 15.0)):
+    for name, hi in (("alpha_g", 1.0), ("sigma_env", 0.5 * cbar), ("alpha_w", 0.5), ("sigma_a_deg", 15.0)):
         v = np.array([getattr(p, name) for p in ps])
         assert v.min() >= 0 and v.max() <= hi
         assert v.min() < 0.01 * hi and v.max() > 0.99 * hi  # the whole range is used

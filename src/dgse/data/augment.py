@@ -254,9 +254,7 @@ def transform_cells(cells: np.ndarray, k: SymmetryLike, map_shape: Sequence[int]
     return np.stack([t[:, 1], t[:, 0]], axis=1).round().astype(np.int64)
 
 
-def transform_observations(
-    obs: Observations, k: SymmetryLike, map_shape: Sequence[int]
-) -> Observations:
+def transform_observations(obs: Observations, k: SymmetryLike, map_shape: Sequence[int]) -> Observations:
     """Observations on an ``(H, W)`` map after ``k``: cells move, wind readings rotate."""
     return replace(
         obs,

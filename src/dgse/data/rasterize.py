@@ -120,9 +120,7 @@ def _grid_for(occupancy: np.ndarray, canvas_shape: tuple[int, int]) -> Grid:
     return g
 
 
-def rasterize(
-    occupancy: np.ndarray, obs: Observations, canvas_shape: tuple[int, int]
-) -> np.ndarray:
+def rasterize(occupancy: np.ndarray, obs: Observations, canvas_shape: tuple[int, int]) -> np.ndarray:
     """The five-channel network input (see the module docstring for the channels).
 
     Args:
@@ -241,9 +239,7 @@ def crop(canvas_field: np.ndarray, map_shape: tuple[int, int]) -> np.ndarray:
     return canvas_field[..., :H, :W]
 
 
-def crop_posterior(
-    prob: np.ndarray, map_shape: tuple[int, int], renormalize: bool = True
-) -> np.ndarray:
+def crop_posterior(prob: np.ndarray, map_shape: tuple[int, int], renormalize: bool = True) -> np.ndarray:
     """A source posterior ``(..., S_h, S_w)`` cropped to the map ``(..., H, W)``.
 
     With ``renormalize`` the cropped probabilities are rescaled to sum to 1
