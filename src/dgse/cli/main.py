@@ -31,7 +31,7 @@ from rich.markup import escape
 from rich.table import Table
 from rich.text import Text
 
-from dgse.errors import DGSEError, InputDataError, UnsupportedError
+from dgse.errors import DGSEError, InputDataError
 from dgse.world.case import Case
 from dgse.world.layout import Layout, Opening
 
@@ -537,9 +537,10 @@ app.command(
 @app.command("engines")
 def engines_cmd() -> None:
     """List the physics engines and why unavailable ones are missing."""
-    from dgse.physics.engines import engine_names, get_engine
+    from dgse.physics.engines import engine_names, unavailable_engines
 
     available = engine_names()
+    missing = unavailable_engines()
     table = Table(title="physics engines", title_justify="left", box=box.SIMPLE_HEAD)
     table.add_column("engine", style="bold")
     table.add_column("status")
@@ -549,12 +550,7 @@ def engines_cmd() -> None:
             note = "default" if name == "builtin" else ""
             table.add_row(name, "[green]available[/]", note)
             continue
-        try:
-            get_engine(name)
-            reason = ""
-        except UnsupportedError as e:
-            reason = str(e).removeprefix(f"engine {name!r} is not available: ")
-        table.add_row(name, "[red]unavailable[/]", escape(reason))
+        table.add_row(name, "[red]unavailable[/]", escape(missing.get(name, "")))
     console.print(table)
 
 

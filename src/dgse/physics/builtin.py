@@ -67,15 +67,7 @@ class BuiltinEngine:
     name: str = "builtin"
 
     def solve(self, layout: Layout, inlet_velocity: float, sources: Sequence[Source]) -> Solution:
-        t0 = time.perf_counter()
-        flow, ts = flow_and_transport(layout, inlet_velocity, self.physics, self.settings)
-        t_flow = time.perf_counter() - t0
-        if not flow.info["converged"] and not self.allow_unconverged:
-            raise ConvergenceError(
-                f"flow did not converge in {flow.info['iterations']} iterations "
-                f"(residuals {_fmt(flow.info['residuals'])})",
-                flow.info,
-            )
+        # check the sources before spending time on the flow
         grid = layout.grid
         cells = [grid.cell_of(*s.position) for s in sources]
         for s, (i, j) in zip(sources, cells, strict=True):
@@ -83,6 +75,22 @@ class BuiltinEngine:
                 raise InputDataError(f"source at {s.position} lies in a solid cell ({i}, {j})")
             if not s.release_rate > 0:
                 raise InputDataError(f"release rate must be positive, got {s.release_rate}")
+        t0 = time.perf_counter()
+        flow, ts = flow_and_transport(layout, inlet_velocity, self.physics, self.settings)
+        t_flow = time.perf_counter() - t0
+        if not flow.info["converged"] and not self.allow_unconverged:
+            why = (
+                "diverged"
+                if flow.info["diverged"]
+                else "stalled (residuals stopped falling)"
+                if flow.info["stalled"]
+                else "hit its iteration or time limit"
+            )
+            raise ConvergenceError(
+                f"flow did not converge in {flow.info['iterations']} iterations: {why} "
+                f"(residuals {_fmt(flow.info['residuals'])})",
+                flow.info,
+            )
         t1 = time.perf_counter()
         conc = ts.solve_cells(cells, [s.release_rate for s in sources]) if sources else []
         ratios = []

@@ -83,9 +83,16 @@ def register_engine(name: str, factory: Callable[[], Engine]) -> None:
 
 
 def mark_unavailable(name: str, reason: str) -> None:
-    """Record why a known engine cannot be used here (shown by :func:`get_engine`)."""
-    if name not in _FACTORIES:
-        _UNAVAILABLE[name] = reason
+    """Record why a known engine cannot be used here (shown by :func:`get_engine`);
+    drops a registration made earlier (e.g. before the software went missing)."""
+    _FACTORIES.pop(name, None)
+    _UNAVAILABLE[name] = reason
+
+
+def unavailable_engines() -> dict[str, str]:
+    """Known engines that cannot be used here, with the reason for each."""
+    _load_optional()
+    return dict(_UNAVAILABLE)
 
 
 def _load_optional() -> None:

@@ -194,8 +194,6 @@ def register() -> bool:
     if bin_dir is not None:
         _engines.register_engine(ENGINE_NAME, OpenFOAMEngine)
         return True
-    # engines.py has no "unregister": drop a registration made while it was found
-    _engines._FACTORIES.pop(ENGINE_NAME, None)
     _engines.mark_unavailable(ENGINE_NAME, unavailable_reason())
     return False
 

@@ -53,7 +53,7 @@ _jit = numba.njit(cache=True, nogil=True)
 class FlowSettings:
     """Iteration controls of :func:`solve_flow`."""
 
-    max_iterations: int = 1000
+    max_iterations: int = 600
     tolerance: float = 1e-4  #: on every normalised initial residual (OpenFOAM's residualControl)
     alpha_u: float = 0.9
     alpha_turb: float = 0.8
@@ -61,10 +61,11 @@ class FlowSettings:
     high_order: bool = True
     consistent: bool = True
     rel_tol: float = 0.1  #: relative tolerance of the transport-equation solves
-    p_rel_tol: float = 0.05  #: relative tolerance of the pressure solve
+    p_rel_tol: float = 0.1  #: relative tolerance of the pressure solve
     max_sweeps: int = 50  #: Gauss-Seidel sweeps at most per transport solve
     max_krylov: int = 8  #: CG iterations on stale pressure factors before refactorizing
     max_seconds: float = math.inf  #: give up (not converged) after this wall time
+    stall_window: int = 150  #: give up when the worst residual has not halved over this many iterations
 
 
 @dataclass
@@ -261,6 +262,8 @@ def solve_flow(
     residuals: dict[str, float] = {}
     history: list[dict[str, float]] = []
     converged = False
+    stalled = False
+    worst: list[float] = []
     n_limited = 0
     sweeps = {"U": 0, "k": 0, "epsilon": 0}
     it = 0
@@ -374,11 +377,18 @@ def solve_flow(
         if finite and max(residuals.values()) < s.tolerance:
             converged = True
             break
+        worst.append(max(residuals.values()))
+        w = s.stall_window
+        if it > 2 * w and min(worst[-w:]) > 0.5 * min(worst[:-w]):
+            stalled = True  # an oscillating or stuck iteration: report it, don't burn time
+            break
         if not finite or time.perf_counter() - t0 > s.max_seconds:
             break
     info = {
         "iterations": it,
         "converged": converged,
+        "stalled": stalled,
+        "diverged": not finite,
         "residuals": dict(residuals),
         "seconds": time.perf_counter() - t0,
         "length_scale_limited_cells": n_limited,

@@ -130,6 +130,8 @@ class Case:
         path = Path(path)
         if not path.exists():
             raise CaseFileError(f"{path}: no such file")
+        if not zipfile.is_zipfile(path):
+            raise CaseFileError(f"{path}: not a readable .npz case file (not a zip archive)")
         try:
             with np.load(path, allow_pickle=False) as data:
                 arrays = {k: data[k] for k in data.files}

@@ -143,8 +143,9 @@ class Layout:
         """The layout described by a case's occupancy and ``meta``."""
         res = float(meta.get("resolution", DEFAULT_RESOLUTION))
         try:
-            inlets = [Opening.from_dict(d) for d in meta.get("inlets", [meta["inlet"]])]
-            outlets = [Opening.from_dict(d) for d in meta.get("outlets", [meta["outlet"]])]
+            lists = {k: meta[k + "s"] if k + "s" in meta else [meta[k]] for k in ("inlet", "outlet")}
+            inlets = [Opening.from_dict(d) for d in lists["inlet"]]
+            outlets = [Opening.from_dict(d) for d in lists["outlet"]]
         except KeyError as e:
             raise InputDataError(f"meta has no {e.args[0]!r} (nor a list of them)") from None
         walls = [tuple(w) for w in meta.get("walls", [])]
