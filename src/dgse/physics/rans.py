@@ -235,7 +235,7 @@ def solve_flow(
     t0 = time.perf_counter()
     st, info = _simplec(layout, mesh, inlet_velocity, physics, s, progress)
     attempts = [_summary(info, s)]
-    if not info["converged"] and s.retry_relaxation is not None:
+    if (info["stalled"] or info["diverged"]) and s.retry_relaxation is not None:
         a_u, a_t = s.retry_relaxation
         s2 = replace(s, alpha_u=a_u, alpha_turb=a_t, max_seconds=s.max_seconds - info["seconds"])
         st, info = _simplec(layout, mesh, inlet_velocity, physics, s2, progress)
