@@ -1,0 +1,297 @@
+"""Dataset commands: ``generate``, ``export``, ``import``, ``stats``.
+
+``data_app`` is a typer app with all four commands.  :func:`register` attaches
+them to another app the way the ``dgse`` command exposes them: ``generate``,
+``export`` and ``import`` at the top level, ``stats`` under a ``data`` group
+(``dgse data stats``).
+
+Every error a user can cause (:class:`~dgse.errors.DGSEError`, or a file that
+cannot be written) prints one red line ``error: <message>`` and exits with
+status 2.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Annotated, Any, TypeVar
+
+import typer
+from rich.console import Console
+from rich.markup import escape
+from rich.table import Table
+from rich.text import Text
+
+from dgse.errors import DGSEError, InputDataError
+
+__all__ = [
+    "data_app",
+    "export_cmd",
+    "generate_cmd",
+    "import_cmd",
+    "main",
+    "register",
+    "stats_cmd",
+]
+
+EXIT_USER_ERROR = 2
+
+console = Console(highlight=False)
+err_console = Console(stderr=True, highlight=False)
+
+data_app = typer.Typer(
+    name="data",
+    help="Datasets: generate on Dask, export/import case files, statistics.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def _print_error(message: str) -> None:
+    err_console.print(
+        Text("error: ", style="bold red") + Text(message.replace("\n", " "), style="red"),
+        soft_wrap=True,
+    )
+
+
+def _user_errors(fn: F) -> F:
+    """Print a user-caused error as one red line and exit with status 2."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except DGSEError as e:
+            _print_error(str(e))
+            raise typer.Exit(EXIT_USER_ERROR) from None
+        except OSError as e:
+            _print_error(f"{e.filename}: {e.strerror}" if e.filename and e.strerror else str(e))
+            raise typer.Exit(EXIT_USER_ERROR) from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+def _p(path: Path) -> str:
+    return escape(str(path))
+
+
+# -- commands ------------------------------------------------------------------------------------
+@_user_errors
+def generate_cmd(
+    layouts: Annotated[int, typer.Option("--layouts", "-n", help="Number of layouts (3750 in the paper).")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Dataset store (.h5) to create or resume.")],
+    engine: Annotated[
+        str, typer.Option("--engine", "-e", help="Physics engine: builtin or openfoam.")
+    ] = "builtin",
+    workers: Annotated[
+        int | None,
+        typer.Option("--workers", "-w", help="Local worker processes (default: number of CPUs)."),
+    ] = None,
+    scheduler: Annotated[
+        str | None,
+        typer.Option("--scheduler", help="Address of an existing Dask scheduler (tcp://host:8786)."),
+    ] = None,
+    seed: Annotated[int, typer.Option("--seed", "-s", help="Dataset seed.")] = 0,
+    size: Annotated[
+        tuple[float, float] | None,
+        typer.Option(
+            "--size",
+            metavar="MIN MAX",
+            help="Range of the domain's width and height in m (default 5 10, the paper's).",
+        ),
+    ] = None,
+    retries: Annotated[
+        int, typer.Option("--retries", help="Fresh draws to try for a layout that fails.")
+    ] = 2,
+    retry_failed: Annotated[
+        bool, typer.Option("--retry-failed", help="Try layouts recorded as failed again.")
+    ] = False,
+    checkpoint: Annotated[
+        float,
+        typer.Option("--checkpoint", help="Least seconds between commits into the store file."),
+    ] = 60.0,
+    progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")] = True,
+) -> None:
+    """Generate a dataset: random layouts x 4 sources, solved on a Dask cluster.
+
+    Resumable: run the same command again after an interruption (even kill -9)
+    and it makes only the missing layouts.
+    """
+    from dgse.data.generation import generate
+
+    kwargs: dict[str, Any] = {}
+    if size is not None:
+        kwargs = {"width_range": tuple(size), "height_range": tuple(size)}
+    where = f"scheduler {scheduler}" if scheduler else f"{workers or 'all'} local workers"
+    console.print(
+        f"generating {layouts} layouts into [cyan]{_p(out)}[/] with {escape(engine)} "
+        f"on {escape(where)} (seed {seed})"
+    )
+    try:
+        report = generate(
+            layouts,
+            out,
+            engine=engine,
+            workers=workers,
+            scheduler=scheduler,
+            seed=seed,
+            progress=progress,
+            retries=retries,
+            retry_failed=retry_failed,
+            checkpoint_s=checkpoint,
+            **kwargs,
+        )
+    except KeyboardInterrupt:
+        _print_error(f"interrupted; what was finished is in {out}; run the command again to resume")
+        raise typer.Exit(130) from None
+    splits = ", ".join(f"{k} {v}" for k, v in report.splits.items())
+    rate = report.layouts_per_minute
+    console.print(
+        f"[bold]{report.n_layouts}[/] layouts in [cyan]{_p(out)}[/] ({splits}); "
+        f"{report.n_failures} failed; this run: {report.n_new} new, {report.n_failed_new} failed "
+        f"in {report.seconds:.1f} s"
+        + (f" ({rate:.1f} layouts/min)" if report.n_new + report.n_failed_new else "")
+    )
+
+
+@_user_errors
+def export_cmd(
+    store: Annotated[Path, typer.Argument(metavar="STORE", help="Dataset store (.h5).")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Directory for the case files.")],
+    split: Annotated[str | None, typer.Option("--split", help="Only this split (train, val, test).")] = None,
+) -> None:
+    """Write every case of a store as a case file <layout>_src<k>.npz (plus manifest.json)."""
+    from dgse.data.store import DatasetStore
+
+    with DatasetStore(store, "r") as s:
+        files = s.export(out, split=split)
+    console.print(f"wrote {len(files)} case files into [cyan]{_p(out)}[/]")
+
+
+@_user_errors
+def import_cmd(
+    cases: Annotated[
+        list[Path],
+        typer.Argument(metavar="CASES...", help="Case files (.npz) or directories of them."),
+    ],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Dataset store (.h5), created if missing.")],
+    split: Annotated[
+        str, typer.Option("--split", help="Split of the imported layouts (train, val, test).")
+    ] = "train",
+) -> None:
+    """Add case files to a dataset store (cases sharing a layout become one layout)."""
+    from dgse.data.store import DatasetStore
+
+    with DatasetStore(out, "a") as s:
+        added = s.import_cases(cases, split=split)
+        n_cases = sum(s.n_sources(i) for i in added)
+        total = len(s)
+    console.print(
+        f"imported {n_cases} cases as {len(added)} layouts ({escape(split)}) into "
+        f"[cyan]{_p(out)}[/]; the store now holds {total} layouts"
+    )
+
+
+def _fmt(v: float | int | None) -> str:
+    if v is None or (isinstance(v, float) and v != v):
+        return "-"
+    return f"{v:.3g}"
+
+
+@_user_errors
+def stats_cmd(
+    store: Annotated[Path, typer.Argument(metavar="STORE", help="Dataset store (.h5).")],
+    plot: Annotated[
+        Path | None, typer.Option("--plot", help="Save histograms to this figure (png, pdf, ...).")
+    ] = None,
+    json_out: Annotated[Path | None, typer.Option("--json", help="Write the statistics as JSON.")] = None,
+) -> None:
+    """Statistics of a dataset: sizes, inlet speeds, release rates, concentrations, splits."""
+    from dgse.data.stats import dataset_stats, plot_stats
+
+    st = dataset_stats(store)
+    sp = st["splits"]
+    console.print(
+        f"[bold]{escape(str(store))}[/]: {st['n_layouts']} layouts, {st['n_cases']} cases; "
+        + ", ".join(f"{k} {v['layouts']}" for k, v in sp.items())
+        + f"; {st['failures']['count']} failures"
+        + (
+            " (" + ", ".join(f"{k} {v}" for k, v in st["failures"]["by_error"].items()) + ")"
+            if st["failures"]["count"]
+            else ""
+        )
+    )
+    table = Table(title_justify="left")
+    for col in ("quantity", "min", "p05", "median", "mean", "p95", "max"):
+        table.add_column(col, justify="left" if col == "quantity" else "right")
+    rows = [
+        ("width [m]", "width_m"),
+        ("height [m]", "height_m"),
+        ("free fraction", "free_fraction"),
+        ("inlet velocity [m/s]", "inlet_velocity"),
+        ("max wind speed [m/s]", "max_speed"),
+        ("release rate [g/s]", "release_rate_gps"),
+        ("max conc. [ppm]", "max_ppm"),
+        ("mean conc. [ppm]", "mean_ppm"),
+    ]
+    for label, key in rows:
+        s = st[key]
+        table.add_row(label, *(_fmt(s[k]) for k in ("min", "p05", "median", "mean", "p95", "max")))
+    console.print(table)
+    if json_out is not None:
+        json_out.parent.mkdir(parents=True, exist_ok=True)
+        json_out.write_text(json.dumps(st, indent=1, allow_nan=True))
+        console.print(f"wrote statistics [cyan]{_p(json_out)}[/]")
+    if plot is not None:
+        plot.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            plot_stats(st).savefig(plot, dpi=120)
+        except ValueError as e:  # unknown image format
+            raise InputDataError(f"cannot save figure {plot}: {e}") from None
+        console.print(f"wrote figure [cyan]{_p(plot)}[/]")
+
+
+data_app.command("generate")(generate_cmd)
+data_app.command("export")(export_cmd)
+data_app.command("import")(import_cmd)
+data_app.command("stats")(stats_cmd)
+
+
+def register(app: typer.Typer) -> typer.Typer:
+    """Attach the commands to ``app``: generate/export/import at top level, ``data stats``.
+
+    Returns the ``data`` sub-app (add more dataset commands to it).
+    """
+    app.command("generate")(generate_cmd)
+    app.command("export")(export_cmd)
+    app.command("import")(import_cmd)
+    sub = typer.Typer(
+        name="data",
+        help="Dataset tools.",
+        no_args_is_help=True,
+        context_settings={"help_option_names": ["-h", "--help"]},
+    )
+    sub.command("stats")(stats_cmd)
+    app.add_typer(sub, name="data")
+    return sub
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Run ``data_app`` with ``args`` (default ``sys.argv[1:]``); returns the exit status."""
+    try:
+        data_app(args=list(args) if args is not None else None, prog_name="dgse-data")
+    except SystemExit as e:
+        code = e.code
+        return code if isinstance(code, int) else (0 if code is None else 1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
