@@ -291,47 +291,62 @@ def residual_norm(aP, a, b, nb, x):
 
 @_jit
 def gauss_seidel(aP, a, b, nb, x, rel_tol, max_sweeps):
-    """Symmetric Gauss-Seidel sweeps on ``x`` (in place) until the residual fell by
-    ``rel_tol`` or ``max_sweeps`` sweeps; returns the number of sweeps."""
-    n = x.shape[0]
-    r0 = 0.0
-    for c in range(n):
-        r = b[c] - aP[c] * x[c]
-        for d in range(4):
-            j = nb[c, d]
-            if j >= 0:
-                r += a[c, d] * x[j]
-        r0 += abs(r)
-    if r0 == 0.0:
-        return 0
+    """Symmetric Gauss-Seidel on ``aP x - sum a x_nb = b`` for ``m`` right-hand sides.
+
+    ``b`` and ``x`` are ``(n, m)``; ``x`` is updated in place until every column's
+    residual fell by ``rel_tol`` (estimated during the forward sweep) or after
+    ``max_sweeps`` symmetric sweeps.  Returns ``(sweeps, initial)``: the sweeps
+    done and OpenFOAM's normalised initial residual of each column.
+    """
+    n, m = x.shape
+    initial = np.zeros(m)
+    r0 = np.zeros(m)
+    for k in range(m):
+        xm = 0.0
+        for c in range(n):
+            xm += x[c, k]
+        xm /= max(n, 1)
+        norm = 0.0
+        for c in range(n):
+            ax = aP[c] * x[c, k]
+            aavg = aP[c] * xm
+            for d in range(4):
+                j = nb[c, d]
+                if j >= 0:
+                    ax -= a[c, d] * x[j, k]
+                    aavg -= a[c, d] * xm
+            r0[k] += abs(b[c, k] - ax)
+            norm += abs(ax - aavg) + abs(b[c, k] - aavg)
+        initial[k] = r0[k] / (norm + 1e-20)
     sweeps = 0
+    est = np.empty(m)
     while sweeps < max_sweeps:
+        est[:] = 0.0
         for c in range(n):
-            s = b[c]
-            for d in range(4):
-                j = nb[c, d]
-                if j >= 0:
-                    s += a[c, d] * x[j]
-            x[c] = s / aP[c]
-        for c in range(n - 1, -1, -1):
-            s = b[c]
-            for d in range(4):
-                j = nb[c, d]
-                if j >= 0:
-                    s += a[c, d] * x[j]
-            x[c] = s / aP[c]
-        sweeps += 1
-        res = 0.0
-        for c in range(n):
-            r = b[c] - aP[c] * x[c]
-            for d in range(4):
-                j = nb[c, d]
-                if j >= 0:
-                    r += a[c, d] * x[j]
-            res += abs(r)
-        if res <= rel_tol * r0:
+            for k in range(m):
+                s = b[c, k]
+                for d in range(4):
+                    j = nb[c, d]
+                    if j >= 0:
+                        s += a[c, d] * x[j, k]
+                est[k] += abs(s - aP[c] * x[c, k])
+                x[c, k] = s / aP[c]
+        done = True
+        for k in range(m):
+            if est[k] > rel_tol * r0[k]:
+                done = False
+        if done and sweeps > 0:
             break
-    return sweeps
+        for c in range(n - 1, -1, -1):
+            for k in range(m):
+                s = b[c, k]
+                for d in range(4):
+                    j = nb[c, d]
+                    if j >= 0:
+                        s += a[c, d] * x[j, k]
+                x[c, k] = s / aP[c]
+        sweeps += 1
+    return sweeps, initial
 
 
 @_jit

@@ -332,12 +332,13 @@ def _simplec(
         gp = gradient(st.p, zero4, outlet, nb, ft, h, False)
         rhs_x = bx - gp[:, 0] * V
         rhs_y = by - gp[:, 1] * V
-        residuals["Ux"] = residual_norm(aPr, a, rhs_x, nb, st.ux)
-        residuals["Uy"] = residual_norm(aPr, a, rhs_y, nb, st.uy)
-        ux_star = st.ux.copy()
-        uy_star = st.uy.copy()
-        sweeps["U"] += gauss_seidel(aPr, a, rhs_x, nb, ux_star, s.rel_tol, s.max_sweeps)
-        sweeps["U"] += gauss_seidel(aPr, a, rhs_y, nb, uy_star, s.rel_tol, s.max_sweeps)
+        u_star = np.stack([st.ux, st.uy], axis=1)
+        n_sw, res = gauss_seidel(
+            aPr, a, np.stack([rhs_x, rhs_y], axis=1), nb, u_star, s.rel_tol, s.max_sweeps
+        )
+        sweeps["U"] += n_sw
+        residuals["Ux"], residuals["Uy"] = float(res[0]), float(res[1])
+        ux_star, uy_star = u_star[:, 0], u_star[:, 1]
 
         # ---- SIMPLEC pressure equation ---------------------------------------------------
         hbyax = (bx + neighbour_sum(a, ux_star, nb)) / aPr
@@ -386,9 +387,11 @@ def _simplec(
         aP = np.where(wall_cell, 1.0, aP)
         b = np.where(wall_cell, eps_wall, b)
         a = np.where(wall_cell[:, None], 0.0, a)
-        residuals["epsilon"] = residual_norm(aP, a, b, nb, st.eps)
-        eps_new = st.eps.copy()
-        sweeps["epsilon"] += gauss_seidel(aP, a, b, nb, eps_new, s.rel_tol, s.max_sweeps)
+        eps_new = st.eps.copy()[:, None]
+        n_sw, res = gauss_seidel(aP, a, b[:, None], nb, eps_new, s.rel_tol, s.max_sweeps)
+        sweeps["epsilon"] += n_sw
+        residuals["epsilon"] = float(res[0])
+        eps_new = eps_new[:, 0]
         eps_new = bound(eps_new, nb, ft, 1e-15)
 
         dk = nu + st.nut / physics.sigma_k
@@ -400,9 +403,11 @@ def _simplec(
             bval = np.full((n, 4), k_in)
             b += ho_source(st.k, gradient(st.k, bval, fixed_t, nb, ft, h, True), F, nb, ft, h)
         aP, b = relax(aP, a, b, st.k, s.alpha_turb)
-        residuals["k"] = residual_norm(aP, a, b, nb, st.k)
-        k_new = st.k.copy()
-        sweeps["k"] += gauss_seidel(aP, a, b, nb, k_new, s.rel_tol, s.max_sweeps)
+        k_new = st.k.copy()[:, None]
+        n_sw, res = gauss_seidel(aP, a, b[:, None], nb, k_new, s.rel_tol, s.max_sweeps)
+        sweeps["k"] += n_sw
+        residuals["k"] = float(res[0])
+        k_new = k_new[:, 0]
         st.k = bound(k_new, nb, ft, 1e-15)
         # realizability guard: the length scale Cmu^0.75 k^1.5 / eps cannot exceed the
         # domain; without it a transient dip of epsilon gives an unbounded nu_t
