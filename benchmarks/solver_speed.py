@@ -51,13 +51,23 @@ def worker(args: argparse.Namespace) -> None:
     try:
         sol = engine.solve(layout, v_in, [Source(p, q) for p, q in sources])
     except ConvergenceError as e:
-        json.dump({"converged": False, "error": str(e), "seconds": time.perf_counter() - t,
-                   "iterations": e.info.get("iterations")}, open(args.out + ".json", "w"))
+        json.dump(
+            {
+                "converged": False,
+                "error": str(e),
+                "seconds": time.perf_counter() - t,
+                "iterations": e.info.get("iterations"),
+            },
+            open(args.out + ".json", "w"),
+        )
         return
     np.savez(args.out, wind=sol.flow.wind, conc=np.stack(sol.concentrations))
-    info = {"converged": True, "seconds": time.perf_counter() - t,
-            "outlet_flux_ratio": sol.outlet_flux_ratio,
-            "iterations": sol.info.get("flow_iterations", sol.flow.info.get("iterations"))}
+    info = {
+        "converged": True,
+        "seconds": time.perf_counter() - t,
+        "outlet_flux_ratio": sol.outlet_flux_ratio,
+        "iterations": sol.info.get("flow_iterations", sol.flow.info.get("iterations")),
+    }
     json.dump(info, open(args.out + ".json", "w"))
 
 
@@ -124,9 +134,17 @@ def main() -> None:
     from dgse.world.case import Case
 
     use_foam = "openfoam" in engine_names() and not args.no_openfoam
-    results: dict = {"machine": {"cpu_count": os.cpu_count(), "platform": platform.platform(),
-                                 "python": platform.python_version()},
-                     "openfoam": use_foam, "layouts": [], "sizes": [], "non_converging": None}
+    results: dict = {
+        "machine": {
+            "cpu_count": os.cpu_count(),
+            "platform": platform.platform(),
+            "python": platform.python_version(),
+        },
+        "openfoam": use_foam,
+        "layouts": [],
+        "sizes": [],
+        "non_converging": None,
+    }
     with tempfile.TemporaryDirectory() as tmp_s:
         tmp = Path(tmp_s)
         run("builtin", "rand:0:5", tmp)  # warm the numba cache: not timed
@@ -157,11 +175,14 @@ def main() -> None:
         for side in args.sizes:
             sc = f"rand:7:{side:g}"
             b = run("builtin", sc, tmp)
-            row = {"side_m": side, "cells": round(side / 0.1) ** 2,
-                   "builtin": {k: v for k, v in b.items() if not k.startswith("_")}}
+            row = {
+                "side_m": side,
+                "cells": round(side / 0.1) ** 2,
+                "builtin": {k: v for k, v in b.items() if not k.startswith("_")},
+            }
             results["sizes"].append(row)
             print(json.dumps(row, default=float), flush=True)
-        nc = run("builtin", "ref:s1_l000", tmp, tolerance=1e-12)
+        nc = run("builtin", "rand:25", tmp)  # an oscillating flow (see solver_robustness)
         results["non_converging"] = {k: v for k, v in nc.items() if not k.startswith("_")}
         print(json.dumps(results["non_converging"], default=float), flush=True)
     out = Path(args.out)
@@ -172,10 +193,14 @@ def main() -> None:
 
 
 def markdown(r: dict) -> str:
-    lines = ["Wall seconds per layout with four sources, each in a fresh process (start-up included); "
-             "accuracy of the built-in solution against OpenFOAM's on the same layout.", "",
-             "| layout | built-in s | OpenFOAM s | speed-up | built-in iterations | velocity rel. L2 | "
-             "log(1+ppm) RMSE (max over sources) |", "|---|---|---|---|---|---|---|"]
+    lines = [
+        "Wall seconds per layout with four sources, each in a fresh process (start-up included); "
+        "accuracy of the built-in solution against OpenFOAM's on the same layout.",
+        "",
+        "| layout | built-in s | OpenFOAM s | speed-up | built-in iterations | velocity rel. L2 | "
+        "log(1+ppm) RMSE (max over sources) |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for row in r["layouts"]:
         b = row["builtin"]
         f = row.get("openfoam", {})
@@ -195,8 +220,10 @@ def markdown(r: dict) -> str:
         lines.append(f"| {row['cells']} | {b['wall_s']:.2f} | {b.get('iterations')} |")
     nc = r.get("non_converging")
     if nc:
-        lines.append(f"\nNon-converging flow (tolerance 1e-12, reference layout s1_l000): reported after "
-                     f"{nc['wall_s']:.1f} s, {nc.get('iterations')} iterations: {nc.get('error', '')}")
+        lines.append(
+            f"\nNon-converging flow (random layout, seed 25, an oscillating flow): reported after "
+            f"{nc['wall_s']:.1f} s, {nc.get('iterations')} iterations: {nc.get('error', '')}"
+        )
     return "\n".join(lines) + "\n"
 
 
