@@ -123,7 +123,7 @@ def main() -> None:
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results"))
     ap.add_argument("--tolerance", type=float, default=None)
     ap.add_argument("--random", type=int, default=3, help="random training layouts (both engines)")
-    ap.add_argument("--sizes", type=float, nargs="*", default=[5, 10, 15, 20], help="square sides, m")
+    ap.add_argument("--sizes", type=float, nargs="*", default=[5, 7.5, 10, 15, 20], help="square sides, m")
     ap.add_argument("--no-openfoam", action="store_true")
     args = ap.parse_args()
     if args.worker:
@@ -173,15 +173,16 @@ def main() -> None:
             results["layouts"].append(row)
             print(json.dumps(row, default=float)[:400], flush=True)
         for side in args.sizes:
-            sc = f"rand:7:{side:g}"
-            b = run("builtin", sc, tmp)
-            row = {
-                "side_m": side,
-                "cells": round(side / 0.1) ** 2,
-                "builtin": {k: v for k, v in b.items() if not k.startswith("_")},
-            }
-            results["sizes"].append(row)
-            print(json.dumps(row, default=float), flush=True)
+            for seed in (7, 8):
+                b = run("builtin", f"rand:{seed}:{side:g}", tmp)
+                row = {
+                    "side_m": side,
+                    "seed": seed,
+                    "cells": round(side / 0.1) ** 2,
+                    "builtin": {k: v for k, v in b.items() if not k.startswith("_")},
+                }
+                results["sizes"].append(row)
+                print(json.dumps(row, default=float), flush=True)
         nc = run("builtin", "rand:25", tmp)  # an oscillating flow (see solver_robustness)
         results["non_converging"] = {k: v for k, v in nc.items() if not k.startswith("_")}
         print(json.dumps(results["non_converging"], default=float), flush=True)
@@ -214,10 +215,21 @@ def markdown(r: dict) -> str:
     sp = [row["speedup"] for row in r["layouts"] if "speedup" in row]
     if sp:
         lines.append(f"\nMedian speed-up {statistics.median(sp):.1f}x (min {min(sp):.1f}x).")
-    lines += ["", "| cells | built-in s (incl. start-up) | iterations |", "|---|---|---|"]
+    lines += [
+        "",
+        "Growth with the map size (square random layouts, built-in solver, two seeds each):",
+        "",
+        "| cells | seed | wall s (incl. start-up) | solve s | iterations | ms per iteration | converged |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for row in r["sizes"]:
         b = row["builtin"]
-        lines.append(f"| {row['cells']} | {b['wall_s']:.2f} | {b.get('iterations')} |")
+        its = b.get("iterations") or 0
+        per_it = 1e3 * b["seconds"] / its if its else float("nan")
+        lines.append(
+            f"| {row['cells']} | {row['seed']} | {b['wall_s']:.2f} | {b['seconds']:.2f} | {its} | "
+            f"{per_it:.1f} | {b['converged']} |"
+        )
     nc = r.get("non_converging")
     if nc:
         lines.append(
