@@ -60,6 +60,7 @@ def run(n_layouts: int, workers: int, seed: int, directory: Path) -> dict:
         "layouts_per_minute": round(60.0 * n_done / wall, 2),
         "steady_layouts_per_minute": round(steady, 2),
         "mean_task_s_per_layout": round(report.solve_seconds / max(n_done, 1), 2),
+        "mean_task_cpu_s_per_layout": round(report.cpu_seconds / max(n_done, 1), 2),
         "mean_cells": round(sum(h * w for h, w in cells) / max(len(cells), 1)),
         "store_bytes_per_layout": round(size / max(report.n_layouts, 1)),
         "projected_hours_for_3750": round(PAPER_LAYOUTS / steady / 60.0, 2)

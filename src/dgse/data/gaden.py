@@ -15,9 +15,10 @@ of a 3-D scenario::
     ...                                         (one row per cell, any order)
 
 Header keys are matched without their unit suffix (``env_min`` or
-``env_min(m)``); lines before the column header that are not ``key values``
-pairs are an error, as are missing required keys, a row count other than the
-number of cells, indices out of range and non-finite values.  Only ``ppm``
+``env_min(m)``; a single ``CellSize`` of newer GADEN versions is accepted
+too); other header lines are ignored, but the file must start with a known
+key.  Missing required keys, malformed values, a row count other than the
+number of cells, indices out of range and non-finite values are errors; only ``ppm``
 concentrations are accepted (GADEN can also write moles).
 
 Several files of one scenario are time frames (sorted by their trailing
@@ -127,7 +128,7 @@ def _parse_header(path: Path, lines: list[str]) -> tuple[dict[str, Any], int, st
             conv = _VECTOR_KEYS[key]
             parts = rest.split()
             try:
-                vals = tuple(conv(p) if conv is float else int(p) for p in parts)
+                vals = tuple(conv(p) for p in parts)
             except ValueError:
                 vals = ()
             if len(vals) != 3 or not all(math.isfinite(v) for v in vals):
@@ -135,6 +136,14 @@ def _parse_header(path: Path, lines: list[str]) -> tuple[dict[str, Any], int, st
                     f"{path}: line {n + 1}: {key} needs three {conv.__name__} values, got {rest!r}"
                 )
             header[key] = vals
+        elif key == "CellSize":  # newer GADEN versions: one cubic cell size
+            try:
+                c = float(rest.split()[0])
+            except (ValueError, IndexError):
+                c = math.nan
+            if not math.isfinite(c):
+                raise InputDataError(f"{path}: line {n + 1}: CellSize needs a number, got {rest!r}")
+            header["CellSizes_XYZ"] = (c, c, c)
         elif key == "GasType":
             header["GasType"] = rest.strip()
         elif not header:

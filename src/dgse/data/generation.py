@@ -102,6 +102,7 @@ class LayoutResult:
     cases: list[Case] | None
     failure: dict[str, Any] | None
     seconds: float
+    cpu_seconds: float = 0.0
 
     @property
     def ok(self) -> bool:
@@ -139,7 +140,7 @@ def solve_layout(
     from dgse.physics.scenario import solve_cases
     from dgse.world.generate import random_inlet_velocity, random_layout, random_sources
 
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     lid = layout_id_for(layout_index)
     kwargs = dict(layout_kwargs or {})
     attempts: list[dict[str, Any]] = []
@@ -165,7 +166,9 @@ def solve_layout(
         if attempts:
             gen["failed_attempts"] = attempts
         cases = [c.with_meta(generation=gen) for c in cases]
-        return LayoutResult(layout_index, lid, cases, None, time.perf_counter() - t0)
+        return LayoutResult(
+            layout_index, lid, cases, None, time.perf_counter() - t0, time.process_time() - c0
+        )
     last = attempts[-1]
     failure = {
         "layout_index": int(layout_index),
@@ -176,7 +179,7 @@ def solve_layout(
         "reason": last["reason"],
         "attempts": attempts,
     }
-    return LayoutResult(layout_index, lid, None, failure, time.perf_counter() - t0)
+    return LayoutResult(layout_index, lid, None, failure, time.perf_counter() - t0, time.process_time() - c0)
 
 
 @dataclass
@@ -195,7 +198,8 @@ class GenerationReport:
         seconds: wall time of the run.
         first_result_s: seconds from the start of the run to its first result
             (cluster start-up and the first layout), None when nothing ran.
-        solve_seconds: summed task times of this run's layouts.
+        solve_seconds: summed task wall times of this run's layouts.
+        cpu_seconds: summed task CPU times (of the worker processes).
         complete: every requested index is stored or recorded as failed.
     """
 
@@ -210,6 +214,7 @@ class GenerationReport:
     seconds: float = 0.0
     first_result_s: float | None = None
     solve_seconds: float = 0.0
+    cpu_seconds: float = 0.0
     complete: bool = False
 
     @property
@@ -565,6 +570,7 @@ def _run(
                         )
                     )
                 report.solve_seconds += res.seconds
+                report.cpu_seconds += res.cpu_seconds
                 failed = f"[red]{report.n_failed_new} failed[/]" if report.n_failed_new else ""
                 bar.update(bar_task, advance=1, failed=failed)
                 now = time.monotonic()
