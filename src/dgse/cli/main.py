@@ -554,6 +554,12 @@ def engines_cmd() -> None:
     console.print(table)
 
 
+# the dataset commands: generate, export, import at the top level, `data stats`
+from dgse.cli.data import register as _register_data  # noqa: E402
+
+_register_data(app)
+
+
 # -- entry point -------------------------------------------------------------------------
 def _print_error(message: str) -> None:
     err_console.print(
