@@ -183,3 +183,16 @@ def test_other_problems_raise_clear_errors(tmp_path):
         load_gaden(files[0], blocked)
     with pytest.raises(InputDataError, match="no such"):
         load_gaden(tmp_path / "missing", pgm)
+
+
+def test_cli_imports_a_gaden_scenario(tmp_path):
+    from dgse.cli.main import main
+    from dgse.world.case import Case
+
+    files, pgm = scenario(tmp_path, n_frames=3)
+    out = tmp_path / "gaden_case.npz"
+    args = ["import-gaden", *map(str, files), "--obstacles", str(pgm), "--frame-dt", "1", "-o", str(out)]
+    assert main(args) == 0
+    case = Case.load(out)
+    assert case.frames.shape == (3, 20, 30) and case.meta["frame_dt"] == 1.0
+    assert main(["import-gaden", str(files[0]), "--obstacles", str(tmp_path / "none.pgm"), "-o", str(out)]) == 2

@@ -32,6 +32,7 @@ __all__ = [
     "export_cmd",
     "generate_cmd",
     "import_cmd",
+    "import_gaden_cmd",
     "main",
     "register",
     "stats_cmd",
@@ -258,9 +259,40 @@ def stats_cmd(
         console.print(f"wrote figure [cyan]{_p(plot)}[/]")
 
 
+@_user_errors
+def import_gaden_cmd(
+    files: Annotated[
+        list[Path],
+        typer.Argument(metavar="FILES...", help="GADEN result files (time frames) or a directory of them."),
+    ],
+    obstacles: Annotated[Path, typer.Option("--obstacles", help="Obstacle image (PGM/PNG, dark = solid).")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Case file (.npz) to write.")],
+    frame_dt: Annotated[
+        float | None, typer.Option("--frame-dt", help="Seconds between frames (with several files).")
+    ] = None,
+    z_index: Annotated[
+        int | None, typer.Option("--z-index", help="z slice to keep (default: the source's).")
+    ] = None,
+    rate: Annotated[float | None, typer.Option("--rate", help="Release rate in g/s, if known.")] = None,
+    inlet_velocity: Annotated[
+        float | None, typer.Option("--inlet-velocity", help="Inlet speed in m/s, if known.")
+    ] = None,
+) -> None:
+    """Make a case file (with frames) from a GADEN scenario's result files."""
+    from dgse.data.gaden import load_gaden
+
+    case = load_gaden(
+        files, obstacles, z_index=z_index, frame_dt=frame_dt, release_rate=rate, inlet_velocity=inlet_velocity
+    )
+    path = case.save(out)
+    n = 0 if case.frames is None else case.frames.shape[0]
+    console.print(f"wrote [cyan]{_p(path)}[/]: {case.grid.width}x{case.grid.height} cells, {n} frames")
+
+
 data_app.command("generate")(generate_cmd)
 data_app.command("export")(export_cmd)
 data_app.command("import")(import_cmd)
+data_app.command("import-gaden")(import_gaden_cmd)
 data_app.command("stats")(stats_cmd)
 
 
@@ -272,6 +304,7 @@ def register(app: typer.Typer) -> typer.Typer:
     app.command("generate")(generate_cmd)
     app.command("export")(export_cmd)
     app.command("import")(import_cmd)
+    app.command("import-gaden")(import_gaden_cmd)
     sub = typer.Typer(
         name="data",
         help="Dataset tools.",
