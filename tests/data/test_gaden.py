@@ -195,4 +195,5 @@ def test_cli_imports_a_gaden_scenario(tmp_path):
     assert main(args) == 0
     case = Case.load(out)
     assert case.frames.shape == (3, 20, 30) and case.meta["frame_dt"] == 1.0
-    assert main(["import-gaden", str(files[0]), "--obstacles", str(tmp_path / "none.pgm"), "-o", str(out)]) == 2
+    missing = str(tmp_path / "none.pgm")
+    assert main(["import-gaden", str(files[0]), "--obstacles", missing, "-o", str(out)]) == 2
