@@ -1,0 +1,209 @@
+"""The belief every estimator returns (DGSE variants and classical baselines alike).
+
+A :class:`Belief` lives on the map grid ``(H, W)`` (not on a network canvas;
+spec section 1: cell ``(i, j)`` has its centre at ``x = (j + 0.5) * res``,
+``y = (i + 0.5) * res``).  It holds
+
+* the source posterior ``source_probs`` (``(H, W)``, sums to 1 over the free
+  cells, exactly 0 on solid cells);
+* optionally a Gaussian wind field (mean and variance per component);
+* optionally a Gaussian over the log-concentration ``L = log(1 + c)``
+  (``c`` in ppm) per cell, the networks' scale.  Then ``1 + c`` is lognormal
+  and its moments give the concentration in ppm:
+
+  ``E[c] = exp(m + v / 2) - 1``,  ``Var[c] = (exp(v) - 1) * exp(2 m + v)``
+
+  with ``m``, ``v`` the mean and variance of ``L`` (``v = 0`` when a method
+  gives no variance: then ``E[c] = exp(m) - 1`` and no variance).
+
+Methods without a wind or concentration estimate leave those fields None.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from dgse.errors import InputDataError
+from dgse.world.grid import Grid
+
+__all__ = ["Belief", "normalize_source_probs"]
+
+#: Tolerance on ``sum(source_probs) == 1``.
+PROB_TOL = 1e-6
+
+
+def normalize_source_probs(probs: np.ndarray, occupancy: np.ndarray) -> np.ndarray:
+    """``probs`` (``(H, W)``, >= 0) set to 0 on solid cells and rescaled to sum 1 over free cells.
+
+    Raises:
+        InputDataError: on a shape mismatch, negative or non-finite values, or
+            no mass on any free cell.
+    """
+    p = np.array(probs, dtype=np.float64)
+    occ = np.asarray(occupancy)
+    if p.shape != occ.shape:
+        raise InputDataError(f"source probabilities {p.shape} do not match the map {occ.shape}")
+    if not np.isfinite(p).all() or (p < 0).any():
+        raise InputDataError("source probabilities must be finite and >= 0")
+    p[occ != 0] = 0.0
+    total = p.sum()
+    if not total > 0:
+        raise InputDataError("source probabilities have no mass on a free cell")
+    return p / total
+
+
+def _field(
+    value: np.ndarray | None, shape: tuple[int, ...], name: str, nonneg: bool = False
+) -> np.ndarray | None:
+    if value is None:
+        return None
+    a = np.asarray(value, dtype=np.float64)
+    if a.shape != shape:
+        raise InputDataError(f"{name} has shape {a.shape}, expected {shape}")
+    if not np.isfinite(a).all():
+        raise InputDataError(f"{name} has non-finite values")
+    if nonneg and (a < 0).any():
+        raise InputDataError(f"{name} has negative values")
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class Belief:
+    """An estimator's belief about the source (and the fields) on the map grid.
+
+    Attributes:
+        occupancy: ``uint8 (H, W)`` map, 1 solid, 0 free.
+        resolution: cell size in m.
+        source_probs: ``float64 (H, W)`` source posterior: >= 0, 0 on solid
+            cells, sums to 1 (build it with :func:`normalize_source_probs`).
+        wind_mean: ``float64 (2, H, W)`` ``[u_x, u_y]`` in m/s, or None.
+        wind_var: ``float64 (2, H, W)`` its variance, or None.
+        log_conc_mean: ``float64 (H, W)`` mean of ``log(1 + c)``, or None.
+        log_conc_var: ``float64 (H, W)`` its variance, or None.
+        info: bookkeeping, at least ``method`` (name) and ``seconds`` (time to estimate).
+    """
+
+    occupancy: np.ndarray
+    resolution: float
+    source_probs: np.ndarray
+    wind_mean: np.ndarray | None = None
+    wind_var: np.ndarray | None = None
+    log_conc_mean: np.ndarray | None = None
+    log_conc_var: np.ndarray | None = None
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        occ = np.asarray(self.occupancy)
+        if occ.ndim != 2 or min(occ.shape) < 1:
+            raise InputDataError(f"occupancy must be a non-empty 2-D array, got shape {occ.shape}")
+        occ = (occ != 0).astype(np.uint8)
+        if not (occ == 0).any():
+            raise InputDataError("the map has no free cell")
+        res = float(self.resolution)
+        if not (res > 0 and math.isfinite(res)):
+            raise InputDataError(f"resolution must be positive, got {self.resolution}")
+        H, W = occ.shape
+        p = _field(self.source_probs, (H, W), "source_probs", nonneg=True)
+        assert p is not None
+        if (p[occ != 0] != 0).any():
+            raise InputDataError("source_probs must be 0 on solid cells (use normalize_source_probs)")
+        if abs(p.sum() - 1.0) > PROB_TOL:
+            raise InputDataError(f"source_probs sum to {p.sum():.9g}, not 1 (use normalize_source_probs)")
+        object.__setattr__(self, "occupancy", occ)
+        object.__setattr__(self, "resolution", res)
+        object.__setattr__(self, "source_probs", p)
+        object.__setattr__(self, "wind_mean", _field(self.wind_mean, (2, H, W), "wind_mean"))
+        object.__setattr__(self, "wind_var", _field(self.wind_var, (2, H, W), "wind_var", nonneg=True))
+        object.__setattr__(self, "log_conc_mean", _field(self.log_conc_mean, (H, W), "log_conc_mean"))
+        object.__setattr__(
+            self, "log_conc_var", _field(self.log_conc_var, (H, W), "log_conc_var", nonneg=True)
+        )
+        if self.wind_var is not None and self.wind_mean is None:
+            raise InputDataError("wind_var given without wind_mean")
+        if self.log_conc_var is not None and self.log_conc_mean is None:
+            raise InputDataError("log_conc_var given without log_conc_mean")
+        info = dict(self.info)
+        info.setdefault("method", "unknown")
+        info.setdefault("seconds", float("nan"))
+        object.__setattr__(self, "info", info)
+
+    # -- geometry ------------------------------------------------------------------------
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(H, W)`` of the map."""
+        return (int(self.occupancy.shape[0]), int(self.occupancy.shape[1]))
+
+    @property
+    def grid(self) -> Grid:
+        """The map's :class:`~dgse.world.grid.Grid`."""
+        return Grid(self.shape, self.resolution)
+
+    @property
+    def free(self) -> np.ndarray:
+        """``bool (H, W)``: the candidate source cells (free cells)."""
+        return self.occupancy == 0
+
+    @property
+    def method(self) -> str:
+        """The estimator's name (``info["method"]``)."""
+        return str(self.info["method"])
+
+    # -- concentration in ppm ----------------------------------------------------------
+    @property
+    def conc_mean_ppm(self) -> np.ndarray | None:
+        """``(H, W)`` mean concentration in ppm: ``exp(m + v/2) - 1`` (lognormal ``1 + c``), or None."""
+        if self.log_conc_mean is None:
+            return None
+        v = 0.0 if self.log_conc_var is None else self.log_conc_var
+        return np.expm1(self.log_conc_mean + 0.5 * v)
+
+    @property
+    def conc_var_ppm(self) -> np.ndarray | None:
+        """``(H, W)`` concentration variance (ppm^2) ``(exp(v) - 1) exp(2m + v)``; None without a variance."""
+        if self.log_conc_mean is None or self.log_conc_var is None:
+            return None
+        m, v = self.log_conc_mean, self.log_conc_var
+        return np.expm1(v) * np.exp(2.0 * m + v)
+
+    # -- source ------------------------------------------------------------------------
+    def source_estimate(self) -> tuple[float, float]:
+        """Probability-weighted mean source position ``(x, y)`` in m (paper Sec. III-D, ``s_hat``)."""
+        H, W = self.shape
+        x = (np.arange(W) + 0.5) * self.resolution
+        y = (np.arange(H) + 0.5) * self.resolution
+        p = self.source_probs
+        return float(p.sum(axis=0) @ x), float(p.sum(axis=1) @ y)
+
+    def most_likely_cell(self) -> tuple[int, int]:
+        """``(i, j)`` of the most probable source cell (first one on ties)."""
+        i, j = np.unravel_index(int(np.argmax(self.source_probs)), self.shape)
+        return int(i), int(j)
+
+    def localization_error(self, source_xy: tuple[float, float]) -> float:
+        """Distance (m) from :meth:`source_estimate` to the true source ``(x, y)`` (spec section 6)."""
+        x, y = self.source_estimate()
+        return float(math.hypot(x - float(source_xy[0]), y - float(source_xy[1])))
+
+    def entropy(self) -> float:
+        """Shannon entropy of the source posterior in nats."""
+        p = self.source_probs[self.source_probs > 0]
+        return float(-(p * np.log(p)).sum())
+
+    @property
+    def n_candidates(self) -> int:
+        """Number of candidate (free) cells ``N``."""
+        return int(self.free.sum())
+
+    @property
+    def max_entropy(self) -> float:
+        """``log N``: the entropy of the uniform posterior over the free cells."""
+        return math.log(self.n_candidates)
+
+    def normalized_entropy(self) -> float:
+        """``entropy() / max_entropy`` in [0, 1] (0 for a single candidate cell); the paper's ``eta`` test."""
+        m = self.max_entropy
+        return self.entropy() / m if m > 0 else 0.0

@@ -1,0 +1,109 @@
+"""DGSEEstimator: rasterize -> network -> Belief on the map; factories and checkpoints."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from dgse.errors import InputDataError, UnsupportedError
+from dgse.estimators.dgse import DGSEEstimator, default_model_path
+from dgse.estimators.registry import Estimator, StreamingEstimator, get_estimator
+from dgse.models.checkpoint import CheckpointError, save_model
+from dgse.sensing.sensors import Observations
+from tests.models.helpers import tiny_model
+
+
+def _map() -> tuple[np.ndarray, Observations]:
+    occ = np.zeros((20, 30), np.uint8)
+    occ[:, 15] = 1
+    occ[8:12, 15] = 0
+    cells = np.array([[1, 1], [5, 20], [19, 29], [10, 15]])
+    obs = Observations(
+        cells, np.array([0.0, 10.0, 3.0, 50.0]), np.array([[1, 0], [0, 1], [0.5, 0.5], [0, 0]])
+    )
+    return occ, obs
+
+
+@pytest.mark.parametrize("variant", ["dgse-o", "dgse-p", "dgse-s"])
+def test_estimate_belief_on_map(variant):
+    occ, obs = _map()
+    est = DGSEEstimator(tiny_model(variant), K=2, T=2, seed=0, canvas_minimum=32)
+    assert isinstance(est, Estimator) and est.name == variant
+    b = est.estimate(occ, 0.1, obs)
+    assert b.source_probs.shape == (20, 30)
+    assert b.source_probs.sum() == pytest.approx(1.0, abs=1e-9)
+    assert (b.source_probs[occ == 1] == 0).all() and (b.source_probs[occ == 0] > 0).all()
+    assert b.info["method"] == variant and b.info["seconds"] > 0 and b.info["canvas"] == (32, 32)
+    assert 0 <= b.source_estimate()[0] <= 3.0 and 0 <= b.source_estimate()[1] <= 2.0
+    if variant == "dgse-o":
+        assert b.wind_mean is None and b.log_conc_mean is None
+    else:
+        assert b.wind_mean.shape == b.wind_var.shape == (2, 20, 30)
+        assert b.log_conc_var.shape == (20, 30) and (b.conc_mean_ppm > -1).all()
+    if variant == "dgse-s":  # a seed makes the estimate reproducible
+        b2 = est.estimate(occ, 0.1, obs)
+        np.testing.assert_array_equal(b.source_probs, b2.source_probs)
+
+
+def test_default_canvas_and_large_map():
+    est = DGSEEstimator(tiny_model("dgse-o"))
+    assert est.canvas_shape((20, 30)) == (100, 100)
+    assert est.canvas_shape((102, 40)) == (112, 112)
+
+
+def test_bfloat16_channels_last_option():
+    occ, obs = _map()
+    est = DGSEEstimator(
+        tiny_model("dgse-s"), K=2, T=1, seed=0, canvas_minimum=32, dtype="bf16", channels_last=True
+    )
+    b = est.estimate(occ, 0.1, obs)
+    assert b.info["dtype"] == "bfloat16" and b.source_probs.sum() == pytest.approx(1.0)
+    with pytest.raises(InputDataError, match="dtype"):
+        DGSEEstimator(tiny_model("dgse-s"), dtype="int8")
+
+
+def test_resolution_and_observation_checks():
+    occ, obs = _map()
+    est = DGSEEstimator(tiny_model("dgse-o"), canvas_minimum=32)
+    with pytest.raises(InputDataError, match=r"0\.1 m cells"):
+        est.estimate(occ, 0.05, obs)
+    wall = Observations(np.array([[0, 15]]), np.array([1.0]), np.zeros((1, 2)))
+    with pytest.raises(InputDataError):
+        est.estimate(occ, 0.1, wall)
+    b = est.estimate(occ, 0.1, Observations.empty())
+    assert b.info["n_observations"] == 0
+
+
+def test_registry_factories_with_checkpoints(tmp_path):
+    occ, obs = _map()
+    path = save_model(tiny_model("dgse-s"), tmp_path / "s.safetensors")
+    est = get_estimator("dgse-s", model=path, K=1, T=1, canvas_minimum=32, seed=1)
+    assert isinstance(est, DGSEEstimator) and est.checkpoint == path
+    stream = StreamingEstimator(est, occ, 0.1)
+    assert stream.update(obs).source_probs.sum() == pytest.approx(1.0)
+    with pytest.raises(CheckpointError, match="expected 'dgse-p'"):
+        get_estimator("dgse-p", model=path)
+    net = get_estimator("dgse-o", model=tiny_model("dgse-o"))
+    assert isinstance(net, DGSEEstimator)
+    with pytest.raises(InputDataError):
+        get_estimator("dgse-o", model=tiny_model("dgse-s"))
+    assert DGSEEstimator.from_checkpoint(path, K=1, T=1).name == "dgse-s"
+
+
+def test_missing_shipped_weights_is_unsupported():
+    try:
+        default_model_path("dgse-s")
+    except UnsupportedError as e:
+        assert "model=" in str(e)
+        with pytest.raises(UnsupportedError):
+            get_estimator("dgse-s")
+    else:  # weights shipped: the default model loads
+        assert isinstance(get_estimator("dgse-s"), DGSEEstimator)
+
+
+def test_device_and_k_validation():
+    with pytest.raises(InputDataError):
+        DGSEEstimator(tiny_model("dgse-s"), K=0)
+    with pytest.raises(InputDataError):
+        DGSEEstimator(torch.nn.Linear(2, 2))  # type: ignore[arg-type]
