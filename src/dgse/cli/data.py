@@ -12,20 +12,18 @@ status 2.
 
 from __future__ import annotations
 
-import functools
 import json
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Annotated, Any, TypeVar
+from typing import Annotated, Any
 
 import typer
-from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
-from rich.text import Text
 
-from dgse.errors import DGSEError, InputDataError
+from dgse.cli.common import console, new_app, path_text, print_error, user_errors
+from dgse.errors import InputDataError
 
 __all__ = [
     "data_app",
@@ -38,53 +36,11 @@ __all__ = [
     "stats_cmd",
 ]
 
-EXIT_USER_ERROR = 2
-
-console = Console(highlight=False)
-err_console = Console(stderr=True, highlight=False)
-
-data_app = typer.Typer(
-    name="data",
-    help="Datasets: generate on Dask, export/import case files, statistics.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
-    context_settings={"help_option_names": ["-h", "--help"]},
-)
-
-F = TypeVar("F", bound=Callable[..., Any])
-
-
-def _print_error(message: str) -> None:
-    err_console.print(
-        Text("error: ", style="bold red") + Text(message.replace("\n", " "), style="red"),
-        soft_wrap=True,
-    )
-
-
-def _user_errors(fn: F) -> F:
-    """Print a user-caused error as one red line and exit with status 2."""
-
-    @functools.wraps(fn)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        try:
-            return fn(*args, **kwargs)
-        except DGSEError as e:
-            _print_error(str(e))
-            raise typer.Exit(EXIT_USER_ERROR) from None
-        except OSError as e:
-            _print_error(f"{e.filename}: {e.strerror}" if e.filename and e.strerror else str(e))
-            raise typer.Exit(EXIT_USER_ERROR) from None
-
-    return wrapper  # type: ignore[return-value]
-
-
-def _p(path: Path) -> str:
-    return escape(str(path))
+data_app = new_app("data", "Datasets: generate on Dask, export/import case files, statistics.")
 
 
 # -- commands ------------------------------------------------------------------------------------
-@_user_errors
+@user_errors
 def generate_cmd(
     layouts: Annotated[int, typer.Option("--layouts", "-n", help="Number of layouts (3750 in the paper).")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Dataset store (.h5) to create or resume.")],
@@ -132,7 +88,7 @@ def generate_cmd(
         kwargs = {"width_range": tuple(size), "height_range": tuple(size)}
     where = f"scheduler {scheduler}" if scheduler else f"{workers or 'all'} local workers"
     console.print(
-        f"generating {layouts} layouts into [cyan]{_p(out)}[/] with {escape(engine)} "
+        f"generating {layouts} layouts into [cyan]{path_text(out)}[/] with {escape(engine)} "
         f"on {escape(where)} (seed {seed})"
     )
     try:
@@ -150,19 +106,19 @@ def generate_cmd(
             **kwargs,
         )
     except KeyboardInterrupt:
-        _print_error(f"interrupted; what was finished is in {out}; run the command again to resume")
+        print_error(f"interrupted; what was finished is in {out}; run the command again to resume")
         raise typer.Exit(130) from None
     splits = ", ".join(f"{k} {v}" for k, v in report.splits.items())
     rate = report.layouts_per_minute
     console.print(
-        f"[bold]{report.n_layouts}[/] layouts in [cyan]{_p(out)}[/] ({splits}); "
+        f"[bold]{report.n_layouts}[/] layouts in [cyan]{path_text(out)}[/] ({splits}); "
         f"{report.n_failures} failed; this run: {report.n_new} new, {report.n_failed_new} failed "
         f"in {report.seconds:.1f} s"
         + (f" ({rate:.1f} layouts/min)" if report.n_new + report.n_failed_new else "")
     )
 
 
-@_user_errors
+@user_errors
 def export_cmd(
     store: Annotated[Path, typer.Argument(metavar="STORE", help="Dataset store (.h5).")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Directory for the case files.")],
@@ -173,10 +129,10 @@ def export_cmd(
 
     with DatasetStore(store, "r") as s:
         files = s.export(out, split=split)
-    console.print(f"wrote {len(files)} case files into [cyan]{_p(out)}[/]")
+    console.print(f"wrote {len(files)} case files into [cyan]{path_text(out)}[/]")
 
 
-@_user_errors
+@user_errors
 def import_cmd(
     cases: Annotated[
         list[Path],
@@ -196,7 +152,7 @@ def import_cmd(
         total = len(s)
     console.print(
         f"imported {n_cases} cases as {len(added)} layouts ({escape(split)}) into "
-        f"[cyan]{_p(out)}[/]; the store now holds {total} layouts"
+        f"[cyan]{path_text(out)}[/]; the store now holds {total} layouts"
     )
 
 
@@ -206,7 +162,7 @@ def _fmt(v: float | int | None) -> str:
     return f"{v:.3g}"
 
 
-@_user_errors
+@user_errors
 def stats_cmd(
     store: Annotated[Path, typer.Argument(metavar="STORE", help="Dataset store (.h5).")],
     plot: Annotated[
@@ -249,17 +205,17 @@ def stats_cmd(
     if json_out is not None:
         json_out.parent.mkdir(parents=True, exist_ok=True)
         json_out.write_text(json.dumps(st, indent=1, allow_nan=True))
-        console.print(f"wrote statistics [cyan]{_p(json_out)}[/]")
+        console.print(f"wrote statistics [cyan]{path_text(json_out)}[/]")
     if plot is not None:
         plot.parent.mkdir(parents=True, exist_ok=True)
         try:
             plot_stats(st).savefig(plot, dpi=120)
         except ValueError as e:  # unknown image format
             raise InputDataError(f"cannot save figure {plot}: {e}") from None
-        console.print(f"wrote figure [cyan]{_p(plot)}[/]")
+        console.print(f"wrote figure [cyan]{path_text(plot)}[/]")
 
 
-@_user_errors
+@user_errors
 def import_gaden_cmd(
     files: Annotated[
         list[Path],
@@ -286,7 +242,7 @@ def import_gaden_cmd(
     )
     path = case.save(out)
     n = 0 if case.frames is None else case.frames.shape[0]
-    console.print(f"wrote [cyan]{_p(path)}[/]: {case.grid.width}x{case.grid.height} cells, {n} frames")
+    console.print(f"wrote [cyan]{path_text(path)}[/]: {case.grid.width}x{case.grid.height} cells, {n} frames")
 
 
 data_app.command("generate")(generate_cmd)
@@ -305,12 +261,7 @@ def register(app: typer.Typer) -> typer.Typer:
     app.command("export")(export_cmd)
     app.command("import")(import_cmd)
     app.command("import-gaden")(import_gaden_cmd)
-    sub = typer.Typer(
-        name="data",
-        help="Dataset tools.",
-        no_args_is_help=True,
-        context_settings={"help_option_names": ["-h", "--help"]},
-    )
+    sub = new_app("data", "Dataset tools.")
     sub.command("stats")(stats_cmd)
     app.add_typer(sub, name="data")
     return sub

@@ -26,11 +26,18 @@ from typing import Annotated
 
 import typer
 from rich import box
-from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 from rich.text import Text
 
+from dgse.cli.common import (
+    EXIT_USER_ERROR,
+    console,
+    new_app,
+    os_error_message,
+    path_text,
+    print_error,
+)
 from dgse.errors import DGSEError, InputDataError
 from dgse.world.case import Case
 from dgse.world.layout import Layout, Opening
@@ -39,19 +46,9 @@ __all__ = ["app", "main"]
 
 #: Engines the CLI reports on even when they are not registered.
 KNOWN_ENGINES = ("builtin", "openfoam")
-#: Exit status of every user-caused error.
-EXIT_USER_ERROR = 2
-
-console = Console(highlight=False)
-err_console = Console(stderr=True, highlight=False)
-
-app = typer.Typer(
-    name="dgse",
-    help="Indoor gas-leak scenarios: layouts, a RANS + gas transport solver, figures.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
-    context_settings={"help_option_names": ["-h", "--help"]},
+app = new_app(
+    "dgse",
+    "Indoor gas leaks: scenarios, a RANS + gas transport solver, datasets, estimators, search.",
 )
 
 
@@ -75,17 +72,10 @@ def _version_callback(value: bool) -> None:
 def _root(
     version: Annotated[
         bool,
-        typer.Option(
-            "--version", callback=_version_callback, is_eager=True, help="Print the version."
-        ),
+        typer.Option("--version", callback=_version_callback, is_eager=True, help="Print the version."),
     ] = False,
 ) -> None:
     """Indoor gas-leak scenarios: layouts, a RANS + gas transport solver, figures."""
-
-
-def _p(path: Path | str) -> str:
-    """A path, escaped for rich markup."""
-    return escape(str(path))
 
 
 def _new_seed() -> int:
@@ -143,8 +133,7 @@ def _check_source(layout: Layout, x: float, y: float) -> None:
     i, j = layout.grid.cell_of(x, y)
     if layout.occupancy[i, j]:
         raise InputDataError(
-            f"source ({x:g}, {y:g}) m lies in a wall: cell ({i}, {j}) of layout "
-            f"{layout.name!r} is solid"
+            f"source ({x:g}, {y:g}) m lies in a wall: cell ({i}, {j}) of layout {layout.name!r} is solid"
         )
 
 
@@ -166,14 +155,13 @@ def _case_summary(case: Case, path: Path, seconds: float) -> Table:
     t.add_column(style="bold")
     t.add_column()
     g = case.grid
-    t.add_row("case", f"{escape(case.name)} -> {_p(path)}")
+    t.add_row("case", f"{escape(case.name)} -> {path_text(path)}")
     t.add_row("engine", escape(str(m.get("solver", "?"))))
     t.add_row("grid", f"{g.width} x {g.height} cells, {g.width_m:g} x {g.height_m:g} m")
     t.add_row("inlet velocity", f"{case.inlet_velocity:.3g} m/s")
     t.add_row(
         "source",
-        f"({float(case.source[0]):.2f}, {float(case.source[1]):.2f}) m, "
-        f"{case.release_rate:.3g} g/s",
+        f"({float(case.source[0]):.2f}, {float(case.source[1]):.2f}) m, {case.release_rate:.3g} g/s",
     )
     iters = (m.get("iterations") or {}).get("flow")
     conv = m.get("flow_converged")
@@ -196,9 +184,7 @@ def layout_cmd(
     seed: Annotated[int | None, typer.Option("--seed", "-s", help=_SEED_HELP)] = None,
     ood: Annotated[
         bool,
-        typer.Option(
-            "--ood", help="Out-of-domain layout: up to 15 x 10 m, several openings, obstacles."
-        ),
+        typer.Option("--ood", help="Out-of-domain layout: up to 15 x 10 m, several openings, obstacles."),
     ] = False,
     out: Annotated[
         Path | None,
@@ -218,20 +204,18 @@ def layout_cmd(
     path = save_layout(layout, out if out is not None else Path(f"{layout.name}.npz"))
     summary = escape(_layout_summary(layout))
     console.print(f"[bold]{escape(layout.name)}[/] (seed {seed}): {summary}")
-    console.print(f"wrote layout [cyan]{_p(path)}[/]")
+    console.print(f"wrote layout [cyan]{path_text(path)}[/]")
     if plot is not None:
         from dgse.viz.case import plot_layout
 
-        console.print(f"wrote figure [cyan]{_p(_save_figure(plot_layout(layout), plot, 150))}[/]")
+        console.print(f"wrote figure [cyan]{path_text(_save_figure(plot_layout(layout), plot, 150))}[/]")
 
 
 @app.command("import-floorplan")
 def import_floorplan_cmd(
     floorplan: Annotated[
         Path,
-        typer.Argument(
-            metavar="MAP", help="ROS map_server YAML (with its PGM/PNG) or a floor plan image."
-        ),
+        typer.Argument(metavar="MAP", help="ROS map_server YAML (with its PGM/PNG) or a floor plan image."),
     ],
     inlet: Annotated[
         tuple[str, float, float],
@@ -252,9 +236,7 @@ def import_floorplan_cmd(
     ] = 0.1,
     pixel_size: Annotated[
         float | None,
-        typer.Option(
-            "--pixel-size", help="Image pixel side in m (plain images; default: one cell)."
-        ),
+        typer.Option("--pixel-size", help="Image pixel side in m (plain images; default: one cell)."),
     ] = None,
     width_m: Annotated[
         float | None,
@@ -262,16 +244,12 @@ def import_floorplan_cmd(
     ] = None,
     carve: Annotated[
         float,
-        typer.Option(
-            "--carve", help="Cut the openings through an outer wall up to this depth in m."
-        ),
+        typer.Option("--carve", help="Cut the openings through an outer wall up to this depth in m."),
     ] = 0.0,
     name: Annotated[
         str | None, typer.Option("--name", help="Layout name (default: the map's file name).")
     ] = None,
-    plot: Annotated[
-        Path | None, typer.Option("--plot", help="Also save a figure of the layout.")
-    ] = None,
+    plot: Annotated[Path | None, typer.Option("--plot", help="Also save a figure of the layout.")] = None,
 ) -> None:
     """Make a layout from a floor plan (ROS map_server YAML, or PNG/PGM: dark is solid)."""
     from dgse.world.floorplan import layout_from_floorplan, load_png_map, load_ros_map
@@ -281,8 +259,7 @@ def import_floorplan_cmd(
     if floorplan.suffix.lower() in (".yaml", ".yml"):
         if pixel_size is not None or width_m is not None:
             raise InputDataError(
-                "--pixel-size/--width-m apply to plain images; a ROS map's YAML gives its "
-                "resolution"
+                "--pixel-size/--width-m apply to plain images; a ROS map's YAML gives its resolution"
             )
         fp = load_ros_map(floorplan, resolution)
         where = f", origin ({fp.origin[0]:g}, {fp.origin[1]:g}) m in the map frame"
@@ -291,7 +268,7 @@ def import_floorplan_cmd(
         where = ""
     g = fp.grid
     console.print(
-        f"floor plan [cyan]{_p(floorplan)}[/]: {g.width_m:g} x {g.height_m:g} m "
+        f"floor plan [cyan]{path_text(floorplan)}[/]: {g.width_m:g} x {g.height_m:g} m "
         f"({g.width} x {g.height} cells){escape(where)}"
     )
     layout = layout_from_floorplan(
@@ -299,11 +276,11 @@ def import_floorplan_cmd(
     )
     path = save_layout(layout, out)
     console.print(f"[bold]{escape(layout.name)}[/]: {escape(_layout_summary(layout))}")
-    console.print(f"wrote layout [cyan]{_p(path)}[/]")
+    console.print(f"wrote layout [cyan]{path_text(path)}[/]")
     if plot is not None:
         from dgse.viz.case import plot_layout
 
-        console.print(f"wrote figure [cyan]{_p(_save_figure(plot_layout(layout), plot, 150))}[/]")
+        console.print(f"wrote figure [cyan]{path_text(_save_figure(plot_layout(layout), plot, 150))}[/]")
 
 
 @app.command("solve")
@@ -371,8 +348,7 @@ def solve_cmd(
             missing = [k for k, v in given.items() if v is None and k != "--seed"]
             if missing:
                 raise InputDataError(
-                    f"{input_file} is a layout file: give {', '.join(missing)} "
-                    "(or --seed S to draw them)"
+                    f"{input_file} is a layout file: give {', '.join(missing)} (or --seed S to draw them)"
                 )
         else:
             from dgse.world.generate import as_generator, random_inlet_velocity, random_sources
@@ -394,18 +370,14 @@ def solve_cmd(
     if plot is not None:
         from dgse.viz.case import plot_case
 
-        console.print(f"wrote figure [cyan]{_p(_save_figure(plot_case(result), plot, 150))}[/]")
+        console.print(f"wrote figure [cyan]{path_text(_save_figure(plot_case(result), plot, 150))}[/]")
 
 
 @app.command("show")
 def show_cmd(
-    input_file: Annotated[
-        Path, typer.Argument(metavar="CASE", help="A case file (or a layout file).")
-    ],
+    input_file: Annotated[Path, typer.Argument(metavar="CASE", help="A case file (or a layout file).")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Figure to write (png, pdf, svg, ...).")],
-    arrows: Annotated[
-        bool, typer.Option("--arrows/--no-arrows", help="Wind direction arrows.")
-    ] = True,
+    arrows: Annotated[bool, typer.Option("--arrows/--no-arrows", help="Wind direction arrows.")] = True,
     dpi: Annotated[int, typer.Option("--dpi", help="Resolution of raster figures.")] = 150,
 ) -> None:
     """Draw a case: layout with inlet/outlet, wind speed and direction, concentration."""
@@ -418,7 +390,7 @@ def show_cmd(
         fig = plot_case(Case.load(input_file), arrows=arrows)
     else:
         fig = plot_layout(load_layout(input_file))
-    console.print(f"wrote figure [cyan]{_p(_save_figure(fig, out, dpi))}[/]")
+    console.print(f"wrote figure [cyan]{path_text(_save_figure(fig, out, dpi))}[/]")
 
 
 _SCENARIO_HELP = (
@@ -448,9 +420,7 @@ def scenario_cmd(
             help="Range of the domain's width and height in m (smaller solves faster).",
         ),
     ] = (5.0, 10.0),
-    figures: Annotated[
-        bool, typer.Option("--figures/--no-figures", help="Write a figure per case.")
-    ] = True,
+    figures: Annotated[bool, typer.Option("--figures/--no-figures", help="Write a figure per case.")] = True,
 ) -> None:
     from dgse.physics.scenario import solve_cases
     from dgse.world.generate import (
@@ -523,7 +493,7 @@ def scenario_cmd(
         f"{_fmt_s(tm.get('flow'))}; gas {_fmt_s(tm.get('gas'))}; "
         f"total {time.perf_counter() - t0:.2f} s (solve {t_solve:.2f} s)"
     )
-    console.print(f"wrote {len(written)} files into [cyan]{_p(out)}[/]")
+    console.print(f"wrote {len(written)} files into [cyan]{path_text(out)}[/]")
 
 
 app.command("scenario", help=_SCENARIO_HELP)(scenario_cmd)
@@ -561,13 +531,6 @@ _register_data(app)
 
 
 # -- entry point -------------------------------------------------------------------------
-def _print_error(message: str) -> None:
-    err_console.print(
-        Text("error: ", style="bold red") + Text(message.replace("\n", " "), style="red"),
-        soft_wrap=True,
-    )
-
-
 def main(args: Sequence[str] | None = None) -> int:
     """Run the CLI with ``args`` (default ``sys.argv[1:]``); returns the exit status.
 
@@ -579,10 +542,10 @@ def main(args: Sequence[str] | None = None) -> int:
         code = e.code
         return code if isinstance(code, int) else (0 if code is None else 1)
     except DGSEError as e:
-        _print_error(str(e))
+        print_error(str(e))
         return EXIT_USER_ERROR
     except OSError as e:  # a file that cannot be written (permission, disk full, ...)
-        _print_error(f"{e.filename}: {e.strerror}" if e.filename and e.strerror else str(e))
+        print_error(os_error_message(e))
         return EXIT_USER_ERROR
     return 0
 
