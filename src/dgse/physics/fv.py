@@ -83,8 +83,6 @@ def build_mesh(layout: Layout) -> Mesh:
     index = np.full((H, Wd), -1, dtype=np.int64)
     ii, jj = np.nonzero(free)
     index[ii, jj] = np.arange(ii.size)
-    inlet = layout.opening_mask("inlet")
-    outlet = layout.opening_mask("outlet")
     n = ii.size
     nb = np.full((n, 4), -1, dtype=np.int64)
     ft = np.full((n, 4), WALL, dtype=np.int8)
@@ -96,28 +94,14 @@ def build_mesh(layout: Layout) -> Mesh:
         internal = nbr >= 0
         nb[internal, d] = nbr[internal]
         ft[internal, d] = INTERNAL
-        edge = ~inside
-        on_side = _opening_side(d, layout)
-        for mask, code in ((inlet, INLET), (outlet, OUTLET)):
-            hit = edge & mask[ii, jj] & on_side(ii, jj, mask is inlet)
-            ft[hit, d] = code
+        side = ("east", "west", "north", "south")[d]
+        for openings, code in ((layout.inlets, INLET), (layout.outlets, OUTLET)):
+            on_opening = np.zeros((H, Wd), dtype=bool)  # boundary cells whose face d is open
+            for o in openings:
+                if o.side == side:
+                    on_opening[o.cells(layout.grid)] = True
+            ft[~inside & on_opening[ii, jj], d] = code
     return Mesh(layout.resolution, free, index, np.stack([ii, jj], axis=1), nb, ft)
-
-
-def _opening_side(d: int, layout: Layout):
-    """Whether a boundary cell's face ``d`` lies in an opening on that side."""
-    side = ("east", "west", "north", "south")[d]
-    g = layout.grid
-
-    def test(ii: np.ndarray, jj: np.ndarray, inlet: bool) -> np.ndarray:
-        along = np.zeros(g.height if side in ("east", "west") else g.width, dtype=bool)
-        for o in layout.inlets if inlet else layout.outlets:
-            if o.side == side:
-                rows, cols = o.cells(g)
-                along[rows if side in ("east", "west") else cols] = True
-        return along[ii] if side in ("east", "west") else along[jj]
-
-    return test
 
 
 class StencilMatrix:
