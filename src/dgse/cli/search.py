@@ -1,0 +1,344 @@
+"""The ``dgse search`` command: active gas source search trials with a simulated robot.
+
+``dgse search CASES_DIR_OR_CASE --method dgse-s --trials 20 --seed 0 --json out.json``
+runs ``--trials`` episodes (:func:`dgse.search.episode.run_episode`) per case
+with the estimator ``--method`` (any registered name, built by
+:func:`~dgse.estimators.registry.get_estimator`) and the planner ``--planner``
+(:func:`~dgse.search.planners.get_planner`), prints a table of the paper's
+metrics per case and over all trials, and writes them as JSON:
+
+* ``per_case``: one entry per case: ``case``, ``file``, ``metrics`` (the
+  :func:`~dgse.search.metrics.aggregate` of its trials) and ``trials`` (each
+  episode's summary and metrics);
+* ``aggregate``: the aggregate over all trials of all cases (``success_rate``,
+  ``error_m_mean``, ``search_time_s_mean``, ``distance_m_mean``,
+  ``step_seconds_mean``, ``per_mean``, ... with ``_std`` and ``_median``);
+* ``settings``: the command's settings.
+
+Seeds: trial ``r`` of the case file ``<stem>.npz`` uses
+``SeedSequence([seed, crc32(stem), r])``, so the start cells (and sensor
+noise) do not depend on the method, the planner or the other cases.
+
+``--animate DIR`` also writes ``DIR/<stem>.gif`` for trial 0 of every case:
+the trajectory, measurements and the predicted wind, concentration and
+source posterior over the steps (:mod:`dgse.search.animate`).
+
+For DGSE methods (``dgse-*``) the estimator gets ``model=`` (``--model``,
+default ``"default"``: the shipped weights) and ``seed=`` (``--seed``);
+other methods get ``model=`` only when ``--model`` is given.  ``-O KEY=VALUE``
+passes further estimator options (values parsed as JSON when possible, e.g.
+``-O K=5``), ``-P KEY=VALUE`` planner options.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+import zlib
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import typer
+from rich import box
+from rich.markup import escape
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from dgse.cli.common import console, new_app, path_text, user_errors
+from dgse.errors import InputDataError
+from dgse.world.case import Case
+
+__all__ = ["load_cases", "main", "register", "search_cmd", "trial_seed"]
+
+
+# -- helpers -----------------------------------------------------------------------------
+def load_cases(path: Path) -> list[tuple[Path, Case]]:
+    """The case files at ``path``: one file, or every case ``.npz`` in a directory (sorted by name).
+
+    Layout files in a directory are skipped.
+
+    Raises:
+        InputDataError: no such path, or no case file in the directory.
+    """
+    from dgse.world.layout_io import npz_kind
+
+    if path.is_dir():
+        files = sorted(p for p in path.glob("*.npz") if p.is_file())
+        out = [(p, Case.load(p)) for p in files if npz_kind(p) == "case"]
+        if not out:
+            raise InputDataError(f"{path}: no case files (.npz with wind, concentration, source)")
+        return out
+    if not path.exists():
+        raise InputDataError(f"{path}: no such file or directory")
+    if npz_kind(path) != "case":
+        raise InputDataError(f"{path} is a layout file; dgse search needs case files (solve it first)")
+    return [(path, Case.load(path))]
+
+
+def trial_seed(seed: int, stem: str, trial: int) -> np.random.SeedSequence:
+    """The seed of trial ``trial`` on the case file named ``stem`` (see the module docstring)."""
+    return np.random.SeedSequence([int(seed) & 0xFFFFFFFF, zlib.crc32(stem.encode()), int(trial)])
+
+
+def _parse_options(items: Sequence[str] | None, flag: str) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for item in items or ():
+        key, sep, value = item.partition("=")
+        key = key.strip()
+        if not sep or not key.isidentifier():
+            raise InputDataError(f"{flag} takes KEY=VALUE with a Python identifier as KEY, got {item!r}")
+        try:
+            out[key] = json.loads(value)
+        except ValueError:
+            out[key] = value
+    return out
+
+
+def _json_safe(obj: Any) -> Any:
+    """NaN and infinities as None; numpy scalars as Python numbers; tuples as lists."""
+    if isinstance(obj, dict):
+        return {str(k): _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_json_safe(v) for v in obj]
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def _ms(agg: dict[str, Any], key: str, fmt: str) -> str:
+    mean, std = agg.get(f"{key}_mean"), agg.get(f"{key}_std")
+    if mean is None:
+        return "-"
+    return f"{mean:{fmt}} ({std:{fmt}})" if std is not None else f"{mean:{fmt}}"
+
+
+def _table(rows: list[tuple[str, dict[str, Any]]], title: str) -> Table:
+    t = Table(title=title, title_justify="left", box=box.SIMPLE_HEAD)
+    t.add_column("case", no_wrap=True)
+    for col in ("trials", "SR [%]", "error [m]", "ST [s]", "TD [m]", "step [s]", "PER"):
+        t.add_column(escape(col), justify="right")
+    for i, (name, agg) in enumerate(rows):
+        sr = agg.get("success_rate")
+        t.add_row(
+            escape(name),
+            str(agg["n_trials"]),
+            "-" if sr is None else f"{100 * sr:.0f}",
+            _ms(agg, "error_m", ".3f"),
+            _ms(agg, "search_time_s", ".1f"),
+            _ms(agg, "distance_m", ".2f"),
+            _ms(agg, "step_seconds", ".3g"),
+            "-" if agg.get("per_mean") is None else f"{agg['per_mean']:.2f}",
+            style="bold" if i == len(rows) - 1 and len(rows) > 1 else None,
+            end_section=i == len(rows) - 2,
+        )
+    return t
+
+
+def _write_json(path: Path, data: dict[str, Any]) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".part")
+    tmp.write_text(json.dumps(_json_safe(data), indent=1, allow_nan=False))
+    tmp.replace(path)
+    return path
+
+
+# -- command -----------------------------------------------------------------------------
+@user_errors
+def search_cmd(
+    cases_path: Annotated[
+        Path,
+        typer.Argument(metavar="CASES_DIR_OR_CASE", help="A case file or a directory of case files."),
+    ],
+    method: Annotated[str, typer.Option("--method", "-m", help="Estimator (registered name).")] = "dgse-s",
+    model: Annotated[
+        str | None,
+        typer.Option("--model", help="Network checkpoint, or 'default' (DGSE methods' default)."),
+    ] = None,
+    planner: Annotated[str, typer.Option("--planner", "-p", help="Planner (registered name).")] = "utility",
+    trials: Annotated[int, typer.Option("--trials", "-r", help="Episodes per case.")] = 20,
+    seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of the start cells and noise.")] = 0,
+    eta: Annotated[
+        float | None,
+        typer.Option("--eta", help="Entropy termination threshold (planner default: 0.65)."),
+    ] = None,
+    time_limit: Annotated[float, typer.Option("--time-limit", help="Time limit per episode, s.")] = 2000.0,
+    frames: Annotated[
+        bool,
+        typer.Option("--frames/--steady", help="Read time-varying frames when a case has them."),
+    ] = True,
+    speed: Annotated[float, typer.Option("--speed", help="Robot speed, m/s.")] = 0.5,
+    dwell: Annotated[float, typer.Option("--dwell", help="Time per measurement, s.")] = 3.0,
+    min_start_distance: Annotated[
+        float,
+        typer.Option(
+            "--min-start-distance",
+            help="Least path length from a random start to the source, m (a start inside the "
+            "2 m success radius would make a trial trivial).",
+        ),
+    ] = 2.0,
+    compute_time: Annotated[
+        bool,
+        typer.Option(
+            "--compute-time/--no-compute-time", help="Add the measured computation time to the clock."
+        ),
+    ] = False,
+    json_out: Annotated[Path | None, typer.Option("--json", "-o", help="Write the metrics as JSON.")] = None,
+    animate: Annotated[
+        Path | None,
+        typer.Option("--animate", help="Write a GIF of trial 0 of every case into this directory."),
+    ] = None,
+    steps: Annotated[
+        bool, typer.Option("--steps/--no-steps", help="Include every step of every trial in the JSON.")
+    ] = False,
+    option: Annotated[
+        list[str] | None,
+        typer.Option("--option", "-O", metavar="KEY=VALUE", help="Estimator option (repeatable)."),
+    ] = None,
+    planner_option: Annotated[
+        list[str] | None,
+        typer.Option("--planner-option", "-P", metavar="KEY=VALUE", help="Planner option (repeatable)."),
+    ] = None,
+    threads: Annotated[
+        int | None, typer.Option("--threads", help="PyTorch CPU threads (1 is fastest on busy cores).")
+    ] = None,
+    progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")] = True,
+) -> None:
+    """Run active source search trials and report success rate, error, ST, TD, step time, PER."""
+    from dgse.estimators.registry import get_estimator
+    from dgse.search.episode import run_episode
+    from dgse.search.metrics import aggregate, episode_metrics
+    from dgse.search.planners import get_planner
+
+    if trials < 1:
+        raise InputDataError(f"--trials must be at least 1, got {trials}")
+    for name, v in (("--time-limit", time_limit), ("--speed", speed), ("--dwell", dwell)):
+        if not (math.isfinite(v) and v > 0):
+            raise InputDataError(f"{name} must be a positive number, got {v:g}")
+    if not (math.isfinite(min_start_distance) and min_start_distance >= 0):
+        raise InputDataError(f"--min-start-distance must be >= 0, got {min_start_distance:g}")
+    if threads is not None:
+        if threads < 1:
+            raise InputDataError(f"--threads must be at least 1, got {threads}")
+        import torch
+
+        torch.set_num_threads(threads)
+
+    cases = load_cases(cases_path)
+    est_kwargs = _parse_options(option, "--option")
+    if method.startswith("dgse-"):
+        est_kwargs.setdefault("model", model or "default")
+        est_kwargs.setdefault("seed", seed)
+    elif model is not None:
+        est_kwargs.setdefault("model", model)
+    estimator = get_estimator(method, **est_kwargs)
+    plan_kwargs = _parse_options(planner_option, "--planner-option")
+    if eta is not None:
+        plan_kwargs["eta"] = eta
+    plan = get_planner(planner, **plan_kwargs)
+
+    console.print(
+        f"searching {len(cases)} case{'s' * (len(cases) != 1)} x {trials} trials with "
+        f"[bold]{escape(method)}[/] + [bold]{escape(planner)}[/] (seed {seed}, time limit {time_limit:g} s)"
+    )
+    per_case: list[dict[str, Any]] = []
+    all_rows: list[dict[str, Any]] = []
+    table_rows: list[tuple[str, dict[str, Any]]] = []
+    gifs: list[Path] = []
+    t_start = time.perf_counter()
+    bar = Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        disable=not progress,
+        transient=True,
+    )
+    with bar:
+        task = bar.add_task("episodes", total=len(cases) * trials)
+        for path, case in cases:
+            trial_rows: list[dict[str, Any]] = []
+            for r in range(trials):
+                bar.update(task, description=f"{escape(path.stem)} trial {r + 1}/{trials}")
+                keep = animate is not None and r == 0
+                result = run_episode(
+                    case,
+                    estimator,
+                    plan,
+                    rng=trial_seed(seed, path.stem, r),
+                    speed=speed,
+                    dwell=dwell,
+                    time_limit=time_limit,
+                    include_compute_time=compute_time,
+                    record=keep,
+                    use_frames=frames,
+                    min_start_distance=min_start_distance,
+                )
+                m = episode_metrics(result)
+                trial_rows.append({"trial": r, **result.to_dict(steps=steps), "metrics": m})
+                all_rows.append(m)
+                if keep:
+                    from dgse.search.animate import animate_episode
+
+                    assert animate is not None
+                    gifs.append(animate_episode(result, case, animate / f"{path.stem}.gif"))
+                bar.advance(task)
+            agg = aggregate([t["metrics"] for t in trial_rows])
+            per_case.append({"case": case.name, "file": str(path), "metrics": agg, "trials": trial_rows})
+            table_rows.append((path.stem, agg))
+    overall = aggregate(all_rows)
+    table_rows.append(("all", overall))
+    console.print(_table(table_rows, f"active search: {escape(method)} + {escape(planner)}"))
+    console.print(f"{len(all_rows)} episodes in {time.perf_counter() - t_start:.1f} s")
+    if json_out is not None:
+        settings = {
+            "method": method,
+            "model": est_kwargs.get("model") if isinstance(est_kwargs.get("model"), str) else None,
+            "planner": planner,
+            "planner_options": plan_kwargs,
+            "estimator_options": {k: v for k, v in est_kwargs.items() if k != "model"},
+            "trials": trials,
+            "seed": seed,
+            "time_limit_s": time_limit,
+            "frames": frames,
+            "speed": speed,
+            "dwell": dwell,
+            "min_start_distance_m": min_start_distance,
+            "include_compute_time": compute_time,
+        }
+        data = {"settings": settings, "aggregate": overall, "per_case": per_case}
+        console.print(f"wrote metrics [cyan]{path_text(_write_json(json_out, data))}[/]")
+    for g in gifs:
+        console.print(f"wrote animation [cyan]{path_text(g)}[/]")
+
+
+def register(app: typer.Typer) -> None:
+    """Attach ``search`` to ``app`` (``dgse search``)."""
+    app.command("search")(search_cmd)
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Run ``search`` alone (``python -m dgse.cli.search ...``); returns the exit status."""
+    app = new_app("dgse-search", "Active gas source search trials.")
+
+    @app.callback()
+    def _root() -> None:
+        """Active gas source search trials."""
+
+    register(app)
+    try:
+        app(args=["search", *(list(args) if args is not None else sys.argv[1:])], prog_name="dgse")
+    except SystemExit as e:
+        code = e.code
+        return code if isinstance(code, int) else (0 if code is None else 1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

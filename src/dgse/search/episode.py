@@ -1,0 +1,450 @@
+"""One active search episode: the paper's Algorithm 1 for any estimator and planner.
+
+:func:`run_episode` repeats, from a start cell,
+
+1. **sense**: dwell and read gas and wind at the robot's cell (:meth:`Robot.sense`);
+2. **estimate**: the estimator turns *all* readings so far into a belief
+   (:class:`~dgse.estimators.registry.StreamingEstimator`);
+3. **terminate?** ``planner.should_stop(belief, history)`` (the entropy test
+   for the utility planner) ends the search;
+4. **plan**: ``planner.next_goal(...)`` picks the next cell (None ends the search);
+5. **move** there along the shortest obstacle-free path,
+
+until the planner stops it or the clock reaches ``time_limit``.  A
+measurement is started only if its dwell ends within the limit.  When
+time runs out during a move, the robot stops where it is at the limit.
+
+The result (:class:`EpisodeResult`) holds the final estimate, the belief's
+probability-weighted mean source position (paper Sec. III-D) of the last
+belief (at the timeout for failed searches; the centroid of the free cells
+when not even one measurement fitted), the search time (the clock at the
+end; ``time_limit`` after a timeout), the travelled distance, and per step
+(:class:`StepRecord`) the robot cell, time, readings, entropy, estimate,
+error, the computation time split into preprocessing / inference / planning
+and, with ``record=True``, the belief maps for :mod:`dgse.search.animate`
+(source posterior, wind mean, ``log(1 + c)`` mean), float32, block-averaged
+to at most ``record_max_cells`` cells.
+
+Computation time split: *preprocessing* is the loop's own handling of the
+readings (checking and appending them) plus, if the estimator reports it in
+``belief.info["timings"]["preprocessing"]`` (s), its input preparation;
+*inference* is the rest of the ``estimate`` call; *planning* is the
+termination test, the Dijkstra distances from the robot and ``next_goal``.
+
+Random streams: the episode's seed (``rng``: an int, a ``SeedSequence`` or a
+``Generator``) is split into three independent streams: the start cell, the
+sensor noise (parameters and readings), and the planner's generator.  So the
+start depends only on the seed (equal for every method), and a stochastic
+planner does not change the readings of a deterministic one.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from dgse.errors import InputDataError
+from dgse.estimators.belief import Belief
+from dgse.estimators.registry import Estimator, StreamingEstimator
+from dgse.search.paths import Cell, graph_for
+from dgse.search.planners import Planner, SearchHistory
+from dgse.search.robot import DEFAULT_DWELL, DEFAULT_SPEED, Robot, random_start_cell
+from dgse.sensing.noise import NoiseModel, NoiseParams
+from dgse.world.case import Case
+
+__all__ = [
+    "DEFAULT_TIME_LIMIT",
+    "REASONS",
+    "EpisodeResult",
+    "StepRecord",
+    "episode_streams",
+    "run_episode",
+]
+
+#: Time limit of a search, s (paper Sec. V-D).
+DEFAULT_TIME_LIMIT = 2000.0
+#: Why an episode ended: the planner's termination test, ``next_goal`` returned None, the time limit.
+REASONS = ("converged", "planner_stop", "time_limit")
+
+
+@dataclass(eq=False)
+class StepRecord:
+    """One search step: a measurement, the belief after it, the decision.
+
+    Attributes:
+        step: 1-based step index ``k`` (one per measurement location).
+        cell: ``(i, j)`` where the robot measured.
+        time_s: time of the reading (end of the dwell), s.
+        gas: the gas reading, ppm.
+        wind: the wind reading ``(u_x, u_y)``, m/s.
+        entropy: ``H(pi_s)`` of the belief, nats.
+        normalized_entropy: ``H(pi_s) / log N``.
+        estimate_xy: the belief's probability-weighted mean source position, m.
+        error_m: distance from ``estimate_xy`` to the true source, m.
+        preprocessing_s, inference_s, planning_s: computation time of this step, s.
+        goal: the chosen next cell, or None (the search ended at this step).
+        source_probs: recorded source posterior ``float32 (h, w)`` (or None).
+        wind_mean: recorded wind mean ``float32 (2, h, w)`` (or None).
+        log_conc_mean: recorded ``log(1 + c)`` mean ``float32 (h, w)`` (or None).
+    """
+
+    step: int
+    cell: Cell
+    time_s: float
+    gas: float
+    wind: tuple[float, float]
+    entropy: float
+    normalized_entropy: float
+    estimate_xy: tuple[float, float]
+    error_m: float
+    preprocessing_s: float = 0.0
+    inference_s: float = 0.0
+    planning_s: float = 0.0
+    goal: Cell | None = None
+    source_probs: np.ndarray | None = field(default=None, repr=False)
+    wind_mean: np.ndarray | None = field(default=None, repr=False)
+    log_conc_mean: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def compute_s(self) -> float:
+        """One-step computation time: preprocessing + inference + planning, s."""
+        return self.preprocessing_s + self.inference_s + self.planning_s
+
+    def to_dict(self) -> dict[str, Any]:
+        """The scalar fields as JSON-able values (no maps)."""
+        return {
+            "step": self.step,
+            "cell": list(self.cell),
+            "time_s": self.time_s,
+            "gas": self.gas,
+            "wind": list(self.wind),
+            "entropy": self.entropy,
+            "normalized_entropy": self.normalized_entropy,
+            "estimate_xy": list(self.estimate_xy),
+            "error_m": self.error_m,
+            "preprocessing_s": self.preprocessing_s,
+            "inference_s": self.inference_s,
+            "planning_s": self.planning_s,
+            "compute_s": self.compute_s,
+            "goal": None if self.goal is None else list(self.goal),
+        }
+
+
+@dataclass(eq=False)
+class EpisodeResult:
+    """The outcome of one search (see :mod:`dgse.search.metrics` for the paper's metrics).
+
+    Attributes:
+        case_name: the case's name.
+        method: the estimator's name.
+        planner: the planner's name.
+        source_xy: the true source ``(x, y)``, m.
+        source_cell: the true source cell.
+        start_cell: the robot's start cell.
+        estimate_xy: the final estimate ``(x, y)``, m.
+        error_m: localization error of the final estimate, m.
+        reason: one of :data:`REASONS`.
+        search_time_s: the clock when the search ended (``time_limit_s`` after a timeout), s.
+        distance_m: travelled distance, m.
+        shortest_path_m: shortest obstacle-free path from the start to the source cell, m.
+        time_limit_s: the time limit, s.
+        steps: the per-step records.
+        trajectory_cells: ``int64 (n, 2)`` every cell entered, from the start.
+        trajectory_times: ``float64 (n,)`` arrival times, s.
+        record_factor: block size of the recorded maps (1: full resolution).
+        resolution: the map's cell size, m.
+        settings: the episode's settings (speed, dwell, flags, noise parameters, ...).
+    """
+
+    case_name: str
+    method: str
+    planner: str
+    source_xy: tuple[float, float]
+    source_cell: Cell
+    start_cell: Cell
+    estimate_xy: tuple[float, float]
+    error_m: float
+    reason: str
+    search_time_s: float
+    distance_m: float
+    shortest_path_m: float
+    time_limit_s: float = DEFAULT_TIME_LIMIT
+    steps: list[StepRecord] = field(default_factory=list)
+    trajectory_cells: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64), repr=False)
+    trajectory_times: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+    record_factor: int = 1
+    resolution: float = 0.1
+    settings: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.reason not in REASONS:
+            raise InputDataError(f"episode end reason must be one of {REASONS}, got {self.reason!r}")
+
+    @property
+    def terminated(self) -> bool:
+        """True when the method ended the search itself (not by the time limit)."""
+        return self.reason != "time_limit"
+
+    @property
+    def n_steps(self) -> int:
+        """Number of measurements (search steps)."""
+        return len(self.steps)
+
+    @property
+    def measurement_cells(self) -> np.ndarray:
+        """``int64 (k, 2)`` the cells measured, in order."""
+        return np.array([s.cell for s in self.steps], dtype=np.int64).reshape(-1, 2)
+
+    @property
+    def recorded(self) -> bool:
+        """True when the steps carry belief maps (``record=True``)."""
+        return bool(self.steps) and self.steps[0].source_probs is not None
+
+    def to_dict(self, steps: bool = False) -> dict[str, Any]:
+        """A JSON-able summary (with the scalar step records when ``steps``)."""
+        out: dict[str, Any] = {
+            "case": self.case_name,
+            "method": self.method,
+            "planner": self.planner,
+            "source_xy": list(self.source_xy),
+            "source_cell": list(self.source_cell),
+            "start_cell": list(self.start_cell),
+            "estimate_xy": list(self.estimate_xy),
+            "error_m": self.error_m,
+            "reason": self.reason,
+            "terminated": self.terminated,
+            "search_time_s": self.search_time_s,
+            "distance_m": self.distance_m,
+            "shortest_path_m": self.shortest_path_m if math.isfinite(self.shortest_path_m) else None,
+            "time_limit_s": self.time_limit_s,
+            "n_steps": self.n_steps,
+            "settings": self.settings,
+        }
+        if steps:
+            out["steps"] = [s.to_dict() for s in self.steps]
+        return out
+
+
+def episode_streams(
+    rng: np.random.Generator | np.random.SeedSequence | int | None,
+) -> tuple[np.random.Generator, np.random.Generator, np.random.Generator]:
+    """The three independent generators of an episode: start cell, sensor noise, planner."""
+    if isinstance(rng, np.random.Generator):
+        a, b, c = rng.spawn(3)
+        return a, b, c
+    ss = rng if isinstance(rng, np.random.SeedSequence) else np.random.SeedSequence(rng)
+    a, b, c = (np.random.default_rng(s) for s in ss.spawn(3))
+    return a, b, c
+
+
+def _block_reduce(a: np.ndarray, f: int, how: str) -> np.ndarray:
+    """Block mean (``how="mean"``) or sum of the last two axes over ``f x f`` blocks (edges padded)."""
+    if f == 1:
+        return a.astype(np.float32, copy=True)
+    H, W = a.shape[-2:]
+    h, w = -(-H // f), -(-W // f)
+    pad = [(0, 0)] * (a.ndim - 2) + [(0, h * f - H), (0, w * f - W)]
+    p = np.pad(a.astype(np.float64), pad, constant_values=np.nan)
+    p = p.reshape(*a.shape[:-2], h, f, w, f)
+    r = np.nansum(p, axis=(-3, -1)) if how == "sum" else np.nanmean(p, axis=(-3, -1))
+    return r.astype(np.float32)
+
+
+def _record_factor(shape: tuple[int, int], max_cells: int) -> int:
+    f = 1
+    while math.ceil(shape[0] / f) * math.ceil(shape[1] / f) > max_cells:
+        f += 1
+    return f
+
+
+def _estimator_name(estimator: Estimator, belief: Belief | None) -> str:
+    if belief is not None and belief.method != "unknown":
+        return belief.method
+    name = getattr(estimator, "name", None)
+    return str(name) if isinstance(name, str) else type(estimator).__name__
+
+
+def _free_centroid(case: Case) -> tuple[float, float]:
+    i, j = np.nonzero(case.free)
+    res = case.resolution
+    return (float((j + 0.5).mean() * res), float((i + 0.5).mean() * res))
+
+
+def run_episode(
+    case: Case,
+    estimator: Estimator,
+    planner: Planner,
+    *,
+    start: Sequence[int] | None = None,
+    rng: np.random.Generator | np.random.SeedSequence | int | None = None,
+    speed: float = DEFAULT_SPEED,
+    dwell: float = DEFAULT_DWELL,
+    time_limit: float = DEFAULT_TIME_LIMIT,
+    include_compute_time: bool = False,
+    record: bool = True,
+    use_frames: bool = True,
+    noise_model: NoiseModel | None = None,
+    noise_params: NoiseParams | None = None,
+    min_start_distance: float = 0.0,
+    connectivity: int = 8,
+    record_max_cells: int = 10_000,
+) -> EpisodeResult:
+    """Run one active search on ``case`` (see the module docstring).
+
+    Args:
+        case: the true scenario.
+        estimator: any :class:`~dgse.estimators.registry.Estimator`.
+        planner: any :class:`~dgse.search.planners.Planner` (``reset()`` is called first).
+        start: the start cell; None draws one (connected to the source, at
+            least ``min_start_distance`` m from it by path).
+        rng: the episode's seed or generator (see the module docstring).
+        speed: robot speed, m/s.
+        dwell: time per measurement, s (> 0).
+        time_limit: s.
+        include_compute_time: add each step's measured computation time to the clock.
+        record: keep the belief maps per step (for the animation).
+        use_frames: read the case's time-varying frames when it has them.
+        noise_model: Table I ranges of the noise parameters (default :class:`NoiseModel`).
+        noise_params: fixed noise parameters instead of a draw (e.g. ``NoiseParams.zero()``).
+        min_start_distance: see ``start``.
+        connectivity: 8 or 4 (:class:`~dgse.search.paths.FreeSpaceGraph`).
+        record_max_cells: recorded maps are block-averaged (the posterior
+            block-summed) to at most this many cells.
+
+    Returns:
+        The :class:`EpisodeResult`.
+    """
+    time_limit = float(time_limit)
+    if not (math.isfinite(time_limit) and time_limit > 0):
+        raise InputDataError(f"time limit must be a positive number of seconds, got {time_limit}")
+    if not (math.isfinite(dwell) and dwell > 0):  # with no dwell a planner staying put would loop forever
+        raise InputDataError(f"dwell must be a positive number of seconds, got {dwell}")
+    if record_max_cells < 1:
+        raise InputDataError(f"record_max_cells must be >= 1, got {record_max_cells}")
+    start_rng, sensor_rng, planner_rng = episode_streams(rng)
+    graph = graph_for(case.occupancy, case.resolution, connectivity)
+    source_cell = case.source_cell
+    if start is None:
+        start = random_start_cell(graph, start_rng, source_cell, min_start_distance)
+    robot = Robot(
+        case,
+        start=start,
+        rng=sensor_rng,
+        speed=speed,
+        dwell=dwell,
+        noise_model=noise_model,
+        noise_params=noise_params,
+        use_frames=use_frames,
+        graph=graph,
+    )
+    planner.reset()
+    stream = StreamingEstimator(estimator, case.occupancy, case.resolution)
+    history = SearchHistory(graph=graph, rng=planner_rng)
+    source_xy = (float(case.source[0]), float(case.source[1]))
+    factor = _record_factor(graph.shape, int(record_max_cells))
+    steps: list[StepRecord] = []
+    belief: Belief | None = None
+    reason = "time_limit"
+
+    while robot.clock + robot.dwell <= time_limit:
+        obs = robot.sense()
+        t0 = time.perf_counter()
+        stream.add(obs)
+        t1 = time.perf_counter()
+        belief = stream.belief
+        t2 = time.perf_counter()
+        pre, inf = t1 - t0, t2 - t1
+        timings = belief.info.get("timings")
+        if isinstance(timings, dict) and isinstance(timings.get("preprocessing"), int | float):
+            extra = min(max(float(timings["preprocessing"]), 0.0), inf)
+            pre, inf = pre + extra, inf - extra
+
+        history.observations = stream.observations
+        history.trajectory = robot.trajectory_cells
+        history.time_s = robot.clock
+        history.distance_m = robot.distance_m
+        history.step = len(steps) + 1
+
+        t3 = time.perf_counter()
+        stop = bool(planner.should_stop(belief, history))
+        goal: Cell | None = None
+        if not stop:
+            distances = graph.distances_from(robot.cell)
+            raw = planner.next_goal(belief, robot.cell, distances, history)
+            goal = None if raw is None else graph.check_cell(raw, f"goal of planner {planner.name!r}")
+        plan = time.perf_counter() - t3
+
+        est = belief.source_estimate()
+        rec = StepRecord(
+            step=len(steps) + 1,
+            cell=robot.cell,
+            time_s=float(obs.times[0]) if obs.times is not None else robot.clock,
+            gas=float(obs.gas[0]),
+            wind=(float(obs.wind[0, 0]), float(obs.wind[0, 1])),
+            entropy=belief.entropy(),
+            normalized_entropy=belief.normalized_entropy(),
+            estimate_xy=est,
+            error_m=math.hypot(est[0] - source_xy[0], est[1] - source_xy[1]),
+            preprocessing_s=pre,
+            inference_s=inf,
+            planning_s=plan,
+            goal=goal,
+        )
+        if record:
+            rec.source_probs = _block_reduce(belief.source_probs, factor, "sum")
+            if belief.wind_mean is not None:
+                rec.wind_mean = _block_reduce(belief.wind_mean, factor, "mean")
+            if belief.log_conc_mean is not None:
+                rec.log_conc_mean = _block_reduce(belief.log_conc_mean, factor, "mean")
+        steps.append(rec)
+
+        if include_compute_time:
+            robot.wait(rec.compute_s, until=time_limit)
+        if stop:
+            reason = "converged"
+            break
+        if goal is None:
+            reason = "planner_stop"
+            break
+        if robot.clock >= time_limit:
+            break
+        robot.move_to(goal, until=time_limit)
+
+    if reason == "time_limit":
+        search_time = time_limit
+    else:
+        search_time = robot.clock
+    estimate = belief.source_estimate() if belief is not None else _free_centroid(case)
+    return EpisodeResult(
+        case_name=case.name,
+        method=_estimator_name(estimator, belief),
+        planner=str(getattr(planner, "name", type(planner).__name__)),
+        source_xy=source_xy,
+        source_cell=source_cell,
+        start_cell=robot.start,
+        estimate_xy=estimate,
+        error_m=math.hypot(estimate[0] - source_xy[0], estimate[1] - source_xy[1]),
+        reason=reason,
+        search_time_s=float(search_time),
+        distance_m=float(robot.distance_m),
+        shortest_path_m=graph.distance(robot.start, source_cell),
+        time_limit_s=time_limit,
+        steps=steps,
+        trajectory_cells=robot.trajectory_cells,
+        trajectory_times=robot.trajectory_times,
+        record_factor=factor,
+        resolution=case.resolution,
+        settings={
+            "speed": robot.speed,
+            "dwell": robot.dwell,
+            "include_compute_time": bool(include_compute_time),
+            "use_frames": bool(use_frames and case.frames is not None),
+            "connectivity": graph.connectivity,
+            "noise": robot.noise_params.to_dict(),
+        },
+    )

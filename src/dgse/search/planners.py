@@ -1,0 +1,301 @@
+"""Planners: where the robot measures next, and when the search stops.
+
+A :class:`Planner` is asked once per search step, after the estimator has
+turned all readings so far into a :class:`~dgse.estimators.belief.Belief`:
+
+1. ``should_stop(belief, history)``: the planner's termination test (for
+   :class:`UtilityPlanner` the paper's entropy test); True ends the search;
+2. otherwise ``next_goal(belief, robot_cell, distances, history)``: the next
+   cell to move to and measure at, or None to end the search (a planner with
+   nothing left to do).
+
+``distances`` is the ``(H, W)`` shortest obstacle-free path length in m from
+the robot's cell (``inf`` on walls and unreachable cells);
+:class:`SearchHistory` gives everything else (all readings, the trajectory,
+the clock, the move graph for planners that need paths, and a random
+generator for stochastic planners).  ``reset()`` is called at the start of
+every episode.
+
+Planners are registered by name (:func:`get_planner`, :func:`register_planner`;
+lazy ``"module:function"`` factories allowed): ``"utility"`` is built in;
+the baselines' planners (Infotaxis, PMFS, dual-mode) register themselves
+the same way.
+
+:class:`UtilityPlanner` is the paper's Sec. III-D planner (Algorithm 1):
+
+``U_i = exp(-w_d dist_i) (w_w sigma_w,i^2 + w_c sigma_c,i^2 + w_s pi_s,i)``
+
+with ``(w_d, w_w, w_c, w_s) = (0.1, 0.25, 2.0, 100.0)`` and the termination
+``H(pi_s) <= eta log N`` (``eta = 0.65``, ``N`` = the belief's candidate
+cells, i.e. the free cells of the map; the paper's "dimension of the source
+posterior" could also be read as the network canvas, 100 x 100 cells with
+walls and padding: ``entropy_cells=10000`` gives that reading).  Decisions on
+what the paper leaves open:
+
+* ``sigma_w^2 = var(u_x) + var(u_y)`` (the belief's ``wind_var`` summed over
+  its two components), in (m/s)^2;
+* ``sigma_c^2`` is the variance of ``log(1 + c)`` (the belief's
+  ``log_conc_var``; DGSE-S's moment-matched ``sigma_c^2`` lives in that
+  space, and in ppm^2 the term would swamp the others by orders of magnitude);
+* a belief without a wind or concentration variance (DGSE-O, most baselines)
+  contributes 0 for that term;
+* ``dist_i`` is in metres by default (the paper does not give the unit;
+  ``distance_unit="cell"`` measures it in cell sides instead, i.e. ``dist / res``);
+* candidates are the free cells reachable from the robot, except the robot's
+  own cell (moving nowhere would repeat the same measurement) and the cells
+  where the robot has already measured (``exclude_measured``, default on);
+  when that leaves nothing, measured cells are allowed again; when even that
+  leaves nothing (a one-cell map), ``next_goal`` returns None;
+* ties (utilities equal to a relative ``1e-12``): the nearest cell by path
+  length, then the lowest row-major index.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import math
+import re
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Literal, Protocol, runtime_checkable
+
+import numpy as np
+
+from dgse.errors import InputDataError, UnsupportedError
+from dgse.estimators.belief import Belief
+from dgse.search.paths import Cell, FreeSpaceGraph
+from dgse.sensing.sensors import Observations
+
+__all__ = [
+    "Planner",
+    "PlannerFactory",
+    "SearchHistory",
+    "UtilityPlanner",
+    "get_planner",
+    "planner_names",
+    "register_planner",
+]
+
+
+@dataclass
+class SearchHistory:
+    """What a planner may know about the search so far (updated by the search loop each step).
+
+    Attributes:
+        graph: the map's move graph (paths and distances between any cells).
+        observations: all readings so far, in order (cells, gas, wind, times).
+        trajectory: ``int64 (n, 2)`` every cell the robot entered, from the start.
+        time_s: the robot's clock, s.
+        distance_m: distance travelled so far, m.
+        step: the number of measurements so far (1 at the first decision).
+        rng: the planner's random generator (seeded per episode).
+    """
+
+    graph: FreeSpaceGraph
+    observations: Observations = field(default_factory=Observations.empty)
+    trajectory: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
+    time_s: float = 0.0
+    distance_m: float = 0.0
+    step: int = 0
+    rng: np.random.Generator = field(default_factory=np.random.default_rng)
+
+    @property
+    def measured(self) -> np.ndarray:
+        """``bool (H, W)``: cells with at least one reading."""
+        m = np.zeros(self.graph.shape, dtype=bool)
+        c = self.observations.cells
+        if len(c):
+            m[c[:, 0], c[:, 1]] = True
+        return m
+
+
+@runtime_checkable
+class Planner(Protocol):
+    """Chooses the next measurement cell and decides when to stop.
+
+    Attributes:
+        name: the planner's name (as registered).
+    """
+
+    name: str
+
+    def reset(self) -> None:
+        """Forget any state of a previous episode (called before each episode)."""
+        ...
+
+    def should_stop(self, belief: Belief, history: SearchHistory) -> bool:
+        """True when the search should end now with ``belief`` as the final belief."""
+        ...
+
+    def next_goal(
+        self, belief: Belief, robot_cell: Cell, distances: np.ndarray, history: SearchHistory
+    ) -> Cell | None:
+        """The next cell ``(i, j)`` to move to and measure at (free, reachable), or None to stop.
+
+        Args:
+            belief: the current belief (all readings so far).
+            robot_cell: the robot's cell.
+            distances: ``(H, W)`` path lengths in m from ``robot_cell`` (``inf`` = unreachable).
+            history: the search so far.
+        """
+        ...
+
+
+@dataclass
+class UtilityPlanner:
+    """The paper's utility planner with entropy termination (see the module docstring).
+
+    Args:
+        w_d: distance discount per metre (per cell with ``distance_unit="cell"``).
+        w_w: weight of the wind variance ``var(u_x) + var(u_y)``.
+        w_c: weight of the log-concentration variance.
+        w_s: weight of the source probability.
+        eta: termination threshold in [0, 1]: stop when ``H(pi_s) <= eta log N``.
+        distance_unit: ``"m"`` or ``"cell"``: the unit of ``dist_i``.
+        exclude_measured: never choose a cell already measured (unless nothing else is left).
+        entropy_cells: ``N`` of the termination test; None (default): the
+            belief's free cells.
+    """
+
+    w_d: float = 0.1
+    w_w: float = 0.25
+    w_c: float = 2.0
+    w_s: float = 100.0
+    eta: float = 0.65
+    distance_unit: Literal["m", "cell"] = "m"
+    exclude_measured: bool = True
+    entropy_cells: int | None = None
+    name: str = field(default="utility", init=False)
+
+    def __post_init__(self) -> None:
+        for k in ("w_d", "w_w", "w_c", "w_s"):
+            v = float(getattr(self, k))
+            if not (math.isfinite(v) and v >= 0):
+                raise InputDataError(f"utility weight {k} must be finite and >= 0, got {v}")
+            setattr(self, k, v)
+        eta = float(self.eta)
+        if not (0.0 <= eta <= 1.0):
+            raise InputDataError(f"eta must lie in [0, 1], got {self.eta}")
+        self.eta = eta
+        if self.entropy_cells is not None and int(self.entropy_cells) < 1:
+            raise InputDataError(f"entropy_cells must be >= 1, got {self.entropy_cells}")
+        if self.distance_unit not in ("m", "cell"):
+            raise InputDataError(f"distance_unit must be 'm' or 'cell', got {self.distance_unit!r}")
+
+    def reset(self) -> None:
+        """Stateless: nothing to reset."""
+
+    def should_stop(self, belief: Belief, history: SearchHistory | None = None) -> bool:
+        """``H(pi_s) <= eta log N`` (``N``: free cells or ``entropy_cells``); a one-cell map stops at once."""
+        log_n = belief.max_entropy if self.entropy_cells is None else math.log(int(self.entropy_cells))
+        return belief.entropy() <= self.eta * log_n
+
+    def utility(self, belief: Belief, distances: np.ndarray) -> np.ndarray:
+        """``float64 (H, W)`` utility ``U_i``; ``-inf`` on walls and unreachable cells."""
+        d = np.asarray(distances, dtype=np.float64)
+        if d.shape != belief.shape:
+            raise InputDataError(f"distances have shape {d.shape}, the belief {belief.shape}")
+        gain = self.w_s * belief.source_probs
+        if belief.wind_var is not None and self.w_w:
+            gain = gain + self.w_w * belief.wind_var.sum(axis=0)
+        if belief.log_conc_var is not None and self.w_c:
+            gain = gain + self.w_c * belief.log_conc_var
+        ok = np.isfinite(d) & belief.free
+        scale = 1.0 / belief.resolution if self.distance_unit == "cell" else 1.0
+        u = np.full(belief.shape, -np.inf)
+        u[ok] = np.exp(-self.w_d * scale * d[ok]) * gain[ok]
+        return u
+
+    def next_goal(
+        self,
+        belief: Belief,
+        robot_cell: Cell,
+        distances: np.ndarray,
+        history: SearchHistory | None = None,
+    ) -> Cell | None:
+        """``argmax_i U_i`` over the candidate cells (see the module docstring), or None if none."""
+        u = self.utility(belief, distances)
+        i0, j0 = int(robot_cell[0]), int(robot_cell[1])
+        u[i0, j0] = -np.inf
+        if self.exclude_measured and history is not None:
+            measured = history.measured
+            if measured.shape == u.shape:
+                masked = np.where(measured, -np.inf, u)
+                if np.isfinite(masked).any():
+                    u = masked
+        finite = np.isfinite(u)
+        if not finite.any():
+            return None
+        best = u[finite].max()
+        ties = np.flatnonzero(finite & (u >= best - 1e-12 * abs(best)))
+        if ties.size > 1:
+            d = np.asarray(distances, dtype=np.float64).reshape(-1)[ties]
+            ties = ties[np.lexsort((ties, d))]
+        k = int(ties[0])
+        W = u.shape[1]
+        return (k // W, k % W)
+
+
+# -- registry -------------------------------------------------------------------------
+PlannerFactory = Callable[..., Planner]
+
+_NAME = re.compile(r"^[a-z0-9][a-z0-9_.+-]*$")
+_REGISTRY: dict[str, PlannerFactory | str] = {"utility": UtilityPlanner}
+
+
+def register_planner(name: str, factory: PlannerFactory | str, *, replace: bool = False) -> None:
+    """Register ``factory`` under ``name``.
+
+    ``factory`` is a callable ``factory(**kwargs) -> Planner`` or a lazy
+    ``"module:function"`` (imported on first use).
+
+    Names are lower case (``[a-z0-9][a-z0-9_.+-]*``); a taken name raises
+    :class:`InputDataError` unless ``replace`` (re-registering the same factory is a no-op).
+    """
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise InputDataError(f"invalid planner name {name!r} (lower case letters, digits, _ . + -)")
+    if isinstance(factory, str):
+        if ":" not in factory:
+            raise InputDataError(f"lazy factory must be 'module:function', got {factory!r}")
+    elif not callable(factory):
+        raise InputDataError(f"planner factory for {name!r} is not callable")
+    old = _REGISTRY.get(name)
+    if old is not None and old is not factory and old != factory and not replace:
+        raise InputDataError(f"planner {name!r} is already registered (pass replace=True)")
+    _REGISTRY[name] = factory
+
+
+def planner_names() -> list[str]:
+    """The registered planner names, sorted."""
+    return sorted(_REGISTRY)
+
+
+def get_planner(name: str, **kwargs: Any) -> Planner:
+    """A new planner ``name`` built with ``kwargs`` (e.g. ``get_planner("utility", eta=0.75)``).
+
+    Raises:
+        UnsupportedError: an unknown name (the message lists the known ones) or
+            a planner whose module cannot be imported here.
+        InputDataError: keyword arguments the planner does not take.
+    """
+    if name not in _REGISTRY:
+        raise UnsupportedError(f"unknown planner {name!r}; known planners: {', '.join(planner_names())}")
+    entry = _REGISTRY[name]
+    if isinstance(entry, str):
+        module, _, attr = entry.partition(":")
+        try:
+            factory = getattr(importlib.import_module(module), attr)
+        except ImportError as e:
+            raise UnsupportedError(f"planner {name!r} cannot be loaded here: {e}") from e
+        if _REGISTRY.get(name) == entry:
+            _REGISTRY[name] = factory
+    else:
+        factory = entry
+    try:
+        inspect.signature(factory).bind(**kwargs)
+    except TypeError as e:
+        raise InputDataError(f"planner {name!r} does not take these options: {e}") from e
+    except ValueError:  # no signature to check (some builtins): let the call decide
+        pass
+    return factory(**kwargs)

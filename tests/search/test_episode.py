@@ -1,0 +1,119 @@
+"""The search loop: termination, time limit, clock bookkeeping, records, seeding, a real DGSE network."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from dgse.estimators.dgse import DGSEEstimator
+from dgse.search.episode import run_episode
+from dgse.search.paths import graph_for
+from dgse.search.planners import UtilityPlanner
+from dgse.sensing.noise import NoiseParams
+from tests.models.helpers import tiny_model
+from tests.search import PeakEstimator, UniformEstimator, corridor_case, solved_two_rooms
+
+torch.set_num_threads(1)
+
+
+def test_entropy_termination_ends_the_search():
+    case = corridor_case()
+    est = PeakEstimator(sigma=0.05)
+    r = run_episode(case, est, UtilityPlanner(), start=(5, 2), rng=0, noise_params=NoiseParams.zero())
+    assert r.reason == "converged" and r.terminated
+    # the posterior is a narrow peak at the first (highest) reading: it stops at once, where it stands
+    assert r.n_steps == 1 and est.calls == 1
+    last = r.steps[-1]
+    assert last.normalized_entropy <= 0.65 and last.goal is None
+    assert r.search_time_s == pytest.approx(3.0) and r.distance_m == 0.0
+    assert r.estimate_xy == pytest.approx(((2 + 0.5) * 0.1, (5 + 0.5) * 0.1))
+
+
+def test_search_climbs_to_the_source_and_succeeds():
+    case = corridor_case()  # source at (5, 25)
+    est = PeakEstimator(adaptive=True)  # wide and exploring until it smells a lot of gas
+    r = run_episode(
+        case,
+        est,
+        UtilityPlanner(eta=0.4),
+        start=(5, 2),
+        rng=1,
+        noise_params=NoiseParams.zero(),
+        time_limit=400,
+    )
+    assert r.reason == "converged", (r.reason, r.n_steps)
+    assert r.n_steps > 2 and r.distance_m > 1.0 and r.error_m < 0.45
+    # the goal is never the cell the robot stands on; each step measures where the last goal was
+    for a, b in zip(r.steps[:-1], r.steps[1:], strict=True):
+        assert a.goal != a.cell and b.cell == a.goal
+    # the clock is travel + dwell (no computation time)
+    assert r.search_time_s == pytest.approx(r.n_steps * 3.0 + r.distance_m / 0.5)
+    assert r.shortest_path_m == pytest.approx(2.3)
+    assert r.settings["noise"] == NoiseParams.zero().to_dict()
+    times = [s.time_s for s in r.steps]
+    assert times == sorted(times) and r.trajectory_times[-1] <= r.search_time_s
+
+
+def test_no_gas_ends_at_the_time_limit():
+    case = corridor_case(gas=False)
+    r = run_episode(case, UniformEstimator(), UtilityPlanner(), rng=2, time_limit=40.0)
+    assert r.reason == "time_limit" and not r.terminated
+    assert r.search_time_s == 40.0 and r.n_steps >= 5
+    assert all(s.gas == 0.0 for s in r.steps)
+    assert r.steps[-1].time_s <= 40.0 and r.trajectory_times[-1] <= 40.0
+    i, j = np.nonzero(case.free)
+    assert r.estimate_xy == pytest.approx(((j + 0.5).mean() * 0.1, (i + 0.5).mean() * 0.1))
+    assert r.recorded and r.steps[0].wind_mean is None and r.steps[0].source_probs.shape == (10, 30)
+    # shorter than one dwell: no measurement at all, the estimate is the free-cell centroid
+    none = run_episode(case, UniformEstimator(), UtilityPlanner(), rng=2, time_limit=2.0)
+    assert none.n_steps == 0 and none.reason == "time_limit"
+    assert none.estimate_xy == pytest.approx(r.estimate_xy)
+
+
+def test_seeding_compute_time_and_downsampled_records():
+    case = corridor_case(gas=False)
+    a = run_episode(case, UniformEstimator(), UtilityPlanner(), rng=7, time_limit=30.0, record=False)
+    b = run_episode(case, PeakEstimator(), UtilityPlanner(), rng=7, time_limit=30.0, record_max_cells=40)
+    assert a.start_cell == b.start_cell  # the start depends on the seed only
+    assert a.settings["noise"] == b.settings["noise"]
+    assert not a.recorded and b.recorded and b.record_factor == 3
+    assert b.steps[0].source_probs.shape == (4, 10)
+    assert b.steps[0].source_probs.sum() == pytest.approx(1, abs=1e-5)
+    assert b.steps[0].wind_mean.shape == (2, 4, 10)
+    again = run_episode(case, UniformEstimator(), UtilityPlanner(), rng=7, time_limit=30.0, record=False)
+    np.testing.assert_array_equal(a.trajectory_cells, again.trajectory_cells)
+    assert [s.gas for s in a.steps] == [s.gas for s in again.steps]
+
+    slow = PeakEstimator(sleep=0.02)
+    c = run_episode(case, slow, UtilityPlanner(), rng=7, time_limit=30.0, include_compute_time=True)
+    compute = sum(s.compute_s for s in c.steps)
+    assert compute >= 0.02 * c.n_steps
+    assert all(s.inference_s >= 0.02 and s.preprocessing_s >= 0 and s.planning_s > 0 for s in c.steps)
+    # the clock at the last reading: dwells + travel + the computation of the steps before it
+    t_last = c.steps[-1].time_s
+    k = int(np.searchsorted(c.trajectory_times, t_last, side="right"))
+    travel = graph_for(case.occupancy, 0.1).path_length(c.trajectory_cells[:k]) / 0.5
+    assert t_last == pytest.approx(c.n_steps * 3.0 + travel + sum(s.compute_s for s in c.steps[:-1]))
+
+
+def test_planner_stop_signal():
+    class OneStep(UtilityPlanner):
+        def next_goal(self, belief, robot_cell, distances, history):
+            return None if history.step >= 2 else super().next_goal(belief, robot_cell, distances, history)
+
+    r = run_episode(corridor_case(gas=False), UniformEstimator(), OneStep(), rng=0, time_limit=100.0)
+    assert r.reason == "planner_stop" and r.terminated and r.n_steps == 2 and r.search_time_s < 100.0
+
+
+def test_dgse_network_in_the_loop():
+    case = solved_two_rooms()
+    est = DGSEEstimator(tiny_model("dgse-s"), K=2, T=1, seed=0, canvas_minimum=32)
+    r = run_episode(case, est, UtilityPlanner(), rng=0, time_limit=25.0)
+    assert r.method == "dgse-s" and r.planner == "utility"
+    assert 1 <= r.n_steps <= 8 and math.isfinite(r.error_m)
+    s = r.steps[0]
+    assert s.wind_mean.shape == (2, 20, 30) and s.log_conc_mean.shape == (20, 30)
+    assert (case.occupancy[r.trajectory_cells[:, 0], r.trajectory_cells[:, 1]] == 0).all()

@@ -1,0 +1,154 @@
+"""The utility planner on hand-made beliefs; entropy termination; the planner registry."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from dgse.errors import InputDataError, UnsupportedError
+from dgse.estimators.belief import Belief, normalize_source_probs
+from dgse.search.paths import FreeSpaceGraph
+from dgse.search.planners import (
+    Planner,
+    SearchHistory,
+    UtilityPlanner,
+    get_planner,
+    planner_names,
+    register_planner,
+)
+from dgse.sensing.sensors import Observations
+
+
+def _belief(occ, probs, res=1.0, wind_var=None, conc_var=None) -> Belief:
+    H, W = occ.shape
+    kw = {}
+    if wind_var is not None:
+        kw.update(wind_mean=np.zeros((2, H, W)), wind_var=wind_var)
+    if conc_var is not None:
+        kw.update(log_conc_mean=np.zeros((H, W)), log_conc_var=conc_var)
+    return Belief(occ, res, normalize_source_probs(probs, occ), **kw)
+
+
+def _history(graph, cells=()) -> SearchHistory:
+    c = np.array(cells, np.int64).reshape(-1, 2)
+    return SearchHistory(graph, Observations(c, np.zeros(len(c)), np.zeros((len(c), 2))))
+
+
+def test_utility_formula_and_choice():
+    """A 1 x 12 corridor of 1 m cells, robot at 0: the nearer, smaller peak wins after the discount."""
+    occ = np.zeros((1, 12), np.uint8)
+    occ[0, 6] = 1  # a wall: cells beyond it are unreachable
+    g = FreeSpaceGraph(occ, 1.0)
+    p = np.full((1, 12), 1.0)
+    p[0, 2], p[0, 5], p[0, 9] = 30.0, 36.0, 1000.0  # the biggest peak is behind the wall
+    wv = np.zeros((2, 1, 12))
+    wv[:, 0, 4] = 8.0  # var(u_x) + var(u_y) = 16
+    cv = np.zeros((1, 12))
+    cv[0, 3] = 3.0
+    b = _belief(occ, p, wind_var=wv, conc_var=cv)
+    d = g.distances_from((0, 0))
+    planner = UtilityPlanner()
+    u = planner.utility(b, d)
+    pi = b.source_probs[0]
+    for j in range(12):
+        if j >= 6:
+            assert u[0, j] == -math.inf
+            continue
+        gain = 100.0 * pi[j] + 0.25 * wv[:, 0, j].sum() + 2.0 * cv[0, j]
+        assert u[0, j] == pytest.approx(math.exp(-0.1 * j) * gain, rel=1e-12)
+    expected = max(range(1, 6), key=lambda j: u[0, j])
+    assert planner.next_goal(b, (0, 0), d, _history(g)) == (0, expected)
+    # in cell units the discount is 10x stronger per metre on a 0.1 m grid
+    fine = _belief(occ, p, res=0.1)
+    d01 = FreeSpaceGraph(occ, 0.1).distances_from((0, 0))
+    assert UtilityPlanner(distance_unit="cell").utility(fine, d01)[0, 3] == pytest.approx(
+        math.exp(-0.3) * 100 * fine.source_probs[0, 3]
+    )
+
+
+def test_goal_is_never_the_current_cell_nor_a_measured_cell():
+    occ = np.zeros((5, 5), np.uint8)
+    g = FreeSpaceGraph(occ, 0.1)
+    p = np.full((5, 5), 1e-6)
+    p[2, 2] = 1.0  # the robot stands on the peak
+    p[2, 3] = 1e-2
+    p[1, 2] = 5e-3
+    b = _belief(occ, p, res=0.1)
+    planner = UtilityPlanner()
+    d = g.distances_from((2, 2))
+    assert planner.next_goal(b, (2, 2), d, _history(g)) == (2, 3)
+    assert planner.next_goal(b, (2, 2), d, _history(g, [(2, 2), (2, 3)])) == (1, 2)
+    # every other cell measured: measured cells are allowed again, never the robot's own
+    all_cells = [(i, j) for i in range(5) for j in range(5)]
+    assert planner.next_goal(b, (2, 2), d, _history(g, all_cells)) == (2, 3)
+    # a one-cell map: nowhere to go
+    one = np.ones((3, 3), np.uint8)
+    one[1, 1] = 0
+    b1 = _belief(one, np.ones((3, 3)))
+    g1 = FreeSpaceGraph(one, 1.0)
+    assert planner.next_goal(b1, (1, 1), g1.distances_from((1, 1)), _history(g1)) is None
+
+
+def test_ties_go_to_the_nearest_cell():
+    occ = np.zeros((1, 9), np.uint8)
+    g = FreeSpaceGraph(occ, 1.0)
+    b = _belief(occ, np.ones((1, 9)))  # uniform: utility decreases with distance only
+    assert UtilityPlanner().next_goal(b, (0, 4), g.distances_from((0, 4)), _history(g)) == (0, 3)
+    flat = UtilityPlanner(w_d=0.0)  # all equal: nearest, then lowest index
+    assert flat.next_goal(b, (0, 4), g.distances_from((0, 4)), _history(g)) == (0, 3)
+
+
+def test_entropy_termination():
+    occ = np.zeros((10, 10), np.uint8)
+    occ[0, :] = 1
+    planner = UtilityPlanner(eta=0.65)
+    uniform = _belief(occ, np.ones((10, 10)))
+    assert not planner.should_stop(uniform, None)
+    N = 90
+    peaked = np.zeros((10, 10))
+    peaked[5, 5] = 1.0
+    assert planner.should_stop(_belief(occ, peaked), None)
+    # uniform over M cells: H = log M; stops iff log M <= eta log N
+    for M, stops in ((int(N**0.65), True), (int(N**0.65) + 1, False)):
+        p = np.zeros((10, 10))
+        p[1:, :].flat[:M] = 1.0
+        assert planner.should_stop(_belief(occ, p), None) is stops, M
+    assert UtilityPlanner(eta=1.0).should_stop(uniform, None)
+    # N as the canvas size instead of the free cells: log(10000) makes the test looser
+    M = int(N**0.65) + 1
+    p = np.zeros((10, 10))
+    p[1:, :].flat[:M] = 1.0
+    assert UtilityPlanner(entropy_cells=10_000).should_stop(_belief(occ, p), None)
+
+
+def test_registry():
+    assert "utility" in planner_names()
+    p = get_planner("utility", eta=0.75)
+    assert isinstance(p, UtilityPlanner) and p.eta == 0.75 and isinstance(p, Planner) and p.name == "utility"
+    with pytest.raises(UnsupportedError, match=r"known planners: .*utility"):
+        get_planner("nope")
+    with pytest.raises(InputDataError, match="does not take"):
+        get_planner("utility", bogus=1)
+    with pytest.raises(InputDataError, match="eta"):
+        UtilityPlanner(eta=1.5)
+
+    class Stay:
+        name = "test-stay"
+
+        def reset(self) -> None: ...
+
+        def should_stop(self, belief, history) -> bool:
+            return False
+
+        def next_goal(self, belief, robot_cell, distances, history):
+            return None
+
+    register_planner("test-stay", Stay)
+    register_planner("test-stay", Stay)  # the same factory again: fine
+    assert isinstance(get_planner("test-stay"), Planner)
+    with pytest.raises(InputDataError, match="already registered"):
+        register_planner("test-stay", UtilityPlanner)
+    register_planner("test-lazy", "dgse.search.planners:UtilityPlanner")
+    assert isinstance(get_planner("test-lazy", w_d=0.2), UtilityPlanner)
