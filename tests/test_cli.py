@@ -23,7 +23,20 @@ from dgse.world.layout import Layout, Opening
 from dgse.world.layout_io import load_layout, save_layout
 
 SRC = Path(__file__).resolve().parents[1] / "src"
-COMMANDS = ["layout", "import-floorplan", "solve", "show", "scenario", "demo", "engines"]
+COMMANDS = [
+    "layout",
+    "import-floorplan",
+    "solve",
+    "show",
+    "scenario",
+    "demo",
+    "engines",
+    "generate",
+    "export",
+    "import",
+    "import-gaden",
+    "search",
+]
 SOURCE = ("0.55", "0.55")  # free cell of the tiny layout
 WALL = ("1.45", "0.55")  # inside its wall
 
@@ -226,9 +239,7 @@ def test_import_floorplan(capsys, tmp_path):
 def test_solve_not_an_npz(capsys, tmp_path):
     bad = tmp_path / "bad.npz"
     bad.write_text("not a zip")
-    _assert_user_error(
-        *_run(capsys, "solve", bad, "-o", tmp_path / "o.npz"), str(bad), "not an .npz file"
-    )
+    _assert_user_error(*_run(capsys, "solve", bad, "-o", tmp_path / "o.npz"), str(bad), "not an .npz file")
     _assert_user_error(
         *_run(capsys, "solve", tmp_path / "missing.npz", "-o", tmp_path / "o.npz"), "no such file"
     )
@@ -237,9 +248,7 @@ def test_solve_not_an_npz(capsys, tmp_path):
 def test_solve_missing_keys(capsys, solved, tmp_path):
     only_occ = tmp_path / "occ.npz"
     np.savez(only_occ, occupancy=np.zeros((5, 5), np.uint8))
-    _assert_user_error(
-        *_run(capsys, "solve", only_occ, "-o", tmp_path / "o.npz"), "missing key(s) meta"
-    )
+    _assert_user_error(*_run(capsys, "solve", only_occ, "-o", tmp_path / "o.npz"), "missing key(s) meta")
     with np.load(solved["case"]) as data:
         arrays = {k: data[k] for k in data.files if k != "concentration"}
     no_conc = tmp_path / "no_conc.npz"
@@ -262,9 +271,7 @@ def test_solve_case_file_with_a_source_in_a_wall(capsys, solved, tmp_path):
     arrays["source"] = np.array([float(WALL[0]), float(WALL[1])], np.float32)
     bad = tmp_path / "wall_case.npz"
     np.savez(bad, **arrays)
-    _assert_user_error(
-        *_run(capsys, "solve", bad, "-o", tmp_path / "o.npz"), "lies in a solid cell"
-    )
+    _assert_user_error(*_run(capsys, "solve", bad, "-o", tmp_path / "o.npz"), "lies in a solid cell")
 
 
 def test_solve_bad_arguments(capsys, solved, tmp_path):
@@ -276,9 +283,7 @@ def test_solve_bad_arguments(capsys, solved, tmp_path):
         "--seed",
     )
     _assert_user_error(
-        *_run(
-            capsys, "solve", solved["layout"], "-o", out, "-v", "-1", "--source", *SOURCE, "-q", "1"
-        ),
+        *_run(capsys, "solve", solved["layout"], "-o", out, "-v", "-1", "--source", *SOURCE, "-q", "1"),
         "--inlet-velocity",
         "positive",
     )
@@ -295,9 +300,7 @@ def test_unknown_engine(capsys, solved, tmp_path):
         "unknown engine 'nope'",
         "builtin",
     )
-    _assert_user_error(
-        *_run(capsys, "scenario", "--engine", "nope", "-o", tmp_path), "unknown engine 'nope'"
-    )
+    _assert_user_error(*_run(capsys, "scenario", "--engine", "nope", "-o", tmp_path), "unknown engine 'nope'")
 
 
 def test_show_bad_format_and_meta(capsys, solved, tmp_path):
@@ -311,9 +314,7 @@ def test_show_bad_format_and_meta(capsys, solved, tmp_path):
     arrays["meta"] = np.array(json.dumps([1, 2]))
     bad = tmp_path / "bad_meta.npz"
     np.savez(bad, **arrays)
-    _assert_user_error(
-        *_run(capsys, "show", bad, "-o", tmp_path / "f.png"), "meta is not a JSON object"
-    )
+    _assert_user_error(*_run(capsys, "show", bad, "-o", tmp_path / "f.png"), "meta is not a JSON object")
 
 
 def test_errors_in_a_real_process(solved, tmp_path):

@@ -7,7 +7,10 @@ Commands (``dgse COMMAND --help`` for each):
 * ``solve``: solve a layout file (with an inlet speed and a source) or re-solve a case file;
 * ``show``: the figure of a case (or a layout) file;
 * ``scenario`` (alias ``demo``): a random multi-room scenario with four sources, solved;
-* ``engines``: the physics engines and why a missing one is missing.
+* ``engines``: the physics engines and why a missing one is missing;
+* ``generate``, ``export``, ``import``, ``import-gaden``, ``data stats``: datasets
+  (:mod:`dgse.cli.data`);
+* ``search``: active search episodes with any estimator and planner (:mod:`dgse.cli.search`).
 
 Every error a user can cause (:class:`~dgse.errors.DGSEError`, or a file that
 cannot be written) is printed as one red line ``error: <message>`` and the
@@ -526,8 +529,10 @@ def engines_cmd() -> None:
 
 # the dataset commands: generate, export, import at the top level, `data stats`
 from dgse.cli.data import register as _register_data  # noqa: E402
+from dgse.cli.search import register as _register_search  # noqa: E402
 
 _register_data(app)
+_register_search(app)
 
 
 # -- entry point -------------------------------------------------------------------------
