@@ -1,0 +1,477 @@
+"""Estimator commands: ``estimate``, ``evaluate``, ``export-onnx``.
+
+``models_app`` is a typer app with the three commands; :func:`register`
+attaches them to the ``dgse`` app at the top level:
+
+* ``dgse estimate CASE.npz --observations N --seed S [--method dgse-s]
+  [--model default|PATH] [-K 5 -T 5] -o BELIEF.npz [--plot FIG.png]``: one
+  estimate from random observations of a case; writes the belief, the
+  observations and the metrics (:func:`dgse.evaluation.evaluate.save_estimate`).
+  The observations (and a DGSE-S estimator's sampling seed) are those of trial
+  0 of ``dgse evaluate CASE.npz --seed S``.
+* ``dgse evaluate CASES_DIR_OR_STORE --method M --observations N [N ...]
+  --trials R --seed S [--json OUT.json] [--split test] [--model ...]``:
+  :func:`dgse.evaluation.evaluate.evaluate`, a table of the aggregate per
+  observation count, the JSON result.
+* ``dgse export-onnx --model PATH -o OUT.onnx [--variant auto|pipeline|stages]``:
+  :func:`dgse.models.onnx_export.export_onnx`, checked against PyTorch with
+  ONNX Runtime.
+
+``--model``, ``-K``, ``-T``, ``--device`` and ``--dtype`` configure the DGSE
+estimators (``dgse-o``, ``dgse-p``, ``dgse-s``); any estimator takes
+keyword arguments as ``--param KEY=VALUE`` (VALUE parsed as JSON, else a
+string), so estimators registered later work unchanged.
+
+Every error a user can cause prints one red line ``error: <message>`` and
+exits with status 2 (:mod:`dgse.cli.common`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from rich import box
+from rich.markup import escape
+from rich.table import Table
+
+from dgse.cli.common import console, new_app, path_text, user_errors
+from dgse.errors import InputDataError
+
+__all__ = [
+    "estimate_cmd",
+    "evaluate_cmd",
+    "export_onnx_cmd",
+    "main",
+    "models_app",
+    "parse_params",
+    "register",
+]
+
+models_app = new_app("models", "Estimators: one estimate, evaluation over cases, ONNX export.")
+
+#: Defaults of the DGSE options (applied only to the DGSE methods).
+DEFAULT_K = DEFAULT_T = 5
+
+_MODEL_HELP = "DGSE weights: 'default' (shipped with dgse) or a .safetensors checkpoint."
+_PARAM_HELP = "Estimator argument KEY=VALUE (VALUE as JSON, else a string); repeatable."
+_THREADS_HELP = "PyTorch CPU threads (1 is often fastest on busy, shared cores)."
+
+
+def _set_threads(threads: int | None) -> None:
+    """``torch.set_num_threads(threads)`` when given (PyTorch is imported only then)."""
+    if threads is None:
+        return
+    if threads < 1:
+        raise InputDataError(f"--threads must be at least 1, got {threads}")
+    import torch
+
+    torch.set_num_threads(threads)
+
+
+def parse_params(items: Sequence[str] | None) -> dict[str, Any]:
+    """``["K=3", "name=x"]`` -> ``{"K": 3, "name": "x"}`` (values JSON-decoded when they parse)."""
+    out: dict[str, Any] = {}
+    for item in items or []:
+        key, sep, raw = item.partition("=")
+        key = key.strip()
+        if not sep or not key.isidentifier():
+            raise InputDataError(f"--param needs KEY=VALUE with KEY a Python name, got {item!r}")
+        try:
+            out[key] = json.loads(raw)
+        except json.JSONDecodeError:
+            out[key] = raw
+    return out
+
+
+def _is_dgse(method: str) -> bool:
+    return method in ("dgse-o", "dgse-p", "dgse-s")
+
+
+def _estimator_kwargs(
+    method: str,
+    model: str | None,
+    k: int | None,
+    t: int | None,
+    device: str | None,
+    dtype: str | None,
+    params: Sequence[str] | None,
+) -> dict[str, Any]:
+    """Keyword arguments of ``get_estimator(method, ...)`` from the command's options."""
+    kwargs: dict[str, Any] = {}
+    given = {"--model": model, "-K": k, "-T": t, "--device": device, "--dtype": dtype}
+    if _is_dgse(method):
+        for name, v in (("-K", k), ("-T", t)):
+            if v is not None and v < 1:
+                raise InputDataError(f"{name} must be at least 1, got {v}")
+        kwargs = {
+            "model": model or "default",
+            "K": DEFAULT_K if k is None else k,
+            "T": DEFAULT_T if t is None else t,
+        }
+        if device is not None:
+            kwargs["device"] = device
+        if dtype is not None:
+            kwargs["dtype"] = dtype
+    else:
+        extra = [name for name, v in given.items() if v is not None]
+        if extra:
+            raise InputDataError(
+                f"{', '.join(extra)} apply to the DGSE methods; "
+                f"give {method}'s arguments as --param KEY=VALUE"
+            )
+    kwargs.update(parse_params(params))
+    return kwargs
+
+
+def _fmt(v: Any, digits: int = 3) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        if not math.isfinite(v) or abs(v) < 10**digits:
+            return f"{v:.{digits}g}"
+        return f"{v:.3g}" if abs(v) >= 1e7 else f"{v:.0f}"
+    return str(v)
+
+
+def _check_figure_path(path: Path) -> None:
+    """Raise :class:`InputDataError` unless matplotlib can write a figure with ``path``'s suffix."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    supported = FigureCanvasAgg(Figure()).get_supported_filetypes()
+    if path.suffix.lstrip(".").lower() not in supported:
+        raise InputDataError(
+            f"cannot write a figure as {path.name!r}: use one of "
+            + ", ".join(f".{k}" for k in sorted(supported))
+        )
+
+
+def _save_figure(fig: Any, path: Path, dpi: int = 120) -> Path:
+    _check_figure_path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi)
+    return path
+
+
+# -- estimate -----------------------------------------------------------------------------------
+@user_errors
+def estimate_cmd(
+    case_file: Annotated[Path, typer.Argument(metavar="CASE", help="A case file (.npz).")],
+    observations: Annotated[
+        int, typer.Option("--observations", "-n", help="Number of sensors at random free cells.")
+    ],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Estimate file (.npz) to write.")],
+    seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of the observations (>= 0).")] = 0,
+    method: Annotated[str, typer.Option("--method", "-m", help="Estimator name (registry).")] = "dgse-s",
+    model: Annotated[str | None, typer.Option("--model", help=_MODEL_HELP)] = None,
+    k: Annotated[int | None, typer.Option("-K", help="DGSE-S wind samples (default 5).")] = None,
+    t: Annotated[int | None, typer.Option("-T", help="DGSE-S concentration samples (default 5).")] = None,
+    device: Annotated[str | None, typer.Option("--device", help="DGSE device (cpu, cuda, ...).")] = None,
+    dtype: Annotated[str | None, typer.Option("--dtype", help="DGSE precision: float32 or bf16.")] = None,
+    params: Annotated[list[str] | None, typer.Option("--param", "-p", help=_PARAM_HELP)] = None,
+    threads: Annotated[int | None, typer.Option("--threads", help=_THREADS_HELP)] = None,
+    plot: Annotated[Path | None, typer.Option("--plot", help="Also save a figure of the belief.")] = None,
+) -> None:
+    """Estimate the source (and fields) of a case from random noisy observations.
+
+    Draws --observations sensors at random free cells with Table I noise (the
+    observations of trial 0 of `dgse evaluate CASE --seed S`), runs the
+    estimator, scores it against the case and writes the belief, the
+    observations and the metrics into the output .npz.
+    """
+    from dgse.estimators.registry import get_estimator
+    from dgse.evaluation.evaluate import draw_observations, estimator_seed, save_estimate
+    from dgse.evaluation.metrics import evaluate_belief
+    from dgse.world.case import Case
+
+    kwargs = _estimator_kwargs(method, model, k, t, device, dtype, params)
+    _set_threads(threads)
+    if plot is not None:
+        _check_figure_path(plot)
+    case = Case.load(case_file)
+    case_id = case_file.stem
+    obs = draw_observations(case, observations, seed, case_id, trial=0)
+    with console.status(f"loading {escape(method)} ..."):
+        est: Any = get_estimator(method, **kwargs)
+    if hasattr(est, "seed") and "seed" not in kwargs:
+        est.seed = estimator_seed(seed, case_id, observations, 0)
+    import time
+
+    t0 = time.perf_counter()
+    belief = est.estimate(case.occupancy, case.resolution, obs)
+    seconds = time.perf_counter() - t0
+    metrics = evaluate_belief(belief, case)
+    extra = {
+        "case": str(case_file),
+        "case_id": case_id,
+        "method": method,
+        "seed": seed,
+        "n_obs": observations,
+        "seconds": seconds,
+        "true_source_xy": [float(case.source[0]), float(case.source[1])],
+        "estimator_kwargs": kwargs,
+    }
+    path = save_estimate(out, belief, obs, metrics, extra)
+
+    m = metrics.to_dict()
+    x, y = belief.source_estimate()
+    sx, sy = float(case.source[0]), float(case.source[1])
+    i, j = belief.most_likely_cell()
+    table = Table.grid(padding=(0, 2))
+    table.add_column(style="bold")
+    table.add_column()
+    table.add_row("case", f"{escape(case.name)} ({case.grid.width} x {case.grid.height} cells)")
+    table.add_row("method", f"{escape(method)}, {observations} observations, seed {seed}")
+    table.add_row("source estimate", f"({x:.2f}, {y:.2f}) m; most likely cell ({i}, {j})")
+    table.add_row("true source", f"({sx:.2f}, {sy:.2f}) m")
+    table.add_row("error", f"[bold]{m['sl_error_m']:.2f} m[/] (most likely cell {m['map_error_m']:.2f} m)")
+    table.add_row(
+        "entropy",
+        f"{m['entropy']:.2f} nats ({m['normalized_entropy']:.2f} of log N); "
+        f"cross-entropy at the true cell {m['ce']:.2f} nats",
+    )
+    if belief.wind_mean is not None:
+        table.add_row("wind", f"RMSE {_fmt(m['wf_rmse'])} m/s, NLL {_fmt(m['wf_nll'])}")
+    if belief.log_conc_mean is not None:
+        table.add_row(
+            "concentration",
+            f"log(1+c) RMSE {_fmt(m['cf_rmse'])}, NLL {_fmt(m['cf_nll'])}; RMSE {_fmt(m['cf_rmse_ppm'])} ppm",
+        )
+    table.add_row("time", f"{seconds:.3f} s per estimate")
+    console.print(table)
+    console.print(f"wrote estimate [cyan]{path_text(path)}[/]")
+    if plot is not None:
+        from dgse.viz.belief import plot_belief
+
+        fig = plot_belief(belief, case, obs)
+        console.print(f"wrote figure [cyan]{path_text(_save_figure(fig, plot))}[/]")
+
+
+# -- evaluate -----------------------------------------------------------------------------------
+def _split_positionals(args: Sequence[str], observations: Sequence[str]) -> tuple[Path, list[int]]:
+    """The cases path and the observation counts from the positionals and ``--observations``.
+
+    ``--observations 50 100 150`` reaches the command as ``--observations 50`` plus
+    the positionals ``100 150``: integer positionals that are not existing paths are
+    more counts; counts may also be comma-separated (``50,100``).
+    """
+    counts: list[int] = []
+    paths: list[str] = []
+
+    def ints(token: str) -> list[int] | None:
+        parts = [p for p in token.split(",") if p.strip()]
+        try:
+            return [int(p) for p in parts] if parts else None
+        except ValueError:
+            return None
+
+    for token in observations:
+        got = ints(token)
+        if got is None:
+            raise InputDataError(f"--observations takes integers, got {token!r}")
+        counts += got
+    for token in args:
+        got = ints(token)
+        if got is not None and not Path(token).exists():
+            counts += got
+        else:
+            paths.append(token)
+    if len(paths) != 1:
+        raise InputDataError(
+            "give one CASES_DIR_OR_STORE (a directory of case files, a case file or a dataset store)"
+            + (f"; got {', '.join(map(repr, paths))}" if paths else "")
+        )
+    if not counts:
+        raise InputDataError("give the numbers of observations: --observations N [N ...]")
+    return Path(paths[0]), counts
+
+
+def _mean_std(agg: dict[str, Any], key: str) -> str:
+    mean, std = agg.get(f"{key}_mean"), agg.get(f"{key}_std")
+    if mean is None:
+        return "-"
+    return f"{_fmt(mean)} ± {_fmt(std, 2)}" if std is not None else _fmt(mean)
+
+
+#: Rows of the aggregate table: label, metric key, statistic ("mean ± std", "median").
+_TABLE_ROWS = (
+    ("SL error [m]", "sl_error_m", "mean"),
+    ("SL error median [m]", "sl_error_m", "median"),
+    ("CE at the true cell [nats]", "ce", "mean"),
+    ("WF RMSE [m/s]", "wf_rmse", "mean"),
+    ("WF NLL [nats]", "wf_nll", "mean"),
+    ("CF RMSE [log(1+ppm)]", "cf_rmse", "mean"),
+    ("CF NLL [nats]", "cf_nll", "mean"),
+    ("CF RMSE [ppm]", "cf_rmse_ppm", "mean"),
+    ("CF NLL, ppm space [nats]", "cf_nll_ppm", "mean"),
+    ("time per estimate, median [s]", "seconds_per_estimate", "median"),
+)
+
+
+def _aggregate_table(result: dict[str, Any]) -> Table:
+    """Metrics as rows (mean ± std unless noted), one column per observation count."""
+    split = f", split {result['split']}" if result.get("split") else ""
+    table = Table(
+        title=f"{escape(result['method'])} on {result['n_cases']} cases{escape(split)}, "
+        f"{result['trials']} trials, seed {result['seed']}",
+        title_justify="left",
+        box=box.SIMPLE_HEAD,
+    )
+    table.add_column("metric", no_wrap=True)
+    aggs = result["aggregate"]
+    for n in aggs:
+        table.add_column(f"n = {n}", justify="right", no_wrap=True)
+    table.add_row("estimates", *(str(a["n_estimates"]) for a in aggs.values()))
+    for label, key, stat in _TABLE_ROWS:
+        cells = [_mean_std(a, key) if stat == "mean" else _fmt(a.get(f"{key}_{stat}")) for a in aggs.values()]
+        table.add_row(escape(label), *cells)
+    return table
+
+
+@user_errors
+def evaluate_cmd(
+    args: Annotated[
+        list[str],
+        typer.Argument(
+            metavar="CASES_DIR_OR_STORE",
+            help="A directory of case files, a case file or a dataset store (.h5).",
+            show_default=False,
+        ),
+    ],
+    observations: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--observations",
+            "-n",
+            metavar="N [N ...]",
+            help="Numbers of sensors, e.g. --observations 50 100 150 (or 50,100,150).",
+        ),
+    ] = None,
+    method: Annotated[str, typer.Option("--method", "-m", help="Estimator name (registry).")] = "dgse-s",
+    trials: Annotated[
+        int, typer.Option("--trials", "-r", help="Random sensor configurations per case and count.")
+    ] = 20,
+    seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of the observations (>= 0).")] = 0,
+    json_out: Annotated[Path | None, typer.Option("--json", help="Write the full result as JSON.")] = None,
+    split: Annotated[str, typer.Option("--split", help="Split of a dataset store.")] = "test",
+    model: Annotated[str | None, typer.Option("--model", help=_MODEL_HELP)] = None,
+    k: Annotated[int | None, typer.Option("-K", help="DGSE-S wind samples (default 5).")] = None,
+    t: Annotated[int | None, typer.Option("-T", help="DGSE-S concentration samples (default 5).")] = None,
+    device: Annotated[str | None, typer.Option("--device", help="DGSE device (cpu, cuda, ...).")] = None,
+    dtype: Annotated[str | None, typer.Option("--dtype", help="DGSE precision: float32 or bf16.")] = None,
+    params: Annotated[list[str] | None, typer.Option("--param", "-p", help=_PARAM_HELP)] = None,
+    threads: Annotated[int | None, typer.Option("--threads", help=_THREADS_HELP)] = None,
+    limit: Annotated[int | None, typer.Option("--limit", help="Only the first N cases.")] = None,
+    progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")] = True,
+) -> None:
+    """Evaluate an estimator on cases from random noisy observations (paper Sec. V).
+
+    For every case, observation count and trial: sensors at random free cells
+    with Table I noise, seeded by (seed, case, count, trial) so that every
+    method sees the same observations; source-localization error, cross-entropy,
+    wind and concentration RMSE/NLL; time per estimate.
+    """
+    from dgse.evaluation.evaluate import evaluate, write_json
+
+    cases, counts = _split_positionals(args, observations or [])
+    kwargs = _estimator_kwargs(method, model, k, t, device, dtype, params)
+    _set_threads(threads)
+    result = evaluate(
+        cases,
+        method,
+        counts,
+        trials=trials,
+        seed=seed,
+        estimator_kwargs=kwargs,
+        progress=progress,
+        split=split,
+        limit=limit,
+    )
+    console.print(_aggregate_table(result))
+    console.print(f"{len(result['per_case'])} estimates in {result['seconds_total']:.1f} s")
+    if json_out is not None:
+        console.print(f"wrote [cyan]{path_text(write_json(result, json_out))}[/]")
+
+
+# -- export-onnx --------------------------------------------------------------------------------
+@user_errors
+def export_onnx_cmd(
+    model: Annotated[
+        str, typer.Option("--model", help="A .safetensors checkpoint, or 'default' (the shipped DGSE-S).")
+    ],
+    out: Annotated[Path, typer.Option("--out", "-o", help="ONNX file to write.")],
+    variant: Annotated[
+        str,
+        typer.Option(
+            "--variant",
+            help="auto/pipeline: one graph (DGSE-S: K,T-marginalized, noise as inputs); "
+            "stages: DGSE-S as three graphs (wind, conc, source).",
+        ),
+    ] = "auto",
+    opset: Annotated[int, typer.Option("--opset", help="ONNX opset (>= 17).")] = 17,
+    check: Annotated[
+        bool, typer.Option("--check/--no-check", help="Compare with PyTorch on ONNX Runtime.")
+    ] = True,
+) -> None:
+    """Export a DGSE network to ONNX for TensorRT / ONNX Runtime (dynamic batch, canvas, K, T)."""
+    from dgse.models.checkpoint import load_model
+    from dgse.models.onnx_export import check_onnx, export_onnx
+
+    if model == "default":
+        from dgse.estimators.dgse import default_model_path
+
+        path = default_model_path("dgse-s")
+    else:
+        path = Path(model)
+    net = load_model(path)
+    with console.status(f"exporting {escape(net.config.variant)} ..."):
+        result = export_onnx(net, out, variant=variant, opset=opset)
+    for p, stage, ins, outs in zip(result.paths, result.stages, result.inputs, result.outputs, strict=True):
+        size = p.stat().st_size / 1e6
+        console.print(
+            f"wrote [cyan]{path_text(p)}[/] ({size:.1f} MB, {escape(stage)}): "
+            f"inputs {escape(', '.join(ins))} -> outputs {escape(', '.join(outs))}"
+        )
+    console.print(
+        f"{escape(result.dgse_variant)} {escape(result.export_variant)}, opset {result.opset}; dynamic axes: "
+        "batch, height, width"
+        + (", K, T (the noise inputs' leading sizes)" if "eps_wind" in result.inputs[0] else "")
+    )
+    if check:
+        with console.status("checking with ONNX Runtime ..."):
+            diff = check_onnx(net, result)
+        if not diff <= 1e-3:
+            raise InputDataError(f"ONNX Runtime and PyTorch disagree: max abs difference {diff:.3g}")
+        console.print(f"ONNX Runtime vs PyTorch: max abs difference {diff:.2g}")
+
+
+models_app.command("estimate")(estimate_cmd)
+models_app.command("evaluate")(evaluate_cmd)
+models_app.command("export-onnx")(export_onnx_cmd)
+
+
+def register(app: typer.Typer) -> None:
+    """Attach ``estimate``, ``evaluate`` and ``export-onnx`` to ``app`` at the top level."""
+    app.command("estimate")(estimate_cmd)
+    app.command("evaluate")(evaluate_cmd)
+    app.command("export-onnx")(export_onnx_cmd)
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Run ``models_app`` with ``args`` (default ``sys.argv[1:]``); returns the exit status."""
+    try:
+        models_app(args=list(args) if args is not None else None, prog_name="dgse-models")
+    except SystemExit as e:
+        code = e.code
+        return code if isinstance(code, int) else (0 if code is None else 1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
