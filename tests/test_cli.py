@@ -36,6 +36,9 @@ COMMANDS = [
     "import",
     "import-gaden",
     "search",
+    "estimate",
+    "evaluate",
+    "export-onnx",
 ]
 SOURCE = ("0.55", "0.55")  # free cell of the tiny layout
 WALL = ("1.45", "0.55")  # inside its wall

@@ -10,6 +10,7 @@ Commands (``dgse COMMAND --help`` for each):
 * ``engines``: the physics engines and why a missing one is missing;
 * ``generate``, ``export``, ``import``, ``import-gaden``, ``data stats``: datasets
   (:mod:`dgse.cli.data`);
+* ``estimate``, ``evaluate``, ``export-onnx``: estimators on cases (:mod:`dgse.cli.models`);
 * ``search``: active search episodes with any estimator and planner (:mod:`dgse.cli.search`).
 
 Every error a user can cause (:class:`~dgse.errors.DGSEError`, or a file that
@@ -529,9 +530,11 @@ def engines_cmd() -> None:
 
 # the dataset commands: generate, export, import at the top level, `data stats`
 from dgse.cli.data import register as _register_data  # noqa: E402
+from dgse.cli.models import register as _register_models  # noqa: E402
 from dgse.cli.search import register as _register_search  # noqa: E402
 
 _register_data(app)
+_register_models(app)
 _register_search(app)
 
 
