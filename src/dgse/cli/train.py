@@ -1,0 +1,268 @@
+"""The ``dgse train`` command: train a DGSE network on a dataset store.
+
+:func:`register` adds the command to a typer app.  The settings are, in
+increasing priority: the paper's defaults (:class:`~dgse.training.config.TrainConfig`),
+a YAML file (``--config``, e.g. ``configs/train/paper.yaml``), ``--set
+KEY=VALUE`` overrides (values in YAML syntax; ``model_overrides.<key>`` and
+``loss_weights.<key>`` reach the nested settings), and the dedicated options
+(``--model``, ``--data``, ``--epochs``, ...).
+
+Every error a user can cause (:class:`~dgse.errors.DGSEError`, or a file that
+cannot be written) prints one red line ``error: <message>`` and exits with
+status 2.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from pathlib import Path
+from typing import Annotated, Any, TypeVar
+
+import typer
+import yaml
+from rich.console import Console
+from rich.markup import escape
+from rich.text import Text
+
+from dgse.errors import DGSEError, InputDataError
+
+__all__ = ["parse_devices", "parse_set", "register", "train_cmd"]
+
+EXIT_USER_ERROR = 2
+
+console = Console(highlight=False)
+err_console = Console(stderr=True, highlight=False)
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def _print_error(message: str) -> None:
+    err_console.print(
+        Text("error: ", style="bold red") + Text(message.replace("\n", " "), style="red"),
+        soft_wrap=True,
+    )
+
+
+def _user_errors(fn: F) -> F:
+    """Print a user-caused error as one red line and exit with status 2."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except DGSEError as e:
+            _print_error(str(e))
+            raise typer.Exit(EXIT_USER_ERROR) from None
+        except OSError as e:
+            _print_error(f"{e.filename}: {e.strerror}" if e.filename and e.strerror else str(e))
+            raise typer.Exit(EXIT_USER_ERROR) from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+def _p(path: Path | str) -> str:
+    return escape(str(path))
+
+
+def parse_devices(text: str) -> int | str | list[int]:
+    """``--devices``: ``"auto"``, a count (``"2"``, ``"-1"`` for all) or indices ``"0,1"``."""
+    t = text.strip()
+    if "," in t:
+        try:
+            return [int(x) for x in t.split(",") if x.strip()]
+        except ValueError:
+            raise InputDataError(f"--devices: bad device list {text!r}") from None
+    try:
+        return int(t)
+    except ValueError:
+        return t
+
+
+def parse_set(items: list[str]) -> dict[str, Any]:
+    """``--set KEY=VALUE`` items as a dict; values are parsed as YAML scalars (``3``, ``true``, ``null``)."""
+    out: dict[str, Any] = {}
+    for item in items:
+        key, eq, raw = item.partition("=")
+        if not eq or not key.strip():
+            raise InputDataError(f"--set needs KEY=VALUE, got {item!r}")
+        try:
+            out[key.strip()] = yaml.safe_load(raw) if raw.strip() else None
+        except yaml.YAMLError:
+            out[key.strip()] = raw
+    return out
+
+
+@_user_errors
+def train_cmd(
+    model: Annotated[
+        str | None, typer.Option("--model", "-m", help="Variant: dgse-o, dgse-p or dgse-s (default dgse-s).")
+    ] = None,
+    data: Annotated[
+        Path | None, typer.Option("--data", "-d", help="Dataset store (.h5) with train and val splits.")
+    ] = None,
+    config_file: Annotated[
+        Path | None,
+        typer.Option("--config", "-c", help="YAML training config (e.g. configs/train/paper.yaml)."),
+    ] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", "-o", help="Run directory for checkpoints and logs (default: runs/dgse)."),
+    ] = None,
+    resume: Annotated[
+        bool, typer.Option("--resume", help="Continue the run in --out from its last.safetensors.")
+    ] = False,
+    preset: Annotated[
+        str | None, typer.Option("--preset", help="Architecture preset: paper or small.")
+    ] = None,
+    epochs: Annotated[int | None, typer.Option("--epochs", "-e", help="Epochs in total.")] = None,
+    batch_size: Annotated[
+        int | None, typer.Option("--batch-size", "-b", help="Samples per step and device.")
+    ] = None,
+    max_time: Annotated[
+        str | None,
+        typer.Option(
+            "--max-time",
+            help="Time budget of this call, HH:MM:SS or DD:HH:MM:SS; stops cleanly after saving.",
+        ),
+    ] = None,
+    precision: Annotated[
+        str | None, typer.Option("--precision", help="32, bf16-mixed (CPU/GPU) or 16-mixed (GPU).")
+    ] = None,
+    accelerator: Annotated[
+        str | None, typer.Option("--accelerator", help="auto, cpu or gpu (Lightning).")
+    ] = None,
+    devices: Annotated[
+        str | None, typer.Option("--devices", help="auto, a device count (-1: all) or indices 0,1.")
+    ] = None,
+    strategy: Annotated[
+        str | None, typer.Option("--strategy", help="Lightning strategy: auto, ddp, ...")
+    ] = None,
+    num_nodes: Annotated[int | None, typer.Option("--num-nodes", help="Nodes of a multi-node run.")] = None,
+    workers: Annotated[
+        int | None, typer.Option("--workers", "-w", help="DataLoader worker processes per device.")
+    ] = None,
+    threads: Annotated[int | None, typer.Option("--threads", help="PyTorch CPU threads.")] = None,
+    seed: Annotated[int | None, typer.Option("--seed", "-s", help="Seed of the run.")] = None,
+    export: Annotated[
+        Path | None, typer.Option("--export", help="Also write the selected model to this .safetensors file.")
+    ] = None,
+    fast_dev_run: Annotated[
+        bool,
+        typer.Option(
+            "--fast-dev-run", help="One epoch of 2 training and 1 validation batch, writing everything."
+        ),
+    ] = False,
+    progress: Annotated[
+        bool | None, typer.Option("--progress/--no-progress", help="Show a progress bar.")
+    ] = None,
+    set_: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--set",
+            metavar="KEY=VALUE",
+            help="Override any config key (repeatable), e.g. --set lr=1e-3 "
+            "--set model_overrides.base_width=4.",
+        ),
+    ] = None,
+) -> None:
+    """Train a DGSE network (paper Sec. III, App. A) on a dataset store, resumably.
+
+    Writes into --out: last.safetensors (weights + optimizer state, for
+    --resume), best.safetensors (lowest validation source loss; a model
+    checkpoint), history.csv (one row per epoch), logs/version_N/metrics.csv
+    (Lightning's CSV log) and config.yaml.
+    """
+    from dgse.training.config import load_config
+
+    overrides: dict[str, Any] = parse_set(list(set_ or []))
+    options: dict[str, Any] = {
+        "model": model,
+        "data": str(data) if data is not None else None,
+        "out_dir": str(out) if out is not None else None,
+        "preset": preset,
+        "epochs": epochs,
+        "batch_size": batch_size,
+        "max_time": max_time,
+        "precision": precision,
+        "accelerator": accelerator,
+        "devices": parse_devices(devices) if devices is not None else None,
+        "strategy": strategy,
+        "num_nodes": num_nodes,
+        "num_workers": workers,
+        "threads": threads,
+        "seed": seed,
+        "export": str(export) if export is not None else None,
+        "progress_bar": progress,
+    }
+    overrides.update({k: v for k, v in options.items() if v is not None})
+    if fast_dev_run:
+        overrides["fast_dev_run"] = True
+    config = load_config(config_file, overrides)
+    if config.data is None:
+        raise InputDataError("no dataset store: pass --data STORE (or set data in the --config file)")
+
+    from lightning.pytorch.utilities import rank_zero_only
+
+    from dgse.models.networks import build_model, count_parameters
+    from dgse.training.train import prepare_out_dir, train
+
+    out_dir = Path(config.out_dir)
+    # the checks train() makes first, before anything is printed
+    if not Path(config.data).is_file():
+        raise InputDataError(f"dataset store {config.data} not found")
+    state = prepare_out_dir(config, resume)
+    talk = getattr(rank_zero_only, "rank", 0) == 0  # set by Lightning from the environment
+    if talk:
+        mc = config.model_config()
+        n_params = count_parameters(build_model(mc))
+        what = f"resuming at epoch {state.next_epoch}" if state is not None else "training"
+        del state
+        console.print(
+            f"{what} [bold]{escape(config.model)}[/] (preset {escape(config.preset)}, base width "
+            f"{mc.base_width}, depth {mc.depth}, {n_params / 1e6:.3f} M parameters) "
+            f"on [cyan]{_p(config.data)}[/]: "
+            f"{config.epochs} epochs, batch {config.batch_size}, precision {escape(config.precision)}"
+            + (", fast dev run" if config.fast_dev_run else "")
+        )
+        console.print(
+            f"metrics -> [cyan]{_p(out_dir / 'history.csv')}[/] and "
+            f"[cyan]{_p(out_dir / 'logs')}/version_N/metrics.csv[/]; checkpoints -> "
+            f"[cyan]{_p(out_dir / 'last.safetensors')}[/], [cyan]{_p(out_dir / 'best.safetensors')}[/]"
+        )
+    result = train(config, resume=resume)
+    if not talk:
+        return
+    stopped = {
+        "max_epochs": "all epochs done",
+        "max_time": "time budget reached",
+        "interrupted": "interrupted",
+        "fast_dev_run": "fast dev run",
+        "already_done": f"nothing to do: {result.epochs_done} epochs already trained",
+    }[result.stop_reason]
+    best = (
+        f"best val/source_loss {result.best_score:.4f} at epoch {result.best_epoch}"
+        if result.best_score is not None
+        else "no validation"
+    )
+    speed = f", {result.samples_per_s:.1f} samples/s" if result.samples_per_s > 0 else ""
+    console.print(
+        f"{stopped}: {result.epochs_done} epoch{'s' * (result.epochs_done != 1)}, "
+        f"{result.global_step} steps, {best} "
+        f"({result.wall_time_s:.1f} s{speed})"
+    )
+    if result.metrics_csv is not None:
+        console.print(
+            f"wrote metrics [cyan]{_p(result.metrics_csv)}[/] and [cyan]{_p(result.history_csv)}[/]"
+        )
+    ckpts = [result.last_path] + ([result.best_path] if result.best_path is not None else [])
+    console.print("checkpoints " + ", ".join(f"[cyan]{_p(p)}[/]" for p in ckpts))
+    if result.export_path is not None:
+        console.print(f"exported model [cyan]{_p(result.export_path)}[/]")
+    if result.stop_reason in ("max_time", "interrupted"):
+        console.print("continue with the same command and --resume")
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``train`` (:func:`train_cmd`) to ``app``."""
+    app.command("train")(train_cmd)
