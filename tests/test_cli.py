@@ -39,6 +39,7 @@ COMMANDS = [
     "estimate",
     "evaluate",
     "export-onnx",
+    "train",
 ]
 SOURCE = ("0.55", "0.55")  # free cell of the tiny layout
 WALL = ("1.45", "0.55")  # inside its wall

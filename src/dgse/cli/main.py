@@ -11,6 +11,7 @@ Commands (``dgse COMMAND --help`` for each):
 * ``generate``, ``export``, ``import``, ``import-gaden``, ``data stats``: datasets
   (:mod:`dgse.cli.data`);
 * ``estimate``, ``evaluate``, ``export-onnx``: estimators on cases (:mod:`dgse.cli.models`);
+* ``train``: train DGSE-O/P/S on a dataset store (:mod:`dgse.cli.train`);
 * ``search``: active search episodes with any estimator and planner (:mod:`dgse.cli.search`).
 
 Every error a user can cause (:class:`~dgse.errors.DGSEError`, or a file that
@@ -532,10 +533,12 @@ def engines_cmd() -> None:
 from dgse.cli.data import register as _register_data  # noqa: E402
 from dgse.cli.models import register as _register_models  # noqa: E402
 from dgse.cli.search import register as _register_search  # noqa: E402
+from dgse.cli.train import register as _register_train  # noqa: E402
 
 _register_data(app)
 _register_models(app)
 _register_search(app)
+_register_train(app)
 
 
 # -- entry point -------------------------------------------------------------------------
