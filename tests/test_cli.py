@@ -118,9 +118,19 @@ def test_help_of_every_command(capsys, cmd):
     assert code == 0 and "Usage" in out
 
 
-def test_demo_is_an_alias_of_scenario(capsys):
-    _, out, _ = _run(capsys, "demo", "--help")
-    assert "Alias of" in out and "scenario" in out and "--sources" in out
+def test_demo_searches_a_random_scenario(capsys, tmp_path):
+    from dgse.models.checkpoint import save_model
+    from tests.models.helpers import tiny_model
+
+    weights = save_model(tiny_model("dgse-s"), tmp_path / "tiny.safetensors")
+    out = tmp_path / "demo"
+    args = ["demo", "--seed", "3", "--model", str(weights), "--time-limit", "40", "--no-animate"]
+    code, text, err = _run(capsys, *args, "-o", str(out))
+    assert code == 0, err
+    assert "localization error" in text and "search time" in text
+    assert (out / "search_final.png").exists() and len(list(out.glob("*.npz"))) == 1
+    code, _, err = _run(capsys, "demo", "--model", str(tmp_path / "missing.safetensors"))
+    assert code == 2 and "missing.safetensors" in err
 
 
 def test_no_command_shows_usage(capsys):

@@ -6,7 +6,9 @@ Commands (``dgse COMMAND --help`` for each):
 * ``import-floorplan``: a layout from a ROS map_server map or a floor plan image;
 * ``solve``: solve a layout file (with an inlet speed and a source) or re-solve a case file;
 * ``show``: the figure of a case (or a layout) file;
-* ``scenario`` (alias ``demo``): a random multi-room scenario with four sources, solved;
+* ``demo``: the main job: a random scenario solved, then one active search with the shipped
+  DGSE-S model (:mod:`dgse.cli.demo`);
+* ``scenario``: a random multi-room scenario with four sources, solved, with figures;
 * ``engines``: the physics engines and why a missing one is missing;
 * ``generate``, ``export``, ``import``, ``import-gaden``, ``data stats``: datasets
   (:mod:`dgse.cli.data`);
@@ -502,11 +504,6 @@ def scenario_cmd(
 
 
 app.command("scenario", help=_SCENARIO_HELP)(scenario_cmd)
-app.command(
-    "demo",
-    help="Alias of `dgse scenario` for now; it will become the full demo "
-    "(scenario, sensors, estimation, search).\n\n" + _SCENARIO_HELP,
-)(scenario_cmd)
 
 
 @app.command("engines")
@@ -531,10 +528,12 @@ def engines_cmd() -> None:
 
 # the dataset commands: generate, export, import at the top level, `data stats`
 from dgse.cli.data import register as _register_data  # noqa: E402
+from dgse.cli.demo import register as _register_demo  # noqa: E402
 from dgse.cli.models import register as _register_models  # noqa: E402
 from dgse.cli.search import register as _register_search  # noqa: E402
 from dgse.cli.train import register as _register_train  # noqa: E402
 
+_register_demo(app)
 _register_data(app)
 _register_models(app)
 _register_search(app)
