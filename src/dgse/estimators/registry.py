@@ -54,6 +54,12 @@ _BUILTIN: dict[str, str] = {
     "dgse-o": "dgse.estimators.dgse:make_dgse_o",
     "dgse-p": "dgse.estimators.dgse:make_dgse_p",
     "dgse-s": "dgse.estimators.dgse:make_dgse_s",
+    # gas distribution mapping baselines (paper Sec. V-B)
+    "kdmv": "dgse.mapping.kernel:KernelDMV",
+    "kdmvw": "dgse.mapping.kernel:KernelDMVW",
+    "ggmrf": "dgse.mapping.gmrf:GGMRF",
+    "gwgmrf": "dgse.mapping.gwgmrf:GWGMRF",
+    "gabp": "dgse.mapping.gabp:GaBPPlus",
 }
 _REGISTRY: dict[str, EstimatorFactory | str] = dict(_BUILTIN)
 
