@@ -40,6 +40,7 @@ COMMANDS = [
     "evaluate",
     "export-onnx",
     "train",
+    "plume",
 ]
 SOURCE = ("0.55", "0.55")  # free cell of the tiny layout
 WALL = ("1.45", "0.55")  # inside its wall

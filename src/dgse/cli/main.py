@@ -13,6 +13,7 @@ Commands (``dgse COMMAND --help`` for each):
 * ``generate``, ``export``, ``import``, ``import-gaden``, ``data stats``: datasets
   (:mod:`dgse.cli.data`);
 * ``estimate``, ``evaluate``, ``export-onnx``: estimators on cases (:mod:`dgse.cli.models`);
+* ``plume``: time-varying filament readings of a case as ``frames`` (:mod:`dgse.cli.plume`);
 * ``train``: train DGSE-O/P/S on a dataset store (:mod:`dgse.cli.train`);
 * ``search``: active search episodes with any estimator and planner (:mod:`dgse.cli.search`).
 
@@ -530,12 +531,14 @@ def engines_cmd() -> None:
 from dgse.cli.data import register as _register_data  # noqa: E402
 from dgse.cli.demo import register as _register_demo  # noqa: E402
 from dgse.cli.models import register as _register_models  # noqa: E402
+from dgse.cli.plume import register as _register_plume  # noqa: E402
 from dgse.cli.search import register as _register_search  # noqa: E402
 from dgse.cli.train import register as _register_train  # noqa: E402
 
 _register_demo(app)
 _register_data(app)
 _register_models(app)
+_register_plume(app)
 _register_search(app)
 _register_train(app)
 
