@@ -1,0 +1,720 @@
+r"""Adjoint Bayesian source localization: the exact posterior of the discretized physics.
+
+Model
+-----
+The steady transport of spec section 4, discretized as the built-in solver
+does, is linear in the source: ``A c = b`` with ``b`` nonzero only in the
+source cell ``s`` (``q / (dx dy h)``).  The reading of sensor ``i`` for a
+source of ``q`` g/s in cell ``s`` is therefore ``q a_i(s)`` with
+
+``a_i = ppm_per_gm3 * A^{-T} e_i / h``   (ppm per g/s, for every candidate ``s`` at once),
+
+one transposed solve per sensor with the one LU factorization of ``A``
+(:meth:`dgse.physics.transport.TransportSolver.adjoint`; the discrete
+operator is transposed, the continuous adjoint is never discretized).  The
+operator is the solver's linear ``linearUpwind`` one; the forward cases are
+solved with the bounded ``limitedLinearUpwind`` scheme (deferred correction),
+so even the oracle sees a small model error near the source (a few per cent
+of the field; the posterior still peaks within a cell or two of the source).
+
+Readings ``z_i = q a_i(s) + e_i``.  Noise (Table I: ``sigma_i = alpha_g c_i +
+sigma_env``, parameters unknown to the robot): ``e_i ~ N(0, sigma^2 r_i^2)``
+with ``r_i = 1 + kappa * chat_i / mean(chat)``: ``sigma`` is the unknown noise
+floor (``sigma_env``), ``kappa`` the unknown relative weight of the
+proportional part, ``chat_i`` a plug-in estimate of the true concentration at
+the sensor (the posterior-predictive mean of a first, homoscedastic pass,
+``kappa = 0``; using the reading itself would down-weight readings that
+happen to be high).  ``kappa`` is averaged over the grid ``kappas`` (default
+``0, 0.5, 2, 8, 32``: Table I gives ``alpha_g c / sigma_env`` around
+``alpha_g / u`` with ``alpha_g ~ U[0, 1]``, ``u ~ U[0, 0.5]``) with equal prior
+weights (a Bayesian model average: the evidence of each ``kappa`` includes
+its ``-sum log r_i`` normalization).
+
+Priors: source uniform over the free cells; release rate ``q ~ U[0, q_max]``
+(default ``q_max = 5`` g/s, the top of the training range; ``q_max=None``
+gives the improper flat prior on ``q >= 0``, see below); noise precision
+``tau = 1 / sigma^2 ~ Gamma(alpha0, beta0)`` with ``alpha0 = 1`` (weak: two
+pseudo-readings) and ``beta0 = alpha0 s0^2``, ``s0 = 0.25 * mean(z)`` (Table
+I's mean ``sigma_env`` when the sensors are spread over the free cells: an
+empirical-Bayes scale).  With the weighted sums ``aa = sum w a_i^2``,
+``az = sum w a_i z_i``, ``zz = sum w z_i^2`` (``w = 1 / r^2``), the
+least-squares rate ``qhat = az / aa`` and the residual ``S = zz - az^2 / aa``,
+integrating ``q`` and then ``tau`` analytically gives
+
+``log p(z | s, kappa) = -sum log r_i - 1/2 log aa - alpha_n log beta_n
++ log[T_nu((q_max - qhat) / t) - T_nu(-qhat / t)] + const``
+
+with ``alpha_n = alpha0 + (m - 1) / 2``, ``beta_n = beta0 + S / 2``,
+``nu = 2 alpha_n``, ``t^2 = beta_n / (alpha_n aa)`` and ``T_nu`` the Student-t
+CDF: the posterior of ``q`` given ``s`` is a Student-t around ``qhat``, and
+the last term is its mass inside the prior's support (the truncation term;
+with a known ``sigma`` it is the ``Phi``/erfc term ``Phi(qhat sqrt(aa) /
+sigma)``).  In the limit ``alpha0, beta0 -> 0``, ``q_max -> inf`` this is the
+textbook ``-[zz - az^2/aa] / (2 sigma^2) - 1/2 log aa`` with ``sigma``
+integrated out: ``-(m-1)/2 log S - 1/2 log aa + log T_{m-1}(qhat sqrt((m-1)
+aa / S))``.  Why ``q_max`` matters: with the flat prior on ``[0, inf)`` the
+``-1/2 log aa`` Occam factor favours cells that hardly reach any sensor
+(``aa -> 0``: any reading pattern explained by an enormous ``q``); the
+proper prior's truncation term cancels that factor (``T(q_max / t) - T(0)
+~ q_max sqrt(aa)``).
+
+Wind
+----
+``wind="oracle"`` (registry ``adjoint-oracle``): the true flow.  The
+estimator protocol only gets the map and the readings, so the oracle is
+built with the true scenario: ``get_estimator("adjoint-oracle", case=case)``
+(or ``case_path=``, ``cases=[...]`` looked up by the map, ``layout=`` +
+``inlet_velocity=``, or a precomputed ``transport=`` (+ ``flow=``)), and
+:meth:`AdjointEstimator.set_case` switches it to another case (the hook an
+evaluation loop over many cases calls).  The flow is re-solved with the
+built-in solver from the case's layout and inlet speed (cached per layout
+and speed; the case's stored wind alone does not give the face fluxes and
+eddy viscosity the transport needs).  With the built-in solver's own cases
+this is the exact generating model up to the convection-scheme difference;
+with OpenFOAM or GADEN cases it is the built-in physics of that scenario.
+
+``wind="estimated"`` (registry ``adjoint``): the robot knows the map *and
+its openings* (inlets/outlets from the layout, like the map: given by
+``layout=`` or taken from ``case=``'s layout, never from the case's wind,
+concentration, inlet speed or source), but not the inlet speed.  RANS is not
+linear in ``v_in``, but the flow's shape changes slowly with it, so: solve
+the layout for the ``candidate_speeds`` (default 0.5, 1, 2, 3.5, 5 m/s;
+cached), fit each candidate's wind at the reading cells to the wind readings
+by least squares with a free scale ``lambda`` (``w_obs ~ lambda u_k``), take
+the candidate with the smallest residual and the speed ``lambda v_k``,
+snapped to a log grid of ``speed_step`` (10 %) so repeated estimates reuse
+solves, and solve the layout once more at that speed (``refine_speed``).
+That flow's adjoint gives the posterior as above.
+
+Belief
+------
+``source_probs``: the posterior over free cells.  ``log_conc_mean`` /
+``log_conc_var``: the posterior predictive of the concentration, a mixture
+over the most probable source cells (up to ``conc_components``, covering
+99 % of the mass) of the forward field at rate ``clip(qhat, 0, q_max)``,
+moment-matched to a lognormal ``1 + c`` (release-rate spread within a cell
+is not included).  ``wind_mean``: the flow used (no variance).
+``info["response_model"]`` gives planners (Infotaxis) the predicted reading
+at any cell for a source in every cell.
+
+Cost: the flow solves (seconds to tens of seconds per speed on a 100 x 100
+map, once per layout and speed), then per estimate one transposed solve per
+new sensor cell and a few dense ``(m, N)`` products.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections import OrderedDict
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from scipy import stats
+
+from dgse.errors import InputDataError
+from dgse.estimators.belief import Belief
+from dgse.localization import check_inputs, log_moments_from_ppm, map_key
+from dgse.physics.builtin import flow_and_transport
+from dgse.physics.constants import DEFAULT_PHYSICS, Physics
+from dgse.physics.engines import FlowField
+from dgse.physics.rans import FlowSettings
+from dgse.physics.transport import TransportSolver
+from dgse.sensing.sensors import Observations
+from dgse.world.case import Case
+from dgse.world.layout import Layout
+
+__all__ = [
+    "AdjointEstimator",
+    "AdjointResponseModel",
+    "FlowModel",
+    "adjoint_log_evidence",
+    "clear_flow_cache",
+    "flow_model",
+    "make_adjoint",
+    "make_adjoint_oracle",
+]
+
+#: Flow models kept in memory (each holds an LU factorization of the transport operator).
+FLOW_CACHE_SIZE = 8
+#: Adjoint rows kept per flow model (one float per free cell each).
+MAX_CACHED_ROWS = 1024
+DEFAULT_SPEEDS = (0.5, 1.0, 2.0, 3.5, 5.0)
+DEFAULT_KAPPAS = (0.0, 0.5, 2.0, 8.0, 32.0)
+
+
+# -- flows ---------------------------------------------------------------------------------
+@dataclass(eq=False)
+class FlowModel:
+    """A flow field and its factorized transport operator, with the adjoint rows cached per sensor cell.
+
+    Attributes:
+        wind: ``float64 (2, H, W)`` the flow's wind, m/s (0 in solid cells).
+        transport: the transport operator of the flow.
+        inlet_velocity: the inlet speed it was solved for, m/s (nan when unknown).
+        info: solver diagnostics (converged, iterations, seconds).
+        physics: constants (``ppm_per_gm3``).
+    """
+
+    wind: np.ndarray
+    transport: TransportSolver
+    inlet_velocity: float = float("nan")
+    info: dict[str, Any] = field(default_factory=dict)
+    physics: Physics = DEFAULT_PHYSICS
+    _rows: dict[tuple[int, int], np.ndarray] = field(default_factory=dict, repr=False)
+
+    @property
+    def mesh(self):
+        """The mesh (free-cell numbering) of the transport operator."""
+        return self.transport.mesh
+
+    @property
+    def free(self) -> np.ndarray:
+        """``bool (H, W)`` the free cells (candidate sources), numbered row-major."""
+        return self.transport.mesh.free
+
+    def responses(self, cells: np.ndarray) -> np.ndarray:
+        """``float64 (k, n_free)``: reading (ppm) at each of ``cells`` per g/s released in every free cell.
+
+        Adjoint rows of the linear (``linearUpwind``) operator, computed in
+        one batch for the cells not seen before and cached (the last
+        :data:`MAX_CACHED_ROWS` cells).
+        """
+        c = np.asarray(cells, dtype=np.int64).reshape(-1, 2)
+        keys = [(int(i), int(j)) for i, j in c]
+        new = sorted({k for k in keys if k not in self._rows})
+        if new:
+            adj = self.transport.adjoint(np.array(new, dtype=np.int64))
+            vals = self.mesh.values(adj) * self.physics.ppm_per_gm3
+            for k, row in zip(new, vals, strict=True):
+                self._rows[k] = row
+        n = self.mesh.n
+        out = np.stack([self._rows[k] for k in keys]) if keys else np.zeros((0, n))
+        while len(self._rows) > MAX_CACHED_ROWS:  # oldest first
+            del self._rows[next(iter(self._rows))]
+        return out
+
+    def forward(self, cells: np.ndarray, rates: np.ndarray) -> np.ndarray:
+        """``float64 (k, n_free)`` concentration (ppm) of sources ``rates`` (g/s) in ``cells``."""
+        m = self.mesh
+        ts = self.transport
+        c = np.asarray(cells, dtype=np.int64).reshape(-1, 2)
+        B = np.zeros((m.n, len(c)))
+        B[m.index[c[:, 0], c[:, 1]], np.arange(len(c))] = np.asarray(rates, float) / ts.physics.slab_depth
+        X = ts.factor(ts.adjoint_scheme).solve(B)
+        return X.T * self.physics.ppm_per_gm3
+
+
+_FLOWS: OrderedDict[tuple[str, float], FlowModel] = OrderedDict()
+
+
+def _layout_key(layout: Layout) -> str:
+    openings = json.dumps(
+        [[o.to_dict() for o in layout.inlets], [o.to_dict() for o in layout.outlets]], sort_keys=True
+    )
+    return map_key(layout.occupancy, layout.resolution) + openings
+
+
+def flow_model(
+    layout: Layout,
+    inlet_velocity: float,
+    physics: Physics = DEFAULT_PHYSICS,
+    settings: FlowSettings | None = None,
+) -> FlowModel:
+    """The built-in solver's flow of ``layout`` at ``inlet_velocity`` (cached, the last 8 kept)."""
+    v = float(inlet_velocity)
+    key = (_layout_key(layout), round(v, 9))
+    hit = _FLOWS.get(key)
+    if hit is not None and hit.physics == physics:
+        _FLOWS.move_to_end(key)
+        return hit
+    t0 = time.perf_counter()
+    flow, ts = flow_and_transport(layout, v, physics, settings)
+    info = {
+        "converged": bool(flow.info.get("converged", False)),
+        "iterations": flow.info.get("iterations"),
+        "seconds": time.perf_counter() - t0,
+    }
+    fm = FlowModel(np.asarray(flow.wind, dtype=np.float64), ts, v, info, physics)
+    _FLOWS[key] = fm
+    while len(_FLOWS) > FLOW_CACHE_SIZE:
+        _FLOWS.popitem(last=False)
+    return fm
+
+
+def clear_flow_cache() -> None:
+    """Forget the cached flows."""
+    _FLOWS.clear()
+
+
+# -- the posterior ----------------------------------------------------------------------------
+def _log_t_interval(lo: np.ndarray, hi: np.ndarray, nu: float) -> np.ndarray:
+    """``log(T_nu(hi) - T_nu(lo))`` for ``lo <= hi`` (``hi`` may be ``inf``), stable in both tails."""
+    lo = np.asarray(lo, dtype=np.float64)
+    hi = np.asarray(hi, dtype=np.float64)
+    lo, hi = np.broadcast_arrays(lo, hi)
+    t = stats.t(nu)
+    out = np.empty(lo.shape)
+    right = lo >= 0  # both in the right tail: survival functions
+    left = hi <= 0  # both in the left tail: CDFs
+    mid = ~(right | left)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        if right.any():
+            a, b = t.logsf(lo[right]), t.logsf(hi[right])
+            out[right] = a + np.log1p(-np.exp(b - a))
+        if left.any():
+            a, b = t.logcdf(hi[left]), t.logcdf(lo[left])
+            out[left] = a + np.log1p(-np.exp(b - a))
+        if mid.any():
+            out[mid] = np.log1p(-(t.cdf(lo[mid]) + t.sf(hi[mid])))
+        width = hi - lo
+        narrow = np.isfinite(width) & ((width < 1e-7 * (1.0 + np.abs(lo) + np.abs(hi))) | ~np.isfinite(out))
+        if narrow.any():
+            c = 0.5 * (lo[narrow] + hi[narrow])
+            out[narrow] = t.logpdf(c) + np.log(np.maximum(width[narrow], 1e-300))
+    return out
+
+
+def _evidence(
+    A: np.ndarray,
+    A2: np.ndarray,
+    z: np.ndarray,
+    r: np.ndarray,
+    q_max: float | None,
+    alpha0: float,
+    beta0: float,
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """``(log p(z | s) per column of A up to an (s, r)-independent constant, qhat, alpha_n)``."""
+    m = z.size
+    w = 1.0 / r**2
+    aa = np.maximum(w @ A2, 1e-300)
+    az = (w * z) @ A
+    zz = float(w @ z**2)
+    qhat = az / aa
+    S = np.maximum(zz - az * qhat, 0.0)
+    alpha_n = alpha0 + 0.5 * (m - 1)
+    beta_n = beta0 + 0.5 * S
+    nu = 2.0 * alpha_n
+    scale = np.sqrt(beta_n / (alpha_n * aa))
+    hi = np.full(aa.shape, np.inf) if q_max is None else (q_max - qhat) / scale
+    log_trunc = _log_t_interval(-qhat / scale, hi, nu)
+    logl = -np.log(r).sum() - 0.5 * np.log(aa) - alpha_n * np.log(beta_n) + log_trunc
+    return logl, qhat, alpha_n
+
+
+def adjoint_log_evidence(
+    A: np.ndarray,
+    z: np.ndarray,
+    *,
+    q_max: float | None = 5.0,
+    kappas: Sequence[float] = DEFAULT_KAPPAS,
+    alpha0: float = 1.0,
+    sigma0_fraction: float = 0.25,
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """``log p(z | s)`` for every candidate source (columns of ``A``), release rate and noise integrated out.
+
+    Args:
+        A: ``(m, N)`` responses: reading ``i`` (ppm) per g/s released in candidate ``s``.
+        z: ``(m,)`` readings, ppm (>= 0).
+        q_max: upper end of the uniform release-rate prior, g/s (None: flat on ``q >= 0``).
+        kappas: grid of the proportional-noise weight ``kappa`` (averaged, equal prior weights);
+            ``(0,)`` gives a homoscedastic model.
+        alpha0: shape of the Gamma prior on the noise precision.
+        sigma0_fraction: prior noise scale ``s0 = sigma0_fraction * mean(z)`` (``beta0 = alpha0 s0^2``).
+
+    Returns:
+        ``(log_evidence (N,), details)`` with ``details``: ``qhat`` ``(N,)`` (least-squares
+        rate of the most probable ``kappa``, g/s), ``kappa_weights`` (posterior weights of
+        ``kappas``), ``kappa`` (the most probable), ``chat`` ``(m,)`` (plug-in concentrations),
+        ``sigma_floor`` (posterior-mean noise floor at the best cell, ppm).  The evidence is
+        defined up to a constant independent of ``s`` (the same for every ``kappa``).
+    """
+    A = np.asarray(A, dtype=np.float64)
+    z = np.maximum(np.asarray(z, dtype=np.float64).reshape(-1), 0.0)
+    if A.ndim != 2 or A.shape[0] != z.size or z.size == 0:
+        raise InputDataError(f"responses {A.shape} do not match {z.size} readings")
+    if q_max is not None and not (q_max > 0 and math.isfinite(q_max)):
+        raise InputDataError(f"q_max must be a positive number of g/s or None, got {q_max}")
+    ks = [float(k) for k in kappas]
+    if not ks or any(not (k >= 0 and math.isfinite(k)) for k in ks):
+        raise InputDataError(f"kappas must be finite and >= 0, got {kappas}")
+    A2 = A * A
+    s0 = max(sigma0_fraction * float(z.mean()), 1e-9 * max(float(z.max()), 1.0), 1e-12)
+    beta0 = alpha0 * s0**2
+    ones = np.ones_like(z)
+    logl0, qhat0, _ = _evidence(A, A2, z, ones, q_max, alpha0, beta0)
+    details: dict[str, Any] = {"s0": s0}
+    if ks == [0.0]:
+        post = np.exp(logl0 - logl0.max())
+        post /= post.sum()
+        best = int(np.argmax(logl0))
+        details.update(qhat=qhat0, kappa_weights=np.ones(1), kappa=0.0, chat=None, best=best)
+        return logl0, details
+    # plug-in concentrations at the sensors from the homoscedastic pass
+    post0 = np.exp(logl0 - logl0.max())
+    post0 /= post0.sum()
+    qclip = np.clip(qhat0, 0.0, np.inf if q_max is None else q_max)
+    chat = A @ (post0 * qclip)
+    chat = np.maximum(chat, 0.0)
+    cbar = float(chat.mean())
+    if not cbar > 0:
+        ks = [0.0]
+    logls, qhats, totals = [], [], []
+    for k in ks:
+        r = ones if k == 0.0 else 1.0 + k * chat / cbar
+        ll, qh, _ = _evidence(A, A2, z, r, q_max, alpha0, beta0)
+        logls.append(ll)
+        qhats.append(qh)
+        top = ll.max()
+        totals.append(top + math.log(np.exp(ll - top).sum()))
+    L = np.stack(logls)
+    top = L.max(axis=0)
+    logl = top + np.log(np.exp(L - top).mean(axis=0))
+    tot = np.array(totals)
+    kw = np.exp(tot - tot.max())
+    kw /= kw.sum()
+    kbest = int(np.argmax(kw))
+    details.update(
+        qhat=qhats[kbest], kappa_weights=kw, kappa=ks[kbest], chat=chat, cbar=cbar, best=int(np.argmax(logl))
+    )
+    return logl, details
+
+
+def _sigma_floor(A: np.ndarray, z: np.ndarray, r: np.ndarray, s: int, alpha0: float, beta0: float) -> float:
+    """Posterior-mean noise floor ``E[sigma^2]^(1/2)`` given the source ``s`` (ppm)."""
+    w = 1.0 / r**2
+    a = A[:, s]
+    aa = max(float(w @ a**2), 1e-300)
+    az = float((w * z) @ a)
+    S = max(float(w @ z**2) - az * az / aa, 0.0)
+    alpha_n = alpha0 + 0.5 * (z.size - 1)
+    beta_n = beta0 + 0.5 * S
+    return math.sqrt(beta_n / max(alpha_n - 1.0, 0.5))
+
+
+# -- the planner-side response model ----------------------------------------------------------
+@dataclass(eq=False)
+class AdjointResponseModel:
+    """Predicted readings for planners: ``E[z at x | source s] = qhat(s) a_x(s)`` (ppm).
+
+    Attributes:
+        flow: the flow model whose adjoint gives ``a_x``.
+        q_map: ``(n_free,)`` release rate per candidate source (``clip(qhat, 0, q_max)``), g/s.
+        sigma_floor: noise floor, ppm.
+        kappa: proportional noise weight; ``sigma(mu) = sigma_floor (1 + kappa mu / cbar)``.
+        cbar: the concentration scale of ``kappa`` (ppm).
+    """
+
+    flow: FlowModel
+    q_map: np.ndarray
+    sigma_floor: float
+    kappa: float = 0.0
+    cbar: float = 1.0
+    kind: str = "ppm"
+
+    def mean_readings(self, cells: np.ndarray) -> np.ndarray:
+        """``(k, H, W)`` expected reading (ppm) at ``cells[k]`` per source in each free cell (0 on walls)."""
+        rows = self.flow.responses(cells) * self.q_map[None, :]
+        return self.flow.mesh.field(np.maximum(rows, 0.0))
+
+    def reading_sigma(self, mean: np.ndarray) -> np.ndarray:
+        """Noise standard deviation (ppm) of a reading with mean ``mean``."""
+        return self.sigma_floor * (1.0 + self.kappa * np.asarray(mean) / max(self.cbar, 1e-12))
+
+    def __repr__(self) -> str:
+        return f"<AdjointResponseModel v_in={self.flow.inlet_velocity:.3g}>"
+
+
+# -- the estimator ------------------------------------------------------------------------------
+def _as_case(case: Case | str | Path) -> Case:
+    return case if isinstance(case, Case) else Case.load(case)
+
+
+@dataclass(eq=False)
+class AdjointEstimator:
+    """Exact Bayesian posterior of the discretized physics (see the module docstring).
+
+    Args:
+        wind: ``"oracle"`` (the true flow; needs the true scenario) or
+            ``"estimated"`` (inlet speed fitted to the wind readings; needs the
+            layout's openings).
+        case: a :class:`Case` or a case file path: the oracle uses its layout and
+            inlet speed, the estimated variant its layout only.
+        cases: several cases, looked up by the map passed to :meth:`estimate`
+            (a map shared by cases with different flows is refused).
+        layout: the layout (map + openings) instead of a case.
+        inlet_velocity: the true inlet speed for the oracle with ``layout``.
+        transport: a precomputed transport operator (oracle; ``flow`` gives its wind).
+        flow: the :class:`FlowField` (or a ``(2, H, W)`` wind) of ``transport``.
+        q_max: release-rate prior ``U[0, q_max]`` g/s (None: flat on ``q >= 0``).
+        kappas: proportional-noise grid (``(0,)``: homoscedastic).
+        alpha0, sigma0_fraction: the noise-precision prior.
+        candidate_speeds: inlet speeds solved for the wind fit (estimated variant), m/s.
+        refine_speed: solve once more at the fitted speed (else use the best candidate).
+        speed_step: relative log-grid step the fitted speed is snapped to.
+        conc_components: most probable source cells mixed into the concentration estimate.
+        flow_settings: SIMPLEC controls of the built-in solver.
+        physics: physical constants.
+    """
+
+    wind: Literal["oracle", "estimated"] = "estimated"
+    case: Case | str | Path | None = None
+    cases: Sequence[Case] | None = None
+    layout: Layout | None = None
+    inlet_velocity: float | None = None
+    transport: TransportSolver | None = None
+    flow: FlowField | np.ndarray | None = None
+    q_max: float | None = 5.0
+    kappas: Sequence[float] = DEFAULT_KAPPAS
+    alpha0: float = 1.0
+    sigma0_fraction: float = 0.25
+    candidate_speeds: Sequence[float] = DEFAULT_SPEEDS
+    refine_speed: bool = True
+    speed_step: float = 0.1
+    conc_components: int = 32
+    flow_settings: FlowSettings | None = None
+    physics: Physics = DEFAULT_PHYSICS
+    _by_map: dict[str, list[tuple[Layout, float]]] = field(default_factory=dict, init=False, repr=False)
+    _fixed: FlowModel | None = field(default=None, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.wind not in ("oracle", "estimated"):
+            raise InputDataError(f"wind must be 'oracle' or 'estimated', got {self.wind!r}")
+        if self.q_max is not None:
+            q = float(self.q_max)
+            if not (q > 0 and math.isfinite(q)):
+                raise InputDataError(f"q_max must be a positive number of g/s or None, got {self.q_max}")
+            self.q_max = q
+        speeds = [float(v) for v in self.candidate_speeds]
+        if not speeds or any(not (v > 0 and math.isfinite(v)) for v in speeds):
+            raise InputDataError(f"candidate_speeds must be positive, got {self.candidate_speeds}")
+        self.candidate_speeds = tuple(speeds)
+        if not (self.speed_step > 0):
+            raise InputDataError(f"speed_step must be > 0, got {self.speed_step}")
+        if self.transport is not None:
+            if self.wind != "oracle":
+                raise InputDataError("a precomputed transport operator is only for wind='oracle'")
+            wind = self.flow.wind if isinstance(self.flow, FlowField) else self.flow
+            if wind is None:
+                wind = np.zeros((2, *self.transport.mesh.shape))
+            wind = np.asarray(wind, dtype=np.float64)
+            if wind.shape != (2, *self.transport.mesh.shape):
+                raise InputDataError(f"flow wind {wind.shape} does not match the transport mesh")
+            v = float("nan") if self.inlet_velocity is None else float(self.inlet_velocity)
+            self._fixed = FlowModel(wind, self.transport, v, {"precomputed": True}, self.transport.physics)
+        if self.case is not None:
+            self.set_case(self.case)
+        elif self.layout is not None:
+            self._add(self.layout, self.inlet_velocity)
+        for c in self.cases or ():
+            c = _as_case(c)
+            self._add(c.layout, c.inlet_velocity if self.wind == "oracle" else None)
+
+    @property
+    def name(self) -> str:
+        """Registry name: ``adjoint-oracle`` or ``adjoint``."""
+        return "adjoint-oracle" if self.wind == "oracle" else "adjoint"
+
+    # -- scenario bookkeeping --------------------------------------------------------------
+    def _add(self, layout: Layout, inlet_velocity: float | None) -> None:
+        if self.wind == "oracle":
+            if inlet_velocity is None:
+                raise InputDataError(
+                    "the oracle needs the true inlet velocity (give case= or inlet_velocity=)"
+                )
+            v = float(inlet_velocity)
+            if not (v > 0 and math.isfinite(v)):
+                raise InputDataError(f"inlet velocity must be positive, got {inlet_velocity}")
+        else:
+            v = float("nan")
+        key = map_key(layout.occupancy, layout.resolution)
+        entries = self._by_map.setdefault(key, [])
+        lk = _layout_key(layout)
+        for lay, vv in entries:
+            if _layout_key(lay) == lk and (vv == v or (math.isnan(vv) and math.isnan(v))):
+                return
+        entries.append((layout, v))
+
+    def set_case(self, case: Case | str | Path) -> None:
+        """Use ``case``'s scenario from now on (the oracle: layout and inlet speed; else the layout only).
+
+        The hook for evaluation loops over many cases: call it before the
+        case's estimates (``est.set_case(case)`` when ``hasattr(est, "set_case")``).
+        """
+        c = _as_case(case)
+        self._by_map.clear()
+        self._add(c.layout, c.inlet_velocity if self.wind == "oracle" else None)
+
+    def _scenario(self, occ: np.ndarray, res: float) -> tuple[Layout, float]:
+        key = map_key(occ, res)
+        entries = self._by_map.get(key)
+        if not entries:
+            what = (
+                "the true case (case=, cases=, layout= + inlet_velocity=)"
+                if self.wind == "oracle"
+                else ("the layout's openings (layout= or case=)")
+            )
+            if self._by_map:
+                raise InputDataError(
+                    f"{self.name}: the map passed to estimate() matches no known case/layout"
+                )
+            raise InputDataError(f"{self.name} needs {what}; construct it with them or call set_case()")
+        if len(entries) > 1:
+            raise InputDataError(
+                f"{self.name}: {len(entries)} scenarios share this map; use set_case() before estimating"
+            )
+        return entries[0]
+
+    # -- flows ---------------------------------------------------------------------------
+    def _oracle_flow(self, occ: np.ndarray, res: float) -> tuple[FlowModel, dict[str, Any]]:
+        if self._fixed is not None:
+            if self._fixed.free.shape != occ.shape or not np.array_equal(self._fixed.free, occ == 0):
+                raise InputDataError("the precomputed transport operator is for another map")
+            return self._fixed, {"inlet_velocity": self._fixed.inlet_velocity, "flow": "precomputed"}
+        layout, v = self._scenario(occ, res)
+        fm = flow_model(layout, v, self.physics, self.flow_settings)
+        return fm, {"inlet_velocity": v, "flow": "true scenario, built-in solver", **_flow_info(fm)}
+
+    def _snap(self, v: float) -> float:
+        step = math.log1p(self.speed_step)
+        return float(f"{math.exp(round(math.log(v) / step) * step):.4g}")
+
+    def _estimated_flow(
+        self, occ: np.ndarray, res: float, obs: Observations
+    ) -> tuple[FlowModel, dict[str, Any]]:
+        layout, _ = self._scenario(occ, res)
+        c = obs.cells
+        wobs = obs.wind
+        fits: list[dict[str, Any]] = []
+        resid = np.empty(len(self.candidate_speeds))
+        scale = np.empty(len(self.candidate_speeds))
+        for n, v in enumerate(self.candidate_speeds):
+            fm = flow_model(layout, v, self.physics, self.flow_settings)
+            u = fm.wind[:, c[:, 0], c[:, 1]].T  # (m, 2)
+            uu = float((u * u).sum())
+            scale[n] = max(float((u * wobs).sum()) / uu, 0.0) if uu > 0 else 0.0
+            resid[n] = float(((wobs - scale[n] * u) ** 2).sum())
+            fits.append(
+                {
+                    "speed": v,
+                    "scale": float(scale[n]),
+                    "residual": float(resid[n]),
+                    "converged": fm.info["converged"],
+                }
+            )
+        k = int(np.argmin(resid))
+        v_fit = float(scale[k] * self.candidate_speeds[k])
+        lo, hi = min(self.candidate_speeds) / 4.0, max(self.candidate_speeds) * 2.0
+        info: dict[str, Any] = {"speed_fits": fits, "speed_fitted": v_fit}
+        v_use = (
+            self._snap(min(max(v_fit, lo), hi))
+            if self.refine_speed and v_fit > 0
+            else self.candidate_speeds[k]
+        )
+        fm = flow_model(layout, v_use, self.physics, self.flow_settings)
+        info.update(inlet_velocity=v_use, flow="fitted to the wind readings", **_flow_info(fm))
+        return fm, info
+
+    # -- estimate ------------------------------------------------------------------------
+    def estimate(self, occupancy: np.ndarray, resolution: float, observations: Observations) -> Belief:
+        """The posterior over source cells given the readings (see the module docstring).
+
+        Raises:
+            InputDataError: no readings, a reading in a wall or off the map, or a
+                map the estimator has no scenario (layout) for.
+        """
+        t0 = time.perf_counter()
+        occ, res, obs = check_inputs(occupancy, resolution, observations)
+        if self.wind == "oracle":
+            fm, finfo = self._oracle_flow(occ, res)
+        else:
+            fm, finfo = self._estimated_flow(occ, res, obs)
+        if fm.free.shape != occ.shape or not np.array_equal(fm.free, occ == 0):
+            raise InputDataError(f"{self.name}: the scenario's map differs from the map passed to estimate()")
+        t_flow = time.perf_counter() - t0
+        A = fm.responses(obs.cells)
+        z = obs.gas
+        logl, det = adjoint_log_evidence(
+            A,
+            z,
+            q_max=self.q_max,
+            kappas=self.kappas,
+            alpha0=self.alpha0,
+            sigma0_fraction=self.sigma0_fraction,
+        )
+        post = np.exp(logl - logl.max())
+        post /= post.sum()
+        mesh = fm.mesh
+        probs = mesh.field(post)
+        qmax = np.inf if self.q_max is None else self.q_max
+        qmap = np.clip(det["qhat"], 0.0, qmax)
+        best = int(np.argmax(post))
+        # concentration: mixture of the most probable sources' forward fields
+        order = np.argsort(post)[::-1]
+        k = int(np.searchsorted(np.cumsum(post[order]), 0.99)) + 1
+        top = order[: max(1, min(k, int(self.conc_components)))]
+        wts = post[top] / post[top].sum()
+        fields = fm.forward(mesh.cells[top], qmap[top])
+        mean = wts @ fields
+        var = np.maximum(wts @ fields**2 - mean**2, 0.0)
+        mu, s2 = log_moments_from_ppm(mesh.field(np.maximum(mean, 0.0)), mesh.field(var))
+        chat = det.get("chat")
+        r_best = (
+            np.ones_like(z) if chat is None or det["kappa"] == 0 else 1.0 + det["kappa"] * chat / det["cbar"]
+        )
+        sig = _sigma_floor(A, z, r_best, best, self.alpha0, self.alpha0 * det["s0"] ** 2)
+        model = AdjointResponseModel(fm, qmap, sig, float(det["kappa"]), float(det.get("cbar", 1.0)))
+        bi, bj = (int(v) for v in mesh.cells[best])
+        info: dict[str, Any] = {
+            "method": self.name,
+            "n_observations": len(obs),
+            "wind_model": self.wind,
+            **finfo,
+            "q_max_gps": self.q_max,
+            "map_cell": [bi, bj],
+            "release_rate_at_map_gps": float(qmap[best]),
+            "kappa": float(det["kappa"]),
+            "kappa_weights": [float(x) for x in det["kappa_weights"]],
+            "kappas": [float(x) for x in self.kappas],
+            "noise_floor_ppm": sig,
+            "conc_components": len(top),
+            "response_model": model,
+            "timings": {"preprocessing": t_flow},
+        }
+        info["seconds"] = time.perf_counter() - t0
+        return Belief(
+            occupancy=occ,
+            resolution=res,
+            source_probs=probs,
+            wind_mean=fm.wind,
+            log_conc_mean=mu,
+            log_conc_var=s2,
+            info=info,
+        )
+
+
+def _flow_info(fm: FlowModel) -> dict[str, Any]:
+    return {"flow_converged": fm.info.get("converged"), "flow_solve_seconds": fm.info.get("seconds")}
+
+
+def make_adjoint(**kwargs: Any) -> AdjointEstimator:
+    """Registry factory ``adjoint``: wind fitted to the readings; give ``layout=`` or ``case=``."""
+    kwargs.pop("wind", None)
+    path = kwargs.pop("case_path", None)
+    if path is not None:
+        kwargs["case"] = Case.load(path)
+    return AdjointEstimator(wind="estimated", **kwargs)
+
+
+def make_adjoint_oracle(**kwargs: Any) -> AdjointEstimator:
+    """Registry factory ``adjoint-oracle``: the true flow; pass ``case=``, ``case_path=``, ``cases=``,
+    ``layout=`` + ``inlet_velocity=``, or ``transport=`` (+ ``flow=``)."""
+    kwargs.pop("wind", None)
+    path = kwargs.pop("case_path", None)
+    if path is not None:
+        kwargs["case"] = Case.load(path)
+    return AdjointEstimator(wind="oracle", **kwargs)

@@ -1,0 +1,63 @@
+"""Registry entries of the localization baselines (lazy ``"module:function"`` factories).
+
+Importing this module registers them (names already taken are left alone, so
+it is safe to import twice or after the registries learned the names some
+other way).  Listing names never imports the heavy modules (numba kernels,
+the flow solver): each factory is imported on first use.
+
+Estimators (:func:`dgse.estimators.get_estimator`):
+
+* ``adjoint``: adjoint Bayesian posterior with the wind fitted to the wind
+  readings; needs the layout's openings: ``get_estimator("adjoint", case=case)``
+  (only ``case.layout`` is used) or ``layout=``;
+* ``adjoint-oracle``: the same with the true flow:
+  ``get_estimator("adjoint-oracle", case=case)`` (or ``case_path=``, ``cases=``,
+  ``layout=`` + ``inlet_velocity=``); an evaluation over many cases calls
+  ``est.set_case(case)`` before each case's estimates;
+* ``dualmode``: the dual-mode planner's particle filter;
+* ``pmfs``: PMFS (``case=``/``layout=`` optional: filaments then leave only
+  through the openings; ``set_case`` as for the adjoint);
+* ``grgsl``: GrGSL.
+
+Planners (:func:`dgse.search.planners.get_planner`): ``infotaxis``,
+``entrotaxis``, ``dualmode``, ``pmfs``.
+"""
+
+from __future__ import annotations
+
+from dgse.estimators.registry import estimator_names, register_estimator
+from dgse.search.planners import planner_names, register_planner
+
+__all__ = ["ESTIMATORS", "PLANNERS", "register_all"]
+
+#: Estimator name -> lazy factory.
+ESTIMATORS: dict[str, str] = {
+    "adjoint": "dgse.localization.adjoint:make_adjoint",
+    "adjoint-oracle": "dgse.localization.adjoint:make_adjoint_oracle",
+    "dualmode": "dgse.localization.particle_filter:ParticleFilterEstimator",
+    "pmfs": "dgse.localization.pmfs:make_pmfs",
+    "grgsl": "dgse.localization.grgsl:GrGSLEstimator",
+}
+
+#: Planner name -> lazy factory.
+PLANNERS: dict[str, str] = {
+    "infotaxis": "dgse.localization.infotaxis:make_infotaxis",
+    "entrotaxis": "dgse.localization.infotaxis:make_entrotaxis",
+    "dualmode": "dgse.localization.particle_filter:DualModePlanner",
+    "pmfs": "dgse.localization.pmfs:PMFSPlanner",
+}
+
+
+def register_all() -> None:
+    """Register every name of :data:`ESTIMATORS` and :data:`PLANNERS` not registered yet."""
+    taken = set(estimator_names())
+    for name, factory in ESTIMATORS.items():
+        if name not in taken:
+            register_estimator(name, factory)
+    taken = set(planner_names())
+    for name, factory in PLANNERS.items():
+        if name not in taken:
+            register_planner(name, factory)
+
+
+register_all()

@@ -1,0 +1,129 @@
+"""Adjoint Bayesian estimator: the marginalized evidence, the oracle, the fitted wind, bad input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import integrate, stats
+
+from dgse.errors import InputDataError
+from dgse.estimators import get_estimator
+from dgse.localization.adjoint import AdjointEstimator, adjoint_log_evidence, flow_model
+from dgse.sensing.sensors import Observations
+from tests.localization import cell_distance, channel_case, dense_readings
+
+
+def _numeric_log_evidence(a: np.ndarray, z: np.ndarray, q_max: float, alpha0: float, beta0: float) -> float:
+    """log of the integral over q ~ U[0, q_max] and tau ~ Gamma(alpha0, beta0) of N(z; q a, I / tau)."""
+    m = z.size
+
+    def inner(tau: float) -> float:
+        def f(q: float) -> float:
+            r = z - q * a
+            return math.exp(0.5 * m * math.log(tau / (2 * math.pi)) - 0.5 * tau * float(r @ r))
+
+        val, _ = integrate.quad(f, 0.0, q_max, limit=200, points=[float(a @ z / (a @ a))])
+        return val / q_max * stats.gamma.pdf(tau, alpha0, scale=1.0 / beta0)
+
+    val, _ = integrate.quad(inner, 0.0, np.inf, limit=200)
+    return math.log(val)
+
+
+def test_evidence_matches_numerical_integration() -> None:
+    rng = np.random.default_rng(3)
+    A = rng.uniform(0.0, 2.0, size=(6, 3))
+    z = 1.3 * A[:, 1] + rng.normal(0.0, 0.2, 6)
+    z = np.maximum(z, 0.0)
+    q_max, alpha0, frac = 3.0, 1.0, 0.25
+    logl, det = adjoint_log_evidence(A, z, q_max=q_max, kappas=(0.0,), alpha0=alpha0, sigma0_fraction=frac)
+    beta0 = alpha0 * det["s0"] ** 2
+    num = np.array([_numeric_log_evidence(A[:, s], z, q_max, alpha0, beta0) for s in range(3)])
+    # equal up to one constant (independent of the candidate)
+    np.testing.assert_allclose(logl - logl[0], num - num[0], atol=1e-5)
+    assert int(np.argmax(logl)) == 1
+
+
+def test_flat_prior_and_truncation_term() -> None:
+    A = np.array([[1.0, 0.01], [0.5, 0.005], [0.2, 0.002]])
+    z = np.array([2.0, 1.0, 0.4])
+    proper, _ = adjoint_log_evidence(A, z, q_max=5.0, kappas=(0.0,))
+    flat, _ = adjoint_log_evidence(A, z, q_max=None, kappas=(0.0,))
+    # both columns fit perfectly (the second with q = 200): the flat prior's Occam factor
+    # favours the weak column, the proper prior (q <= 5) rules it out
+    assert flat[1] > flat[0]
+    assert proper[0] > proper[1] + 5.0
+    # negative least-squares rates are penalized by the truncation term
+    logl, _ = adjoint_log_evidence(np.array([[1.0, -1.0], [1.0, -1.0]]), np.array([1.0, 1.1]), kappas=(0.0,))
+    assert logl[0] > logl[1] + 1.0
+
+
+def test_oracle_noiseless_linear_forward_peaks_at_the_source() -> None:
+    case = channel_case()
+    fm = flow_model(case.layout, case.inlet_velocity)
+    src = np.array([case.source_cell])
+    field = fm.mesh.field(fm.forward(src, [0.2]))[0]  # the same linear operator as the adjoint
+    obs = dense_readings(case, 40, seed=1)
+    obs = Observations(obs.cells, field[obs.cells[:, 0], obs.cells[:, 1]], obs.wind)
+    b = AdjointEstimator(wind="oracle", case=case).estimate(case.occupancy, case.resolution, obs)
+    assert b.most_likely_cell() == case.source_cell
+    assert b.source_probs[case.source_cell] > 0.5
+    assert b.info["release_rate_at_map_gps"] == pytest.approx(0.2, rel=1e-3)
+
+
+def test_oracle_on_the_case_and_registry() -> None:
+    import dgse.localization.register  # noqa: F401
+
+    case = channel_case()
+    est = get_estimator("adjoint-oracle", case=case)
+    obs = dense_readings(case, 40, seed=2)
+    b = est.estimate(case.occupancy, case.resolution, obs)
+    assert cell_distance(b.most_likely_cell(), case.source_cell) <= 2.0
+    assert b.localization_error(tuple(case.source)) < 0.2
+    assert b.wind_mean is not None and b.log_conc_mean is not None and b.log_conc_var is not None
+    conc = b.conc_mean_ppm
+    assert conc is not None and conc[case.source_cell] > 0.3 * case.concentration.max()
+    assert b.info["method"] == "adjoint-oracle" and b.info["seconds"] > 0
+
+
+def test_estimated_wind_fits_the_inlet_speed() -> None:
+    case = channel_case()
+    est = AdjointEstimator(wind="estimated", case=case, candidate_speeds=(0.5, 2.0))
+    obs = dense_readings(case, 40, seed=3)
+    b = est.estimate(case.occupancy, case.resolution, obs)
+    assert b.info["inlet_velocity"] == pytest.approx(case.inlet_velocity, rel=0.15)
+    assert cell_distance(b.most_likely_cell(), case.source_cell) <= 2.0
+    assert b.method == "adjoint"
+
+
+def test_heteroscedastic_noise_average() -> None:
+    case = channel_case()
+    obs = dense_readings(case, 40, seed=4)
+    rng = np.random.default_rng(0)
+    noisy = Observations(
+        obs.cells, np.maximum(obs.gas * (1.0 + 0.5 * rng.standard_normal(len(obs))), 0.0), obs.wind
+    )
+    b = AdjointEstimator(wind="oracle", case=case).estimate(case.occupancy, case.resolution, noisy)
+    w = np.array(b.info["kappa_weights"])
+    assert w.sum() == pytest.approx(1.0)
+    assert w[0] < 0.5  # proportional noise is recognized
+    assert b.localization_error(tuple(case.source)) < 1.0
+
+
+def test_bad_input_is_rejected() -> None:
+    case = channel_case()
+    est = AdjointEstimator(wind="oracle", case=case)
+    with pytest.raises(InputDataError, match="no observations"):
+        est.estimate(case.occupancy, case.resolution, Observations.empty())
+    occ = case.occupancy.copy()
+    occ[3, 3] = 1
+    bad = Observations(np.array([[3, 3]]), np.array([1.0]), np.array([[0.0, 0.0]]))
+    with pytest.raises(InputDataError, match="wall"):
+        est.estimate(occ, case.resolution, bad)
+    with pytest.raises(InputDataError, match="needs"):
+        AdjointEstimator(wind="estimated").estimate(case.occupancy, case.resolution, dense_readings(case, 3))
+    with pytest.raises(InputDataError, match="oracle"):
+        AdjointEstimator(wind="oracle", layout=case.layout)
+    with pytest.raises(InputDataError):
+        AdjointEstimator(wind="sideways")  # type: ignore[arg-type]

@@ -1,0 +1,54 @@
+"""Registry entries of the localization baselines and short searches with each planner."""
+
+from __future__ import annotations
+
+import importlib
+
+import numpy as np
+import pytest
+
+import dgse.localization.register as reg
+from dgse.errors import InputDataError
+from dgse.estimators import estimator_names, get_estimator
+from dgse.localization.grgsl import GrGSLEstimator
+from dgse.localization.particle_filter import DualModePlanner, ParticleFilterEstimator
+from dgse.localization.pmfs import PMFSPlanner
+from dgse.search import get_planner, planner_names, run_episode
+from tests.localization import channel_case
+
+
+def test_names_are_registered_once() -> None:
+    assert set(reg.ESTIMATORS) <= set(estimator_names())
+    assert set(reg.PLANNERS) <= set(planner_names())
+    importlib.reload(reg)  # registering again is harmless
+    reg.register_all()
+    assert isinstance(get_estimator("grgsl"), GrGSLEstimator)
+    assert isinstance(get_estimator("dualmode", n_particles=100), ParticleFilterEstimator)
+    assert isinstance(get_planner("dualmode"), DualModePlanner)
+    assert isinstance(get_planner("pmfs"), PMFSPlanner)
+    with pytest.raises(InputDataError):
+        get_planner("dualmode", no_such_option=1)
+
+
+@pytest.mark.parametrize(
+    ("estimator", "planner", "kwargs", "planner_kwargs"),
+    [
+        ("dualmode", "dualmode", {"n_particles": 200}, {}),
+        ("adjoint-oracle", "infotaxis", {}, {}),
+        ("grgsl", "entrotaxis", {"hit_threshold": 1.0}, {}),
+        # a uniform posterior over this 1.6 x 3.6 m channel already has var x + var y < 1.5 m^2
+        ("pmfs", "pmfs", {"params": {"hit_threshold_fraction": 0.05}}, {"stop_variance_m2": 0.05}),
+    ],
+)
+def test_short_search(estimator: str, planner: str, kwargs: dict, planner_kwargs: dict) -> None:
+    case = channel_case()
+    if estimator in ("adjoint-oracle", "pmfs"):
+        kwargs = {**kwargs, "case": case}
+    est = get_estimator(estimator, **kwargs)
+    result = run_episode(
+        case, est, get_planner(planner, **planner_kwargs), rng=0, time_limit=60.0, record=False
+    )
+    assert result.n_steps >= 2
+    assert np.isfinite(result.error_m)
+    cells = result.measurement_cells
+    assert (case.occupancy[cells[:, 0], cells[:, 1]] == 0).all()
