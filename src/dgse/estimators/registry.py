@@ -38,7 +38,13 @@ __all__ = [
 
 @runtime_checkable
 class Estimator(Protocol):
-    """Anything that turns a map and observations into a :class:`Belief`."""
+    """Anything that turns a map and observations into a :class:`Belief`.
+
+    Optional hook: ``set_case(case)``, called by the evaluation and search loops
+    before a scenario's estimates.  It hands over what a robot is assumed to
+    know besides the map: the layout's openings.  Only oracles (names ending in
+    ``-oracle``) may use more of the case (the true inlet velocity).
+    """
 
     def estimate(self, occupancy: np.ndarray, resolution: float, observations: Observations) -> Belief:
         """The belief given ``occupancy`` (``(H, W)``, 1 solid), cell size ``resolution`` (m)
@@ -60,6 +66,12 @@ _BUILTIN: dict[str, str] = {
     "ggmrf": "dgse.mapping.gmrf:GGMRF",
     "gwgmrf": "dgse.mapping.gwgmrf:GWGMRF",
     "gabp": "dgse.mapping.gabp:GaBPPlus",
+    # source localization baselines and the physics oracle (paper Sec. V-C, V-D)
+    "adjoint": "dgse.localization.adjoint:make_adjoint",
+    "adjoint-oracle": "dgse.localization.adjoint:make_adjoint_oracle",
+    "dualmode": "dgse.localization.particle_filter:ParticleFilterEstimator",
+    "pmfs": "dgse.localization.pmfs:make_pmfs",
+    "grgsl": "dgse.localization.grgsl:GrGSLEstimator",
 }
 _REGISTRY: dict[str, EstimatorFactory | str] = dict(_BUILTIN)
 

@@ -495,6 +495,8 @@ def evaluate(
             with bar:
                 for ref in refs:
                     case = ref.load()
+                    if hasattr(est, "set_case"):  # see dgse.estimators.registry.Estimator
+                        est.set_case(case)
                     for n in counts:
                         _check_count(case, ref.id, n)
                     for n in counts:

@@ -319,6 +319,8 @@ def run_episode(
     Returns:
         The :class:`EpisodeResult`.
     """
+    if hasattr(estimator, "set_case"):  # see dgse.estimators.registry.Estimator
+        estimator.set_case(case)
     time_limit = float(time_limit)
     if not (math.isfinite(time_limit) and time_limit > 0):
         raise InputDataError(f"time limit must be a positive number of seconds, got {time_limit}")

@@ -241,7 +241,14 @@ class UtilityPlanner:
 PlannerFactory = Callable[..., Planner]
 
 _NAME = re.compile(r"^[a-z0-9][a-z0-9_.+-]*$")
-_REGISTRY: dict[str, PlannerFactory | str] = {"utility": UtilityPlanner}
+_REGISTRY: dict[str, PlannerFactory | str] = {
+    "utility": UtilityPlanner,
+    # the baselines' planners (dgse.localization)
+    "infotaxis": "dgse.localization.infotaxis:make_infotaxis",
+    "entrotaxis": "dgse.localization.infotaxis:make_entrotaxis",
+    "dualmode": "dgse.localization.particle_filter:DualModePlanner",
+    "pmfs": "dgse.localization.pmfs:PMFSPlanner",
+}
 
 
 def register_planner(name: str, factory: PlannerFactory | str, *, replace: bool = False) -> None:
