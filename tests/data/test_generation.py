@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dgse.cli.data import main as data_main
+from dgse.cli.main import main as dgse_main
 from dgse.data.generation import ClusterError, generate, layout_id_for, solve_layout
 from dgse.data.store import SPLITS, DatasetStore, Journal, assign_splits, cases_equal
 from dgse.errors import ConvergenceError, InputDataError, UnsupportedError
@@ -181,9 +181,9 @@ def test_unreachable_scheduler_is_a_clear_error(tmp_path):
 
 def test_cli_commands(tmp_path, capsys):
     # generate: user errors are one red line and exit status 2
-    assert data_main(["generate", "-n", "2", "-o", str(tmp_path / "x.h5"), "-e", "nope"]) == 2
+    assert dgse_main(["generate", "-n", "2", "-o", str(tmp_path / "x.h5"), "-e", "nope"]) == 2
     assert "unknown engine" in capsys.readouterr().err
-    assert data_main(["stats", str(tmp_path / "missing.h5")]) == 2
+    assert dgse_main(["data", "stats", str(tmp_path / "missing.h5")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no such dataset store" in err
     # export/import/stats on a store of synthetic cases
@@ -193,14 +193,14 @@ def test_cli_commands(tmp_path, capsys):
     with DatasetStore(store, "w") as s:
         s.add_layout(synthetic_layout_cases(0), "train")
         s.add_layout(synthetic_layout_cases(1, n_sources=2), "test")
-    assert data_main(["export", str(store), "--out", str(tmp_path / "cases")]) == 0
+    assert dgse_main(["export", str(store), "--out", str(tmp_path / "cases")]) == 0
     assert len(list((tmp_path / "cases").glob("*.npz"))) == 6
     back = tmp_path / "back.h5"
-    assert data_main(["import", str(tmp_path / "cases"), "--out", str(back), "--split", "val"]) == 0
+    assert dgse_main(["import", str(tmp_path / "cases"), "--out", str(back), "--split", "val"]) == 0
     assert "imported 6 cases as 2 layouts" in capsys.readouterr().out
-    assert data_main(["import", str(tmp_path / "cases"), "--out", str(back), "--split", "dev"]) == 2
+    assert dgse_main(["import", str(tmp_path / "cases"), "--out", str(back), "--split", "dev"]) == 2
     fig, js = tmp_path / "stats.png", tmp_path / "stats.json"
-    assert data_main(["stats", str(back), "--plot", str(fig), "--json", str(js)]) == 0
+    assert dgse_main(["data", "stats", str(back), "--plot", str(fig), "--json", str(js)]) == 0
     st = json.loads(js.read_text())
     assert st["n_layouts"] == 2 and st["n_cases"] == 6
     assert st["splits"]["val"] == {"layouts": 2, "cases": 6}

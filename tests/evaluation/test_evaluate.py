@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import typer
 
-from dgse.cli.models import main as models_main
+from dgse.cli.main import main as models_main
 from dgse.cli.models import parse_params, register
 from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators.belief import Belief, normalize_source_probs

@@ -116,7 +116,7 @@ def test_dgse_s_stages_assemble_to_predict(tmp_path):
 
 
 def test_export_errors_and_checkpoint(tmp_path, capsys):
-    from dgse.cli.models import main as models_main
+    from dgse.cli.main import main as models_main
     from dgse.models.checkpoint import save_model
 
     with pytest.raises(InputDataError, match="stages"):

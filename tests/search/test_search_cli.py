@@ -9,7 +9,8 @@ import pytest
 import torch
 from PIL import Image
 
-from dgse.cli.search import main, trial_seed
+from dgse.cli.main import main
+from dgse.cli.search import trial_seed
 from dgse.models.checkpoint import save_model
 from dgse.models.networks import create_model
 from dgse.world.layout_io import save_layout
@@ -40,7 +41,7 @@ def setup(tmp_path_factory):
 
 
 def _run(capsys, *args) -> tuple[int, str, str]:
-    code = main([str(a) for a in args])
+    code = main(["search", *(str(a) for a in args)])
     out, err = capsys.readouterr()
     return code, out, err
 

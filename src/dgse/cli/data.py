@@ -1,9 +1,8 @@
 """Dataset commands: ``generate``, ``export``, ``import``, ``stats``.
 
-``data_app`` is a typer app with all four commands.  :func:`register` attaches
-them to another app the way the ``dgse`` command exposes them: ``generate``,
-``export`` and ``import`` at the top level, ``stats`` under a ``data`` group
-(``dgse data stats``).
+:func:`register` attaches them to the ``dgse`` command: ``generate``,
+``export``, ``import`` and ``import-gaden`` at the top level, ``stats`` under a
+``data`` group (``dgse data stats``).
 
 Every error a user can cause (:class:`~dgse.errors.DGSEError`, or a file that
 cannot be written) prints one red line ``error: <message>`` and exits with
@@ -13,8 +12,6 @@ status 2.
 from __future__ import annotations
 
 import json
-import sys
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -26,17 +23,13 @@ from dgse.cli.common import console, new_app, path_text, print_error, user_error
 from dgse.errors import InputDataError
 
 __all__ = [
-    "data_app",
     "export_cmd",
     "generate_cmd",
     "import_cmd",
     "import_gaden_cmd",
-    "main",
     "register",
     "stats_cmd",
 ]
-
-data_app = new_app("data", "Datasets: generate on Dask, export/import case files, statistics.")
 
 
 # -- commands ------------------------------------------------------------------------------------
@@ -245,13 +238,6 @@ def import_gaden_cmd(
     console.print(f"wrote [cyan]{path_text(path)}[/]: {case.grid.width}x{case.grid.height} cells, {n} frames")
 
 
-data_app.command("generate")(generate_cmd)
-data_app.command("export")(export_cmd)
-data_app.command("import")(import_cmd)
-data_app.command("import-gaden")(import_gaden_cmd)
-data_app.command("stats")(stats_cmd)
-
-
 def register(app: typer.Typer) -> typer.Typer:
     """Attach the commands to ``app``: generate/export/import at top level, ``data stats``.
 
@@ -265,17 +251,3 @@ def register(app: typer.Typer) -> typer.Typer:
     sub.command("stats")(stats_cmd)
     app.add_typer(sub, name="data")
     return sub
-
-
-def main(args: Sequence[str] | None = None) -> int:
-    """Run ``data_app`` with ``args`` (default ``sys.argv[1:]``); returns the exit status."""
-    try:
-        data_app(args=list(args) if args is not None else None, prog_name="dgse-data")
-    except SystemExit as e:
-        code = e.code
-        return code if isinstance(code, int) else (0 if code is None else 1)
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

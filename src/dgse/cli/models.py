@@ -1,7 +1,6 @@
 """Estimator commands: ``estimate``, ``evaluate``, ``export-onnx``.
 
-``models_app`` is a typer app with the three commands; :func:`register`
-attaches them to the ``dgse`` app at the top level:
+:func:`register` attaches them to the ``dgse`` app at the top level:
 
 * ``dgse estimate CASE.npz --observations N --seed S [--method dgse-s]
   [--model default|PATH] [-K 5 -T 5] -o BELIEF.npz [--plot FIG.png]``: one
@@ -30,7 +29,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Annotated, Any
@@ -40,20 +38,17 @@ from rich import box
 from rich.markup import escape
 from rich.table import Table
 
-from dgse.cli.common import console, new_app, path_text, user_errors
+from dgse.cli.common import console, path_text, user_errors
 from dgse.errors import InputDataError
 
 __all__ = [
     "estimate_cmd",
     "evaluate_cmd",
     "export_onnx_cmd",
-    "main",
-    "models_app",
     "parse_params",
     "register",
 ]
 
-models_app = new_app("models", "Estimators: one estimate, evaluation over cases, ONNX export.")
 
 #: Defaults of the DGSE options (applied only to the DGSE methods).
 DEFAULT_K = DEFAULT_T = 5
@@ -451,27 +446,8 @@ def export_onnx_cmd(
         console.print(f"ONNX Runtime vs PyTorch: max abs difference {diff:.2g}")
 
 
-models_app.command("estimate")(estimate_cmd)
-models_app.command("evaluate")(evaluate_cmd)
-models_app.command("export-onnx")(export_onnx_cmd)
-
-
 def register(app: typer.Typer) -> None:
     """Attach ``estimate``, ``evaluate`` and ``export-onnx`` to ``app`` at the top level."""
     app.command("estimate")(estimate_cmd)
     app.command("evaluate")(evaluate_cmd)
     app.command("export-onnx")(export_onnx_cmd)
-
-
-def main(args: Sequence[str] | None = None) -> int:
-    """Run ``models_app`` with ``args`` (default ``sys.argv[1:]``); returns the exit status."""
-    try:
-        models_app(args=list(args) if args is not None else None, prog_name="dgse-models")
-    except SystemExit as e:
-        code = e.code
-        return code if isinstance(code, int) else (0 if code is None else 1)
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -14,18 +14,16 @@ viscosity, which costs one flow solve with the built-in solver (seconds);
 
 from __future__ import annotations
 
-import sys
 import time
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from dgse.cli.common import console, new_app, path_text, user_errors
+from dgse.cli.common import console, path_text, user_errors
 from dgse.errors import InputDataError
 
-__all__ = ["main", "plume_cmd", "register"]
+__all__ = ["plume_cmd", "register"]
 
 
 @user_errors
@@ -102,24 +100,3 @@ def plume_cmd(
 def register(app: typer.Typer) -> None:
     """Attach ``plume`` to ``app`` (``dgse plume``)."""
     app.command("plume")(plume_cmd)
-
-
-def main(args: Sequence[str] | None = None) -> int:
-    """Run ``plume`` alone (``python -m dgse.cli.plume ...``); returns the exit status."""
-    app = new_app("dgse-plume", "Filament dispersion frames for a case.")
-
-    @app.callback()
-    def _root() -> None:
-        """Filament dispersion frames for a case."""
-
-    register(app)
-    try:
-        app(args=["plume", *(list(args) if args is not None else sys.argv[1:])], prog_name="dgse")
-    except SystemExit as e:
-        code = e.code
-        return code if isinstance(code, int) else (0 if code is None else 1)
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 import time
 import zlib
 from collections.abc import Sequence
@@ -48,11 +47,11 @@ from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from dgse.cli.common import console, new_app, path_text, user_errors
+from dgse.cli.common import console, path_text, user_errors
 from dgse.errors import InputDataError
 from dgse.world.case import Case
 
-__all__ = ["load_cases", "main", "register", "search_cmd", "trial_seed"]
+__all__ = ["load_cases", "register", "search_cmd", "trial_seed"]
 
 
 # -- helpers -----------------------------------------------------------------------------
@@ -321,24 +320,3 @@ def search_cmd(
 def register(app: typer.Typer) -> None:
     """Attach ``search`` to ``app`` (``dgse search``)."""
     app.command("search")(search_cmd)
-
-
-def main(args: Sequence[str] | None = None) -> int:
-    """Run ``search`` alone (``python -m dgse.cli.search ...``); returns the exit status."""
-    app = new_app("dgse-search", "Active gas source search trials.")
-
-    @app.callback()
-    def _root() -> None:
-        """Active gas source search trials."""
-
-    register(app)
-    try:
-        app(args=["search", *(list(args) if args is not None else sys.argv[1:])], prog_name="dgse")
-    except SystemExit as e:
-        code = e.code
-        return code if isinstance(code, int) else (0 if code is None else 1)
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
