@@ -460,17 +460,17 @@ def ggmrf(
     return GasMap(graph.scatter(mean * scale), graph.scatter(np.maximum(var, 0.0) * scale**2), info=info)
 
 
-class GGMRF(MappingEstimator):
-    """G-GMRF behind the Estimator protocol (registry name ``"ggmrf"``).
+class GMRFEstimator(MappingEstimator):
+    """The Estimator side shared by the GMRF methods (``params_class``, ``name`` set by each).
 
     Args:
-        tuning: optional tuning file (or mapping) whose ``"ggmrf"`` entry overrides the defaults.
+        tuning: optional tuning file (or mapping) whose ``name`` entry overrides the defaults.
         variance: one of :data:`VARIANCE_METHODS`.
         n_samples: draws for ``variance="sampling"``.
-        **params: :class:`GGMRFParams` fields, overriding defaults and tuning.
+        **params: fields of ``params_class``, overriding defaults and tuning.
     """
 
-    name = "ggmrf"
+    params_class: type
 
     def __init__(
         self,
@@ -481,9 +481,16 @@ class GGMRF(MappingEstimator):
     ) -> None:
         if variance not in VARIANCE_METHODS:
             raise InputDataError(f"unknown variance method {variance!r}; one of {VARIANCE_METHODS}")
-        self.params: GGMRFParams = resolve_params(GGMRFParams, self.name, tuning, params)
+        self.params = resolve_params(self.params_class, self.name, tuning, params)
         self.variance = variance
         self.n_samples = int(n_samples)
+
+
+class GGMRF(GMRFEstimator):
+    """G-GMRF behind the Estimator protocol (registry name ``"ggmrf"``)."""
+
+    name = "ggmrf"
+    params_class = GGMRFParams
 
     def map(self, occupancy: np.ndarray, resolution: float, observations: Observations) -> GasMap:
         return ggmrf(occupancy, resolution, observations, self.params, self.variance, self.n_samples)

@@ -61,9 +61,7 @@ Faithfulness notes / assumptions:
 
 from __future__ import annotations
 
-import os
 import time
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -71,8 +69,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from dgse.errors import InputDataError
-from dgse.mapping import GasMap, MappingEstimator, check_inputs, positive, resolve_params
-from dgse.mapping.gmrf import VARIANCE_METHODS, FreeGraph, SparseSPDFactor, free_graph
+from dgse.mapping import GasMap, check_inputs, positive
+from dgse.mapping.gmrf import VARIANCE_METHODS, FreeGraph, GMRFEstimator, SparseSPDFactor, free_graph
 from dgse.sensing.sensors import Observations
 
 __all__ = ["GWGMRF", "GWGMRFParams", "gwgmrf"]
@@ -353,30 +351,14 @@ def gwgmrf(
     return GasMap(graph.scatter(gas), graph.scatter(var[:n] * scale**2), wind_mean, wind_var, info)
 
 
-class GWGMRF(MappingEstimator):
+class GWGMRF(GMRFEstimator):
     """GW-GMRF behind the Estimator protocol (registry name ``"gwgmrf"``); gives gas and wind.
 
-    Args:
-        tuning: optional tuning file (or mapping) whose ``"gwgmrf"`` entry overrides the defaults.
-        variance: one of :data:`dgse.mapping.gmrf.VARIANCE_METHODS`.
-        n_samples: draws for ``variance="sampling"``.
-        **params: :class:`GWGMRFParams` fields, overriding defaults and tuning.
+    Arguments as :class:`~dgse.mapping.gmrf.GMRFEstimator` (``params``: :class:`GWGMRFParams`).
     """
 
     name = "gwgmrf"
-
-    def __init__(
-        self,
-        tuning: str | os.PathLike[str] | Mapping[str, Any] | None = None,
-        variance: str = "takahashi",
-        n_samples: int = 200,
-        **params: Any,
-    ) -> None:
-        if variance not in VARIANCE_METHODS:
-            raise InputDataError(f"unknown variance method {variance!r}; one of {VARIANCE_METHODS}")
-        self.params: GWGMRFParams = resolve_params(GWGMRFParams, self.name, tuning, params)
-        self.variance = variance
-        self.n_samples = int(n_samples)
+    params_class = GWGMRFParams
 
     def map(self, occupancy: np.ndarray, resolution: float, observations: Observations) -> GasMap:
         return gwgmrf(occupancy, resolution, observations, self.params, self.variance, self.n_samples)
