@@ -178,6 +178,15 @@ class Belief:
         p = self.source_probs
         return float(p.sum(axis=0) @ x), float(p.sum(axis=1) @ y)
 
+    def source_variance(self) -> float:
+        """``var x + var y`` of the source posterior, m^2 (its spread around :meth:`source_estimate`)."""
+        H, W = self.shape
+        x = (np.arange(W) + 0.5) * self.resolution
+        y = (np.arange(H) + 0.5) * self.resolution
+        px, py = self.source_probs.sum(axis=0), self.source_probs.sum(axis=1)
+        mx, my = float(px @ x), float(py @ y)
+        return max(float(px @ (x - mx) ** 2) + float(py @ (y - my) ** 2), 0.0)
+
     def most_likely_cell(self) -> tuple[int, int]:
         """``(i, j)`` of the most probable source cell (first one on ties)."""
         i, j = np.unravel_index(int(np.argmax(self.source_probs)), self.shape)

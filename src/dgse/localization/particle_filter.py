@@ -407,14 +407,7 @@ def make_dualmode(**kwargs: Any) -> ParticleFilterEstimator:
 # -- the planner ---------------------------------------------------------------------------------
 def position_spread(belief: Belief) -> float:
     """``sqrt(var x + var y)`` of the source posterior, m."""
-    H, W = belief.shape
-    res = belief.resolution
-    p = belief.source_probs
-    x = (np.arange(W) + 0.5) * res
-    y = (np.arange(H) + 0.5) * res
-    px, py = p.sum(axis=0), p.sum(axis=1)
-    mx, my = float(px @ x), float(py @ y)
-    return math.sqrt(max(float(px @ (x - mx) ** 2) + float(py @ (y - my) ** 2), 0.0))
+    return math.sqrt(belief.source_variance())
 
 
 @dataclass

@@ -790,18 +790,6 @@ def make_pmfs(**kwargs: Any) -> PMFSEstimator:
 
 
 # -- the planner ----------------------------------------------------------------------------------
-def position_variance(belief: Belief) -> float:
-    """``var x + var y`` of the source posterior, m^2."""
-    H, W = belief.shape
-    res = belief.resolution
-    p = belief.source_probs
-    x = (np.arange(W) + 0.5) * res
-    y = (np.arange(H) + 0.5) * res
-    px, py = p.sum(axis=0), p.sum(axis=1)
-    mx, my = float(px @ x), float(py @ y)
-    return float(px @ (x - mx) ** 2) + float(py @ (y - my) ** 2)
-
-
 @dataclass
 class PMFSPlanner:
     """PMFS's movement strategy (module docstring).
@@ -830,7 +818,7 @@ class PMFSPlanner:
 
     def should_stop(self, belief: Belief, history: SearchHistory | None = None) -> bool:
         """``var x + var y < stop_variance_m2``."""
-        return position_variance(belief) < self.stop_variance_m2
+        return belief.source_variance() < self.stop_variance_m2
 
     def _visible_disc(self, free: np.ndarray, cell: Cell, res: float) -> np.ndarray:
         H, W = free.shape
