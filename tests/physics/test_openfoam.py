@@ -19,9 +19,10 @@ from dgse.physics.constants import Physics
 from dgse.physics.engines import Source
 from dgse.world.case import Case
 from dgse.world.layout import Layout, Opening
+from tests.conftest import reference_dir
 
 HAVE_OPENFOAM = of.find_openfoam() is not None
-REFERENCE_DIR = Path(os.environ.get("DGSE_REFERENCE_CASES", "/work/shared/reference-cases"))
+REFERENCE_DIR = reference_dir()
 
 
 def needs_openfoam(test):
