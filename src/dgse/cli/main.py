@@ -15,7 +15,8 @@ Commands (``dgse COMMAND --help`` for each):
 * ``estimate``, ``evaluate``, ``export-onnx``: estimators on cases (:mod:`dgse.cli.models`);
 * ``plume``: time-varying filament readings of a case as ``frames`` (:mod:`dgse.cli.plume`);
 * ``train``: train DGSE-O/P/S on a dataset store (:mod:`dgse.cli.train`);
-* ``search``: active search episodes with any estimator and planner (:mod:`dgse.cli.search`).
+* ``search``: active search episodes with any estimator and planner (:mod:`dgse.cli.search`);
+* ``bench``, ``report``: the paper's experiments as suites, and their HTML report (:mod:`dgse.cli.bench`).
 
 Every error a user can cause (:class:`~dgse.errors.DGSEError`, or a file that
 cannot be written) is printed as one red line ``error: <message>`` and the
@@ -528,6 +529,7 @@ def engines_cmd() -> None:
 
 
 # the dataset commands: generate, export, import at the top level, `data stats`
+from dgse.cli.bench import register as _register_bench  # noqa: E402
 from dgse.cli.data import register as _register_data  # noqa: E402
 from dgse.cli.demo import register as _register_demo  # noqa: E402
 from dgse.cli.models import register as _register_models  # noqa: E402
@@ -541,6 +543,7 @@ _register_models(app)
 _register_plume(app)
 _register_search(app)
 _register_train(app)
+_register_bench(app)
 
 
 # -- entry point -------------------------------------------------------------------------

@@ -1,0 +1,120 @@
+"""Benchmark suites that reproduce the paper's experiments, and the HTML report.
+
+``dgse bench SUITE [--quick] --out DIR`` runs :func:`run_suite`; ``dgse report
+DIR`` turns the results into one self-contained HTML page
+(:func:`dgse.bench.report.write_report`).  Each suite writes JSON, CSV and PNG
+files plus a manifest ``suite.json`` into ``DIR/<suite>/``
+(:mod:`dgse.bench.core`).
+
+Suites (paper figure/table labels in brackets):
+
+* ``variants``: DGSE-O/P/S over 5 to 300 observations [fig5];
+* ``gdm``: DGSE-S against the gas distribution mapping baselines [fig7, fig8, fig9];
+* ``gsl``: source localization from 50 random observations [fig:gsl_only];
+* ``search``: active search against the baselines' planners, steady and
+  filament readings, and out-of-domain layouts [tab:active_search_results,
+  fig:path_compare, de];
+* ``samples``: the K/T quality and latency trade-off and the surrogate
+  objective check [App. C, App. B table object];
+* ``calibration``: reliability and coverage of the predicted uncertainties.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from dgse.bench.core import BenchContext
+from dgse.errors import InputDataError
+
+__all__ = ["SUITES", "SuiteInfo", "run_suite", "suite_names"]
+
+
+@dataclass(frozen=True)
+class SuiteInfo:
+    """A suite: its runner (``"module:function"``, imported on use), title and description."""
+
+    target: str
+    title: str
+    description: str
+
+    def runner(self) -> Callable[[BenchContext], None]:
+        mod, fn = self.target.split(":")
+        return getattr(importlib.import_module(mod), fn)
+
+
+SUITES: dict[str, SuiteInfo] = {
+    "variants": SuiteInfo(
+        "dgse.bench.variants:run",
+        "DGSE variants (fig5)",
+        "DGSE-O, DGSE-P and DGSE-S on the test scenarios, 5 to 300 random observations: "
+        "wind and concentration RMSE and NLL, source-localization error and cross-entropy.",
+    ),
+    "gdm": SuiteInfo(
+        "dgse.bench.gdm:run",
+        "Gas distribution mapping (fig7, fig8, fig9)",
+        "DGSE-S against Kernel DM+V/W, G-GMRF, GW-GMRF and GaBP+: concentration RMSE and NLL in ppm "
+        "for 50 to 250 observations, maps for 100 observations, computation time.",
+    ),
+    "gsl": SuiteInfo(
+        "dgse.bench.gsl:run",
+        "Source localization from sparse observations (fig:gsl_only)",
+        "DGSE-S against the estimators of the field and the adjoint physics oracle, 50 random "
+        "observations.",
+    ),
+    "search": SuiteInfo(
+        "dgse.bench.search:run",
+        "Active search (tab:active_search_results, fig:path_compare, de)",
+        "Closed-loop search with each method's planner on steady and filament readings, and DGSE-S "
+        "in out-of-domain layouts.",
+    ),
+    "samples": SuiteInfo(
+        "dgse.bench.samples:run",
+        "Monte Carlo samples: quality, latency, surrogate objective (App. B, App. C)",
+        "How K and T change DGSE-S's concentration NLL, source cross-entropy and latency, and the "
+        "Monte Carlo estimate of the original objective against the Jensen surrogate.",
+    ),
+    "calibration": SuiteInfo(
+        "dgse.bench.calibration:run",
+        "Calibration of the predicted uncertainty",
+        "Reliability diagrams and 1/2-sigma coverage of the wind and concentration fields, and the "
+        "expected calibration error of the source posterior.",
+    ),
+}
+
+
+def suite_names() -> list[str]:
+    """The suites in the order ``dgse bench all`` runs them."""
+    return list(SUITES)
+
+
+def run_suite(
+    name: str,
+    out: str | os.PathLike[str],
+    *,
+    quick: bool = False,
+    data: str | os.PathLike[str] | None = None,
+    seed: int = 0,
+    progress: bool = False,
+    command: str | None = None,
+) -> Path:
+    """Run suite ``name`` into ``out/<name>/`` and return its manifest path."""
+    if name not in SUITES:
+        raise InputDataError(f"unknown suite {name!r}; the suites are: {', '.join(SUITES)}")
+    info = SUITES[name]
+    ctx = BenchContext(
+        name,
+        out,
+        quick=quick,
+        data=data,
+        seed=seed,
+        progress=progress,
+        command=command,
+        title=info.title,
+        description=info.description,
+    )
+    info.runner()(ctx)
+    return ctx.finish()

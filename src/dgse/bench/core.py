@@ -1,0 +1,432 @@
+"""What every benchmark suite shares: scenarios, result files, figures, tables, provenance.
+
+A suite is a function ``run(ctx: BenchContext) -> None`` registered in
+:data:`dgse.bench.SUITES`.  It writes everything into ``ctx.out``
+(``OUT/<suite>/``):
+
+* raw results as JSON (:meth:`BenchContext.save_json`), e.g. the complete
+  :func:`dgse.evaluation.evaluate` result of every method;
+* sections of the report (:meth:`BenchContext.section`), each with text,
+  figures (PNG, :meth:`Section.figure`) and tables (CSV, :meth:`Section.table`);
+* ``suite.json`` (:meth:`BenchContext.finish`): the manifest the HTML report
+  (:mod:`dgse.bench.report`) reads: title, sections with their figure and
+  table files, the command line, versions, hardware, wall time.
+
+Scenarios (:meth:`BenchContext.scenarios`) are case files in
+``OUT/_scenarios/<kind>/`` shared by all suites of one output directory:
+
+* ``test``: with a dataset store (``--data``), one case (its first source) of
+  each of the first test-split layouts in id order; without one, random
+  training-distribution layouts solved with the built-in solver, one source
+  each (seeded by the run's seed);
+* ``ood``: out-of-domain layouts (:func:`dgse.world.generate.random_ood_layout`,
+  paper App. D) solved with the built-in solver; layouts whose flow does not
+  converge are skipped (and counted);
+* ``filament``: the ``test`` scenarios with ``frames`` from the filament
+  model (:func:`dgse.physics.filament.make_filament_case`).
+
+A scenario file that exists is reused, so an interrupted run continues
+where it stopped and every suite of one directory sees the same scenarios.
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime as _dt
+import json
+import math
+import os
+import platform
+import sys
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as _pkg_version
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from dgse.errors import ConvergenceError, InputDataError
+from dgse.world.case import Case
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+__all__ = [
+    "MANIFEST",
+    "BenchContext",
+    "Section",
+    "environment_info",
+    "jsonable",
+]
+
+#: The manifest file of a suite's directory.
+MANIFEST = "suite.json"
+#: Format tag of the manifest.
+MANIFEST_FORMAT = "dgse-bench-suite"
+
+
+def jsonable(obj: Any) -> Any:
+    """``obj`` with numpy scalars/arrays as Python values and non-finite floats as None."""
+    if isinstance(obj, Mapping):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return jsonable(obj.tolist())
+    if isinstance(obj, np.generic):
+        return jsonable(obj.item())
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, Path):
+        return str(obj)
+    return obj
+
+
+def _version(dist: str) -> str | None:
+    try:
+        return _pkg_version(dist)
+    except PackageNotFoundError:
+        return None
+
+
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def environment_info() -> dict[str, Any]:
+    """Versions and hardware of this run (what the report prints under every suite)."""
+    info: dict[str, Any] = {
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+        "versions": {
+            d: _version(d)
+            for d in ("dgse", "numpy", "scipy", "torch", "numba", "lightning", "matplotlib")
+        },
+        "cpu": _cpu_model(),
+        "cpu_count": os.cpu_count(),
+        "gpu": None,
+    }
+    if "torch" in sys.modules:
+        import torch
+
+        info["torch_threads"] = torch.get_num_threads()
+        if torch.cuda.is_available():
+            info["gpu"] = torch.cuda.get_device_name(0)
+    return info
+
+
+def _now() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+
+def _check_name(name: str) -> str:
+    if not name or any(c in name for c in "/\\") or name.startswith("."):
+        raise InputDataError(f"bad result file name {name!r}")
+    return name
+
+
+@dataclass
+class Section:
+    """One part of a suite's report: a heading, text, figures and tables.
+
+    Create it with :meth:`BenchContext.section`; its files go into the
+    suite's directory.
+    """
+
+    title: str
+    text: str = ""
+    figures: list[dict[str, str]] = field(default_factory=list)
+    tables: list[dict[str, Any]] = field(default_factory=list)
+    _dir: Path = field(default=Path("."), repr=False)
+
+    def figure(self, fig: Figure, name: str, caption: str) -> Path:
+        """Save ``fig`` as ``<name>.png`` (closing it) and list it in this section."""
+        import matplotlib.pyplot as plt
+
+        path = self._dir / f"{_check_name(name)}.png"
+        fig.savefig(path, dpi=110, bbox_inches="tight")
+        plt.close(fig)
+        self.figures.append({"file": path.name, "caption": caption})
+        return path
+
+    def table(
+        self,
+        name: str,
+        rows: Sequence[Mapping[str, Any]],
+        caption: str,
+        columns: Sequence[str] | None = None,
+    ) -> Path:
+        """Write ``rows`` as ``<name>.csv`` and list them (with ``columns`` in order) in this section."""
+        cols = list(columns) if columns is not None else list(dict.fromkeys(k for r in rows for k in r))
+        path = self._dir / f"{_check_name(name)}.csv"
+        with path.open("w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(cols)
+            for r in rows:
+                w.writerow(["" if r.get(c) is None else r.get(c) for c in cols])
+        self.tables.append(
+            {
+                "file": path.name,
+                "caption": caption,
+                "columns": cols,
+                "rows": jsonable([[r.get(c) for c in cols] for r in rows]),
+            }
+        )
+        return path
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"title": self.title, "text": self.text, "figures": self.figures, "tables": self.tables}
+
+
+class BenchContext:
+    """The state of one suite run: where results go, which scenarios, how big.
+
+    Args:
+        suite: the suite's name (``variants``, ``gdm``, ...).
+        out_root: the run's output directory (the suite writes into ``out_root/suite``).
+        quick: a small run (CI); suites pick smaller counts with :meth:`pick`.
+        data: a dataset store whose test split gives the ``test`` scenarios (None:
+            random layouts solved here).
+        seed: the run's seed (scenarios, observations, episodes).
+        progress: show progress bars.
+        command: the command line recorded in the manifest.
+    """
+
+    def __init__(
+        self,
+        suite: str,
+        out_root: str | os.PathLike[str],
+        *,
+        quick: bool = False,
+        data: str | os.PathLike[str] | None = None,
+        seed: int = 0,
+        progress: bool = False,
+        command: str | None = None,
+        title: str = "",
+        description: str = "",
+    ) -> None:
+        self.suite = suite
+        self.root = Path(out_root)
+        self.out = self.root / suite
+        self.out.mkdir(parents=True, exist_ok=True)
+        self.quick = bool(quick)
+        self.data = Path(data) if data is not None else None
+        if self.data is not None and not self.data.is_file():
+            raise InputDataError(f"{self.data}: no such dataset store")
+        self.seed = int(seed)
+        self.progress = bool(progress)
+        self.command = command if command is not None else " ".join(["dgse", *sys.argv[1:]])
+        self.title = title or suite
+        self.description = description
+        self.sections: list[Section] = []
+        self.notes: list[str] = []
+        self.started = _now()
+        self._t0 = time.perf_counter()
+        self.data_info: dict[str, Any] = {}
+
+    # -- sizes -------------------------------------------------------------------------
+    def pick(self, full: Any, quick: Any) -> Any:
+        """``quick`` in a quick run, else ``full``."""
+        return quick if self.quick else full
+
+    # -- results -----------------------------------------------------------------------
+    def section(self, title: str, text: str = "") -> Section:
+        """A new report section (in order of creation)."""
+        s = Section(title=title, text=text, _dir=self.out)
+        self.sections.append(s)
+        return s
+
+    def save_json(self, name: str, data: Any) -> Path:
+        """Write ``data`` as ``<name>.json`` in the suite's directory (atomically)."""
+        path = self.out / f"{_check_name(name)}.json"
+        tmp = path.with_suffix(".json.tmp")
+        tmp.write_text(json.dumps(jsonable(data), indent=1))
+        tmp.replace(path)
+        return path
+
+    def load_json(self, name: str) -> Any | None:
+        """A result written by :meth:`save_json` in an earlier (interrupted) run, or None."""
+        path = self.out / f"{_check_name(name)}.json"
+        if not path.is_file():
+            return None
+        try:
+            return json.loads(path.read_text())
+        except (OSError, json.JSONDecodeError):
+            return None
+
+    def cached(self, name: str, compute: Callable[[], Any]) -> Any:
+        """The JSON result ``name`` if an earlier run of this directory wrote it, else ``compute()`` saved."""
+        got = self.load_json(name)
+        if got is not None:
+            return got
+        result = compute()
+        self.save_json(name, result)
+        return jsonable(result)
+
+    def note(self, text: str) -> None:
+        """A remark for the report (e.g. skipped scenarios)."""
+        self.notes.append(text)
+
+    def finish(self) -> Path:
+        """Write the manifest ``suite.json`` and return its path."""
+        manifest = {
+            "format": MANIFEST_FORMAT,
+            "format_version": 1,
+            "suite": self.suite,
+            "title": self.title,
+            "description": self.description,
+            "quick": self.quick,
+            "seed": self.seed,
+            "command": self.command,
+            "data": self.data_info or ({"store": str(self.data)} if self.data else {"store": None}),
+            "started": self.started,
+            "finished": _now(),
+            "wall_seconds": round(time.perf_counter() - self._t0, 2),
+            "environment": environment_info(),
+            "notes": self.notes,
+            "sections": [s.to_dict() for s in self.sections],
+        }
+        path = self.out / MANIFEST
+        path.write_text(json.dumps(jsonable(manifest), indent=1))
+        return path
+
+    # -- scenarios -----------------------------------------------------------------------
+    def scenario_dir(self, kind: str) -> Path:
+        d = self.root / "_scenarios" / kind
+        d.mkdir(parents=True, exist_ok=True)
+        return d
+
+    def scenarios(self, n: int, kind: str = "test") -> Path:
+        """A directory holding (at least) ``n`` scenario case files of ``kind`` (see module doc).
+
+        Returns the directory of exactly the first ``n`` (sorted by name): the
+        suites pass it to :func:`dgse.evaluation.evaluate` and the search runner.
+        """
+        if n < 1:
+            raise InputDataError(f"need at least one scenario, got {n}")
+        if kind == "test":
+            files = self._test_scenarios(n)
+        elif kind == "ood":
+            files = self._ood_scenarios(n)
+        elif kind == "filament":
+            files = self._filament_scenarios(n)
+        else:
+            raise InputDataError(f"unknown scenario kind {kind!r} (test, ood, filament)")
+        sel = self.root / "_scenarios" / f"{kind}-{len(files)}"
+        sel.mkdir(parents=True, exist_ok=True)
+        for f in files:
+            link = sel / f.name
+            if not link.exists():
+                try:
+                    link.symlink_to(os.path.relpath(f, sel))
+                except OSError:
+                    link.write_bytes(f.read_bytes())
+        return sel
+
+    def _test_scenarios(self, n: int) -> list[Path]:
+        d = self.scenario_dir("test")
+        if self.data is not None:
+            from dgse.data.store import DatasetStore
+
+            with DatasetStore(self.data, mode="r") as store:
+                ids = sorted(store.layouts(split="test"))
+                if len(ids) < n:
+                    raise InputDataError(f"{self.data}: only {len(ids)} test layouts, need {n}")
+                self.data_info = {"store": str(self.data), "split": "test", "layouts": ids[:n]}
+                out = []
+                for lid in ids[:n]:
+                    path = d / f"{lid}_src0.npz"
+                    if not path.is_file():
+                        store.case(lid, 0).save(path)
+                    out.append(path)
+                return out
+        from dgse.physics.scenario import random_cases
+
+        self.data_info = {"store": None, "generated": "random training-distribution layouts, built-in solver"}
+        out = []
+        i = 0
+        ss = np.random.SeedSequence([self.seed, 7001])
+        seeds = ss.spawn(10 * n + 10)
+        while len(out) < n and i < len(seeds):
+            path = d / f"gen{i:03d}.npz"
+            if not path.is_file():
+                try:
+                    random_cases(np.random.default_rng(seeds[i]), n_sources=1)[0].save(path)
+                except ConvergenceError:
+                    i += 1
+                    continue
+            out.append(path)
+            i += 1
+        return out
+
+    def _ood_scenarios(self, n: int) -> list[Path]:
+        from dgse.physics.scenario import solve_cases
+        from dgse.world.generate import random_inlet_velocity, random_ood_layout, random_sources
+
+        d = self.scenario_dir("ood")
+        seeds = np.random.SeedSequence([self.seed, 7002]).spawn(4 * n + 4)
+        out, failed = [], 0
+        for i, s in enumerate(seeds):
+            if len(out) >= n:
+                break
+            path = d / f"ood{i:03d}.npz"
+            skip = d / f"ood{i:03d}.failed"
+            if skip.exists():
+                continue
+            if not path.is_file():
+                rng = np.random.default_rng(s)
+                layout = random_ood_layout(rng, name=f"ood{i:03d}")
+                v = random_inlet_velocity(rng)
+                src = random_sources(layout, rng, n=1)
+                try:
+                    solve_cases(layout, v, src, "builtin")[0].save(path)
+                except ConvergenceError as e:
+                    skip.write_text(str(e))
+                    failed += 1
+                    continue
+            out.append(path)
+        if failed:
+            self.note(f"{failed} out-of-domain layout(s) skipped: the built-in solver did not converge")
+        return out
+
+    def _filament_scenarios(self, n: int) -> list[Path]:
+        from dgse.physics.filament import FilamentSettings, make_filament_case
+
+        d = self.scenario_dir("filament")
+        out = []
+        settings = FilamentSettings(duration=self.pick(240.0, 60.0))
+        for i, src in enumerate(self._test_scenarios(n)):
+            path = d / src.name
+            if not path.is_file():
+                case = Case.load(src)
+                make_filament_case(case, settings, seed=self.seed * 1000 + i).save(path)
+            out.append(path)
+        return out
+
+
+def load_manifests(root: str | os.PathLike[str]) -> list[dict[str, Any]]:
+    """The manifests of every suite under ``root`` (sorted by suite name)."""
+    out = []
+    for p in sorted(Path(root).glob(f"*/{MANIFEST}")):
+        m = json.loads(p.read_text())
+        if m.get("format") == MANIFEST_FORMAT:
+            m["_dir"] = str(p.parent)
+            out.append(m)
+    return out
+
+
+def mean_std(values: Iterable[float | None]) -> tuple[float | None, float | None]:
+    """Mean and population std of the finite values (None, None when there are none)."""
+    v = np.array([x for x in values if x is not None and math.isfinite(x)], dtype=float)
+    if v.size == 0:
+        return None, None
+    return float(v.mean()), float(v.std())
