@@ -5,7 +5,8 @@ runs ``--trials`` episodes (:func:`dgse.search.episode.run_episode`) per case
 with the estimator ``--method`` (any registered name, built by
 :func:`~dgse.estimators.registry.get_estimator`) and the planner ``--planner``
 (:func:`~dgse.search.planners.get_planner`), prints a table of the paper's
-metrics per case and over all trials, and writes them as JSON:
+metrics per case and over all trials, and writes them as JSON (the loop is
+:func:`dgse.search.campaign.run_trials`; the JSON is what it returns):
 
 * ``per_case``: one entry per case: ``case``, ``file``, ``metrics`` (the
   :func:`~dgse.search.metrics.aggregate` of its trials) and ``trials`` (each
@@ -35,12 +36,10 @@ from __future__ import annotations
 import json
 import math
 import time
-import zlib
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
-import numpy as np
 import typer
 from rich import box
 from rich.markup import escape
@@ -49,40 +48,16 @@ from rich.table import Table
 
 from dgse.cli.common import console, path_text, user_errors
 from dgse.errors import InputDataError
+from dgse.search.campaign import json_safe, load_cases, trial_seed
 from dgse.world.case import Case
+
+if TYPE_CHECKING:
+    from dgse.search.episode import EpisodeResult
 
 __all__ = ["load_cases", "register", "search_cmd", "trial_seed"]
 
 
 # -- helpers -----------------------------------------------------------------------------
-def load_cases(path: Path) -> list[tuple[Path, Case]]:
-    """The case files at ``path``: one file, or every case ``.npz`` in a directory (sorted by name).
-
-    Layout files in a directory are skipped.
-
-    Raises:
-        InputDataError: no such path, or no case file in the directory.
-    """
-    from dgse.world.layout_io import npz_kind
-
-    if path.is_dir():
-        files = sorted(p for p in path.glob("*.npz") if p.is_file())
-        out = [(p, Case.load(p)) for p in files if npz_kind(p) == "case"]
-        if not out:
-            raise InputDataError(f"{path}: no case files (.npz with wind, concentration, source)")
-        return out
-    if not path.exists():
-        raise InputDataError(f"{path}: no such file or directory")
-    if npz_kind(path) != "case":
-        raise InputDataError(f"{path} is a layout file; dgse search needs case files (solve it first)")
-    return [(path, Case.load(path))]
-
-
-def trial_seed(seed: int, stem: str, trial: int) -> np.random.SeedSequence:
-    """The seed of trial ``trial`` on the case file named ``stem`` (see the module docstring)."""
-    return np.random.SeedSequence([int(seed) & 0xFFFFFFFF, zlib.crc32(stem.encode()), int(trial)])
-
-
 def _parse_options(items: Sequence[str] | None, flag: str) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for item in items or ():
@@ -95,19 +70,6 @@ def _parse_options(items: Sequence[str] | None, flag: str) -> dict[str, Any]:
         except ValueError:
             out[key] = value
     return out
-
-
-def _json_safe(obj: Any) -> Any:
-    """NaN and infinities as None; numpy scalars as Python numbers; tuples as lists."""
-    if isinstance(obj, dict):
-        return {str(k): _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_json_safe(v) for v in obj]
-    if isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
 
 
 def _ms(agg: dict[str, Any], key: str, fmt: str) -> str:
@@ -142,7 +104,7 @@ def _table(rows: list[tuple[str, dict[str, Any]]], title: str) -> Table:
 def _write_json(path: Path, data: dict[str, Any]) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".part")
-    tmp.write_text(json.dumps(_json_safe(data), indent=1, allow_nan=False))
+    tmp.write_text(json.dumps(json_safe(data), indent=1, allow_nan=False))
     tmp.replace(path)
     return path
 
@@ -210,8 +172,7 @@ def search_cmd(
 ) -> None:
     """Run active source search trials and report success rate, error, ST, TD, step time, PER."""
     from dgse.estimators.registry import get_estimator
-    from dgse.search.episode import run_episode
-    from dgse.search.metrics import aggregate, episode_metrics
+    from dgse.search.campaign import estimator_options, run_trials
     from dgse.search.planners import get_planner
 
     if trials < 1:
@@ -229,26 +190,25 @@ def search_cmd(
         torch.set_num_threads(threads)
 
     cases = load_cases(cases_path)
-    est_kwargs = _parse_options(option, "--option")
-    if method.startswith("dgse-"):
-        est_kwargs.setdefault("model", model or "default")
-        est_kwargs.setdefault("seed", seed)
-    elif model is not None:
-        est_kwargs.setdefault("model", model)
-    estimator = get_estimator(method, **est_kwargs)
+    est_kwargs = estimator_options(method, model=model, seed=seed, options=_parse_options(option, "--option"))
     plan_kwargs = _parse_options(planner_option, "--planner-option")
     if eta is not None:
         plan_kwargs["eta"] = eta
+    estimator = get_estimator(method, **est_kwargs)
     plan = get_planner(planner, **plan_kwargs)
 
     console.print(
         f"searching {len(cases)} case{'s' * (len(cases) != 1)} x {trials} trials with "
         f"[bold]{escape(method)}[/] + [bold]{escape(planner)}[/] (seed {seed}, time limit {time_limit:g} s)"
     )
-    per_case: list[dict[str, Any]] = []
-    all_rows: list[dict[str, Any]] = []
-    table_rows: list[tuple[str, dict[str, Any]]] = []
     gifs: list[Path] = []
+
+    def write_gif(path: Path, case: Case, trial: int, result: EpisodeResult) -> None:
+        if animate is not None and trial == 0:
+            from dgse.search.animate import animate_episode
+
+            gifs.append(animate_episode(result, case, animate / f"{path.stem}.gif"))
+
     t_start = time.perf_counter()
     bar = Progress(
         TextColumn("{task.description}"),
@@ -261,57 +221,36 @@ def search_cmd(
     )
     with bar:
         task = bar.add_task("episodes", total=len(cases) * trials)
-        for path, case in cases:
-            trial_rows: list[dict[str, Any]] = []
-            for r in range(trials):
-                bar.update(task, description=f"{escape(path.stem)} trial {r + 1}/{trials}")
-                keep = animate is not None and r == 0
-                result = run_episode(
-                    case,
-                    estimator,
-                    plan,
-                    rng=trial_seed(seed, path.stem, r),
-                    speed=speed,
-                    dwell=dwell,
-                    time_limit=time_limit,
-                    include_compute_time=compute_time,
-                    record=keep,
-                    use_frames=frames,
-                    min_start_distance=min_start_distance,
-                )
-                m = episode_metrics(result)
-                trial_rows.append({"trial": r, **result.to_dict(steps=steps), "metrics": m})
-                all_rows.append(m)
-                if keep:
-                    from dgse.search.animate import animate_episode
 
-                    assert animate is not None
-                    gifs.append(animate_episode(result, case, animate / f"{path.stem}.gif"))
-                bar.advance(task)
-            agg = aggregate([t["metrics"] for t in trial_rows])
-            per_case.append({"case": case.name, "file": str(path), "metrics": agg, "trials": trial_rows})
-            table_rows.append((path.stem, agg))
-    overall = aggregate(all_rows)
-    table_rows.append(("all", overall))
+        def tick(description: str, done: int, total: int) -> None:
+            bar.update(task, description=escape(description), completed=done)
+
+        data = run_trials(
+            cases,
+            estimator,
+            plan,
+            trials,
+            seed,
+            estimator_options=est_kwargs,
+            planner_options=plan_kwargs,
+            method=method,
+            planner_name=planner,
+            speed=speed,
+            dwell=dwell,
+            time_limit=time_limit,
+            use_frames=frames,
+            min_start_distance=min_start_distance,
+            include_compute_time=compute_time,
+            steps=steps,
+            record_first=animate is not None,
+            progress=tick,
+            on_episode=write_gif,
+        )
+    table_rows = [(Path(c["file"]).stem, c["metrics"]) for c in data["per_case"]]
+    table_rows.append(("all", data["aggregate"]))
     console.print(_table(table_rows, f"active search: {escape(method)} + {escape(planner)}"))
-    console.print(f"{len(all_rows)} episodes in {time.perf_counter() - t_start:.1f} s")
+    console.print(f"{data['aggregate']['n_trials']} episodes in {time.perf_counter() - t_start:.1f} s")
     if json_out is not None:
-        settings = {
-            "method": method,
-            "model": est_kwargs.get("model") if isinstance(est_kwargs.get("model"), str) else None,
-            "planner": planner,
-            "planner_options": plan_kwargs,
-            "estimator_options": {k: v for k, v in est_kwargs.items() if k != "model"},
-            "trials": trials,
-            "seed": seed,
-            "time_limit_s": time_limit,
-            "frames": frames,
-            "speed": speed,
-            "dwell": dwell,
-            "min_start_distance_m": min_start_distance,
-            "include_compute_time": compute_time,
-        }
-        data = {"settings": settings, "aggregate": overall, "per_case": per_case}
         console.print(f"wrote metrics [cyan]{path_text(_write_json(json_out, data))}[/]")
     for g in gifs:
         console.print(f"wrote animation [cyan]{path_text(g)}[/]")

@@ -5,6 +5,7 @@
 * :mod:`~dgse.search.planners`: the planner interface, the paper's utility planner, the registry;
 * :mod:`~dgse.search.episode`: the search loop (Algorithm 1 for any estimator and planner);
 * :mod:`~dgse.search.metrics`: success, error, ST, TD, step time, PER, aggregation;
+* :mod:`~dgse.search.campaign`: many seeded trials over a set of cases (``dgse search``'s loop);
 * :mod:`~dgse.search.animate`: figures and GIFs of an episode (imports matplotlib; not re-exported).
 
 Example::
@@ -17,6 +18,7 @@ Example::
     print(episode_metrics(result))
 """
 
+from dgse.search.campaign import load_cases, run_trials, trial_seed
 from dgse.search.episode import DEFAULT_TIME_LIMIT, EpisodeResult, StepRecord, run_episode
 from dgse.search.metrics import aggregate, episode_metrics, is_success, path_efficiency_ratio
 from dgse.search.paths import FreeSpaceGraph, graph_for
@@ -44,9 +46,12 @@ __all__ = [
     "get_planner",
     "graph_for",
     "is_success",
+    "load_cases",
     "path_efficiency_ratio",
     "planner_names",
     "random_start_cell",
     "register_planner",
     "run_episode",
+    "run_trials",
+    "trial_seed",
 ]

@@ -1,0 +1,254 @@
+"""Search campaigns: many episodes over a set of cases, the per-case and overall metrics.
+
+:func:`run_trials` runs ``trials`` episodes (:func:`~dgse.search.episode.run_episode`)
+on every case with one estimator and one planner and returns a JSON-ready
+dict (what ``dgse search --json`` writes):
+
+* ``settings``: method, model, planner, options, trials, seed, time limit, ...;
+* ``aggregate``: :func:`~dgse.search.metrics.aggregate` over all trials of all cases;
+* ``per_case``: one entry per case: ``case``, ``file``, ``metrics`` (the
+  aggregate of its trials) and ``trials`` (each episode's summary,
+  :meth:`~dgse.search.episode.EpisodeResult.to_dict`, with ``trial`` and
+  ``metrics``).
+
+NaN and infinities are written as None, numpy scalars as Python numbers.
+
+Seeds: trial ``r`` of the case file ``<stem>.npz`` uses
+``SeedSequence([seed, crc32(stem), r])`` (:func:`trial_seed`), so the start
+cells and the sensor noise depend neither on the method, the planner nor the
+other cases: every method meets the same starts.
+
+For DGSE methods (``dgse-*``) the estimator gets ``model="default"`` (the
+shipped weights) and ``seed=`` unless given (:func:`estimator_options`).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import zlib
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dgse.errors import InputDataError
+from dgse.estimators.registry import Estimator
+from dgse.search.episode import DEFAULT_TIME_LIMIT, EpisodeResult
+from dgse.search.planners import Planner
+from dgse.search.robot import DEFAULT_DWELL, DEFAULT_SPEED
+from dgse.world.case import Case
+
+__all__ = [
+    "Progress",
+    "estimator_options",
+    "json_safe",
+    "load_cases",
+    "run_trials",
+    "trial_seed",
+]
+
+#: ``progress(description, done, total)``: called before every episode and once when all are done.
+Progress = Callable[[str, int, int], None]
+#: ``on_episode(path, case, trial, result)``: called after every episode.
+EpisodeCallback = Callable[[Path, Case, int, EpisodeResult], None]
+
+
+def load_cases(path: str | os.PathLike[str]) -> list[tuple[Path, Case]]:
+    """The case files at ``path``: one file, or every case ``.npz`` in a directory (sorted by name).
+
+    Layout files in a directory are skipped.
+
+    Raises:
+        InputDataError: no such path, or no case file in the directory.
+    """
+    from dgse.world.layout_io import npz_kind
+
+    path = Path(path)
+    if path.is_dir():
+        files = sorted(p for p in path.glob("*.npz") if p.is_file())
+        out = [(p, Case.load(p)) for p in files if npz_kind(p) == "case"]
+        if not out:
+            raise InputDataError(f"{path}: no case files (.npz with wind, concentration, source)")
+        return out
+    if not path.exists():
+        raise InputDataError(f"{path}: no such file or directory")
+    if npz_kind(path) != "case":
+        raise InputDataError(f"{path} is a layout file; dgse search needs case files (solve it first)")
+    return [(path, Case.load(path))]
+
+
+def trial_seed(seed: int, stem: str, trial: int) -> np.random.SeedSequence:
+    """The seed of trial ``trial`` on the case file named ``stem`` (see the module docstring)."""
+    return np.random.SeedSequence([int(seed) & 0xFFFFFFFF, zlib.crc32(stem.encode()), int(trial)])
+
+
+def json_safe(obj: Any) -> Any:
+    """NaN and infinities as None; numpy scalars as Python numbers; tuples as lists."""
+    if isinstance(obj, Mapping):
+        return {str(k): json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return json_safe(obj.tolist())
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def estimator_options(
+    method: str, *, model: str | None = None, seed: int = 0, options: Mapping[str, Any] | None = None
+) -> dict[str, Any]:
+    """The keyword arguments of estimator ``method`` in a search campaign.
+
+    DGSE methods (``dgse-*``) get ``model`` (default ``"default"``: the shipped
+    weights) and ``seed``; other methods get ``model`` only when it is given.
+    ``options`` come first (they win over both).
+    """
+    kw = dict(options or {})
+    if method.startswith("dgse-"):
+        kw.setdefault("model", model or "default")
+        kw.setdefault("seed", seed)
+    elif model is not None:
+        kw.setdefault("model", model)
+    return kw
+
+
+def _check_settings(trials: int, time_limit: float, speed: float, dwell: float, min_start: float) -> None:
+    if trials < 1:
+        raise InputDataError(f"trials must be at least 1, got {trials}")
+    for name, v in (("time limit", time_limit), ("speed", speed), ("dwell", dwell)):
+        if not (math.isfinite(v) and v > 0):
+            raise InputDataError(f"{name} must be a positive number, got {v:g}")
+    if not (math.isfinite(min_start) and min_start >= 0):
+        raise InputDataError(f"min_start_distance must be >= 0, got {min_start:g}")
+
+
+def run_trials(
+    cases: Sequence[tuple[str | os.PathLike[str], Case]] | str | os.PathLike[str],
+    estimator: str | Estimator,
+    planner: str | Planner,
+    trials: int = 20,
+    seed: int = 0,
+    *,
+    estimator_options: Mapping[str, Any] | None = None,
+    planner_options: Mapping[str, Any] | None = None,
+    method: str | None = None,
+    planner_name: str | None = None,
+    speed: float = DEFAULT_SPEED,
+    dwell: float = DEFAULT_DWELL,
+    time_limit: float = DEFAULT_TIME_LIMIT,
+    use_frames: bool = True,
+    min_start_distance: float = 2.0,
+    include_compute_time: bool = False,
+    steps: bool = False,
+    record_first: bool = False,
+    progress: Progress | None = None,
+    on_episode: EpisodeCallback | None = None,
+) -> dict[str, Any]:
+    """Run ``trials`` search episodes on every case and return the metrics (module docstring).
+
+    Args:
+        cases: ``(path, case)`` pairs (the path's stem seeds the trials and
+            names the case's row), or a case file or directory of case files
+            (:func:`load_cases`).
+        estimator: a registered estimator name (built with
+            ``estimator_options``) or an estimator object.
+        planner: a registered planner name (built with ``planner_options``)
+            or a planner object (``reset()`` before every episode).
+        trials: episodes per case.
+        seed: the campaign's seed (:func:`trial_seed`).
+        estimator_options: keyword arguments of a named estimator; with an
+            estimator object, the ones it was built with (only recorded).  In
+            ``settings`` the model is recorded separately.
+        planner_options: the same for the planner.
+        method: the estimator's name in ``settings`` (default: the name given,
+            or the object's ``name``).
+        planner_name: the planner's name in ``settings`` (the same default).
+        speed, dwell, time_limit, use_frames, min_start_distance,
+            include_compute_time: :func:`~dgse.search.episode.run_episode`'s.
+        steps: include every step's record in the trials' summaries.
+        record_first: record the belief maps of trial 0 of every case (for
+            ``on_episode``; e.g. an animation).
+        progress: see :data:`Progress`.
+        on_episode: see :data:`EpisodeCallback` (e.g. keep the results).
+
+    Returns:
+        ``{"settings", "aggregate", "per_case"}``, JSON-ready.
+    """
+    from dgse.estimators.registry import get_estimator
+    from dgse.search.episode import run_episode
+    from dgse.search.metrics import aggregate, episode_metrics
+    from dgse.search.planners import get_planner
+
+    _check_settings(trials, time_limit, speed, dwell, min_start_distance)
+    pairs = load_cases(cases) if isinstance(cases, str | os.PathLike) else [(Path(p), c) for p, c in cases]
+    if not pairs:
+        raise InputDataError("no cases to search")
+    est_kw = dict(estimator_options or {})
+    plan_kw = dict(planner_options or {})
+    if isinstance(estimator, str):
+        est = get_estimator(estimator, **est_kw)
+        method = method or estimator
+    else:
+        est = estimator
+        name = getattr(estimator, "name", None)
+        method = method or (name if isinstance(name, str) else type(estimator).__name__)
+    if isinstance(planner, str):
+        plan = get_planner(planner, **plan_kw)
+        planner_name = planner_name or planner
+    else:
+        plan = planner
+        planner_name = planner_name or str(getattr(planner, "name", type(planner).__name__))
+
+    per_case: list[dict[str, Any]] = []
+    all_rows: list[dict[str, Any]] = []
+    total, done = len(pairs) * trials, 0
+    for path, case in pairs:
+        trial_rows: list[dict[str, Any]] = []
+        for r in range(trials):
+            if progress is not None:
+                progress(f"{path.stem} trial {r + 1}/{trials}", done, total)
+            result = run_episode(
+                case,
+                est,
+                plan,
+                rng=trial_seed(seed, path.stem, r),
+                speed=speed,
+                dwell=dwell,
+                time_limit=time_limit,
+                include_compute_time=include_compute_time,
+                record=record_first and r == 0,
+                use_frames=use_frames,
+                min_start_distance=min_start_distance,
+            )
+            m = episode_metrics(result)
+            trial_rows.append({"trial": r, **result.to_dict(steps=steps), "metrics": m})
+            all_rows.append(m)
+            if on_episode is not None:
+                on_episode(path, case, r, result)
+            done += 1
+        agg = aggregate([t["metrics"] for t in trial_rows])
+        per_case.append({"case": case.name, "file": str(path), "metrics": agg, "trials": trial_rows})
+    if progress is not None:
+        progress("done", done, total)
+    model = est_kw.get("model")
+    settings = {
+        "method": method,
+        "model": model if isinstance(model, str) else None,
+        "planner": planner_name,
+        "planner_options": plan_kw,
+        "estimator_options": {k: v for k, v in est_kw.items() if k != "model"},
+        "trials": trials,
+        "seed": seed,
+        "time_limit_s": time_limit,
+        "frames": use_frames,
+        "speed": speed,
+        "dwell": dwell,
+        "min_start_distance_m": min_start_distance,
+        "include_compute_time": include_compute_time,
+    }
+    return json_safe({"settings": settings, "aggregate": aggregate(all_rows), "per_case": per_case})
