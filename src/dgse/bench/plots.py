@@ -1,0 +1,77 @@
+"""Figure helpers shared by the suites (matplotlib, headless)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+
+__all__ = ["METHOD_STYLE", "curves_vs_observations", "style_of"]
+
+#: Colours and markers per method, so every figure shows a method alike.
+METHOD_STYLE: dict[str, dict[str, Any]] = {
+    "dgse-s": {"color": "#d62728", "marker": "o", "label": "DGSE-S"},
+    "dgse-p": {"color": "#1f77b4", "marker": "s", "label": "DGSE-P"},
+    "dgse-o": {"color": "#2ca02c", "marker": "^", "label": "DGSE-O"},
+}
+
+
+def style_of(method: str) -> dict[str, Any]:
+    """Plot style of ``method`` (a grey default for methods without one)."""
+    return METHOD_STYLE.get(method, {"color": None, "marker": "x", "label": method})
+
+
+def curves_vs_observations(
+    results: Mapping[str, Mapping[str, Any]],
+    panels: Sequence[tuple[str, str]],
+    ncols: int = 3,
+    title: str | None = None,
+) -> Figure:
+    """One panel per metric: its mean against the observation count, one line per method.
+
+    Args:
+        results: method name -> :func:`dgse.evaluation.evaluate` result.
+        panels: ``(metric key, axis label)``; the key's ``_mean`` and ``_std`` and
+            ``_count`` statistics of ``aggregate`` are plotted (band: standard error).
+        ncols: panels per row.
+    """
+    n = len(panels)
+    nrows = (n + ncols - 1) // ncols
+    fig, axes = plt.subplots(nrows, ncols, figsize=(4.2 * ncols, 3.2 * nrows), squeeze=False)
+    for ax, (key, label) in zip(axes.flat, panels, strict=False):
+        for method, res in results.items():
+            agg = res["aggregate"]
+            counts = sorted(int(k) for k in agg)
+            xs, ys, es = [], [], []
+            for c in counts:
+                a = agg[str(c)]
+                m, s, k = a.get(f"{key}_mean"), a.get(f"{key}_std"), a.get(f"{key}_count") or 0
+                if m is None:
+                    continue
+                xs.append(c)
+                ys.append(m)
+                es.append((s or 0.0) / max(k, 1) ** 0.5)
+            if not xs:
+                continue
+            st = style_of(method)
+            ax.plot(xs, ys, marker=st["marker"], color=st["color"], label=st["label"], ms=4)
+            lo = [y - e for y, e in zip(ys, es, strict=True)]
+            hi = [y + e for y, e in zip(ys, es, strict=True)]
+            ax.fill_between(xs, lo, hi, color=st["color"], alpha=0.15, lw=0)
+        ax.set_xlabel("observations")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    for ax in list(axes.flat)[n:]:
+        ax.axis("off")
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    if handles:
+        fig.legend(handles, labels, loc="upper center", ncol=len(handles), frameon=False)
+    if title:
+        fig.suptitle(title, y=1.04)
+    fig.tight_layout(rect=(0, 0, 1, 0.93))
+    return fig

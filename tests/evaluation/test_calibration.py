@@ -1,0 +1,63 @@
+import numpy as np
+import pytest
+
+from dgse.errors import InputDataError
+from dgse.evaluation.calibration import (
+    DEFAULT_LEVELS,
+    SIGMA_LEVELS,
+    calibration_error,
+    coverage_curve,
+    credible_level,
+    interval_hits,
+)
+
+
+def test_calibrated_gaussian_covers_its_levels():
+    rng = np.random.default_rng(0)
+    mean = rng.normal(size=200_000)
+    sd = rng.uniform(0.1, 3.0, size=mean.size)
+    truth = mean + sd * rng.normal(size=mean.size)
+    hits, n = interval_hits(truth, mean, sd**2, SIGMA_LEVELS)
+    assert n == mean.size
+    np.testing.assert_allclose(hits / n, SIGMA_LEVELS, atol=0.005)
+
+
+def test_overconfident_gaussian_undercovers_and_mask_counts_only_selected():
+    rng = np.random.default_rng(1)
+    truth = rng.normal(size=(2, 50, 60))
+    mean = np.zeros_like(truth)
+    mask = np.zeros((50, 60), bool)
+    mask[:10] = True
+    hits, n = interval_hits(truth, mean, np.full_like(truth, 0.25), (0.6826894921370859,), mask=mask)
+    assert n == 2 * 10 * 60
+    assert hits[0] / n < 0.45  # sd 0.5 claimed, 1 true: covers P(|z| < 0.5) = 0.38
+
+
+def test_credible_level_by_hand():
+    p = np.array([[0.5, 0.2], [0.2, 0.1]])
+    assert credible_level(p, (0, 0)) == pytest.approx(0.25)
+    assert credible_level(p, (0, 1)) == pytest.approx(0.5 + 0.2)  # ties: half of 0.4
+    assert credible_level(p, (1, 1)) == pytest.approx(0.9 + 0.05)
+
+
+def test_posterior_sampled_from_itself_is_calibrated():
+    rng = np.random.default_rng(2)
+    levels = []
+    for _ in range(3000):
+        p = rng.dirichlet(np.full(30, 0.3))
+        truth = rng.choice(30, p=p)
+        levels.append(credible_level(p, truth))
+    cov = coverage_curve(levels)
+    assert calibration_error(cov) < 0.02
+    # a posterior that always points at the wrong cells is badly calibrated
+    bad = [credible_level(np.r_[0.9, np.full(29, 0.1 / 29)], 5) for _ in range(10)]
+    assert calibration_error(coverage_curve(bad, DEFAULT_LEVELS)) > 0.3
+
+
+def test_bad_input():
+    with pytest.raises(InputDataError):
+        interval_hits(np.zeros(3), np.zeros(4), np.ones(3))
+    with pytest.raises(InputDataError):
+        credible_level(np.zeros(4), 0)
+    with pytest.raises(InputDataError):
+        coverage_curve([0.5], levels=(0.0, 0.5))
