@@ -62,8 +62,7 @@ SUITES: dict[str, SuiteInfo] = {
     "gsl": SuiteInfo(
         "dgse.bench.gsl:run",
         "Source localization from sparse observations (fig:gsl_only)",
-        "DGSE-S against the estimators of the field and the adjoint physics oracle, 50 random "
-        "observations.",
+        "DGSE-S against the estimators of the field and the adjoint physics oracle, 50 random observations.",
     ),
     "search": SuiteInfo(
         "dgse.bench.search:run",

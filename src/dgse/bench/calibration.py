@@ -125,22 +125,31 @@ def run(ctx: BenchContext) -> None:
     files = sorted(ctx.scenarios(n_scen, "test").glob("*.npz"))
     results: dict[str, dict] = {}
     for method in dict.fromkeys(FIELD_METHODS + SOURCE_METHODS):
-        results[method] = ctx.cached(f"calibration_{method}", lambda m=method: _collect(ctx, m, files, counts, trials))
+        results[method] = ctx.cached(
+            f"calibration_{method}", lambda m=method: _collect(ctx, m, files, counts, trials)
+        )
     rows = []
     for method, res in results.items():
         for n, r in res["by_count"].items():
             w1, w2 = _sigma_coverage(res["levels"], r["wind_coverage"])
             c1, c2 = _sigma_coverage(res["levels"], r["conc_coverage"])
+            lv = res["levels"]
+            wc, cc = r["wind_coverage"], r["conc_coverage"]
             rows.append(
                 {
-                    "method": method, "n_obs": int(n), "n_estimates": r["n_estimates"],
-                    "wind_cov_1sigma": w1, "wind_cov_2sigma": w2, "conc_cov_1sigma": c1, "conc_cov_2sigma": c2,
-                    "wind_cal_error": None if r["wind_coverage"] is None else calibration_error(r["wind_coverage"], res["levels"]),
-                    "conc_cal_error": None if r["conc_coverage"] is None else calibration_error(r["conc_coverage"], res["levels"]),
-                    "source_cal_error": calibration_error(r["source_coverage"], res["levels"]),
+                    "method": method,
+                    "n_obs": int(n),
+                    "n_estimates": r["n_estimates"],
+                    "wind_cov_1sigma": w1,
+                    "wind_cov_2sigma": w2,
+                    "conc_cov_1sigma": c1,
+                    "conc_cov_2sigma": c2,
+                    "wind_cal_error": None if wc is None else calibration_error(wc, lv),
+                    "conc_cal_error": None if cc is None else calibration_error(cc, lv),
+                    "source_cal_error": calibration_error(r["source_coverage"], lv),
                     "source_median_level": float(np.median(r["source_levels"])),
                 }
-            )  # fmt: skip
+            )
     field = {m: results[m] for m in FIELD_METHODS}
     src = {m: results[m] for m in SOURCE_METHODS}
     sec = ctx.section(

@@ -108,8 +108,7 @@ def environment_info() -> dict[str, Any]:
         "python": platform.python_version(),
         "platform": platform.platform(),
         "versions": {
-            d: _version(d)
-            for d in ("dgse", "numpy", "scipy", "torch", "numba", "lightning", "matplotlib")
+            d: _version(d) for d in ("dgse", "numpy", "scipy", "torch", "numba", "lightning", "matplotlib")
         },
         "cpu": _cpu_model(),
         "cpu_count": os.cpu_count(),
@@ -125,7 +124,7 @@ def environment_info() -> dict[str, Any]:
 
 
 def _now() -> str:
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
 
 
 def _check_name(name: str) -> str:

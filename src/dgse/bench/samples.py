@@ -63,10 +63,11 @@ def _latency(ctx: BenchContext, sizes: list[int], ks: list[int], repeats: int) -
         occ[0, :] = occ[-1, :] = occ[:, 0] = occ[:, -1] = 1
         free = np.argwhere(occ == 0)
         pick = free[rng.choice(len(free), 50, replace=False)]
-        obs = Observations(
-            cells=pick, gas=rng.uniform(0, 50, 50), wind=rng.normal(0, 0.3, (50, 2))
-        )
-        for label, kw in (("float32", {}), ("bf16+channels_last", {"dtype": "bfloat16", "channels_last": True})):
+        obs = Observations(cells=pick, gas=rng.uniform(0, 50, 50), wind=rng.normal(0, 0.3, (50, 2)))
+        for label, kw in (
+            ("float32", {}),
+            ("bf16+channels_last", {"dtype": "bfloat16", "channels_last": True}),
+        ):
             for k in ks:
                 est = get_estimator("dgse-s", model="default", K=k, T=k, seed=0, **kw)
                 est.estimate(occ, 0.1, obs)  # warm-up
@@ -100,7 +101,12 @@ def _surrogate(ctx: BenchContext, files: list[Path], n_obs: list[int], sizes: li
         for i, n in enumerate(n_obs):
             s = make_sample(case, draw_observations(case, n, ctx.seed, case_id=f.stem, trial=i))
             groups.setdefault(s.canvas_shape, []).append(s)
-    out: dict[str, Any] = {"S": sizes, "conc_nll": [], "source_ce": [], "n_samples": sum(map(len, groups.values()))}
+    out: dict[str, Any] = {
+        "S": sizes,
+        "conc_nll": [],
+        "source_ce": [],
+        "n_samples": sum(map(len, groups.values())),
+    }
     for S in sizes:
         conc, ce = [], []
         for samples in groups.values():
@@ -124,7 +130,11 @@ def run(ctx: BenchContext) -> None:
     trials = ctx.pick(1, 1)
     cases = ctx.scenarios(n_scen, "test")
     q = _quality(ctx, cases, settings, counts, trials)
-    groups = {"all": lambda n: True, "sparse (<= 50)": lambda n: n <= 50, "dense (>= 200)": lambda n: n >= 200}
+    groups = {
+        "all": lambda n: True,
+        "sparse (<= 50)": lambda n: n <= 50,
+        "dense (>= 200)": lambda n: n >= 200,
+    }
     base = q[(1, 1)]
     rows = []
     for (K, T), res in q.items():
@@ -136,9 +146,7 @@ def run(ctx: BenchContext) -> None:
                 row[f"{label} rel. reduction % {g}"] = (
                     None if m0 is None or m is None or m0 == 0 else 100.0 * (m0 - m) / abs(m0)
                 )
-        row["seconds_per_estimate_median"] = float(
-            np.median([r["seconds"] for r in res["per_case"]])
-        )
+        row["seconds_per_estimate_median"] = float(np.median([r["seconds"] for r in res["per_case"]]))
         rows.append(row)
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
     xs = [f"{K},{T}" for K, T in q]
@@ -158,7 +166,9 @@ def run(ctx: BenchContext) -> None:
         "the mean metric against single-sample inference (App. C); positive is better. The concentration "
         "NLL depends on K only.",
     )
-    sec.figure(fig, "samples_quality", "Relative reduction of source CE and concentration NLL against (K, T).")
+    sec.figure(
+        fig, "samples_quality", "Relative reduction of source CE and concentration NLL against (K, T)."
+    )
     sec.table("samples_quality", rows, "Mean metrics and relative reductions per (K, T).")
 
     lat = ctx.cached(
@@ -181,7 +191,8 @@ def run(ctx: BenchContext) -> None:
     fig.tight_layout()
     sec = ctx.section(
         "Latency",
-        f"One full DGSE-S estimate (50 observations) on square maps, {torch.get_num_threads()} CPU thread(s), "
+        f"One full DGSE-S estimate (50 observations) on square maps, {torch.get_num_threads()} CPU "
+        "thread(s), "
         "median of repeated runs after a warm-up; the networks' cost grows with K for the concentration "
         "stage and with K x T for the source stage.",
     )
@@ -204,4 +215,6 @@ def run(ctx: BenchContext) -> None:
         "loss). S = 1 is the Jensen surrogate the network is trained on; the losses should fall "
         "slightly and level off as S grows (the paper's table object).",
     )
-    sec.table("surrogate_objective", rows, "MC-estimated original losses (lower is better) against S_c = S_s.")
+    sec.table(
+        "surrogate_objective", rows, "MC-estimated original losses (lower is better) against S_c = S_s."
+    )

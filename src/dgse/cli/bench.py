@@ -40,9 +40,7 @@ def bench_cmd(
     ] = None,
     seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of scenarios and trials.")] = 0,
     threads: Annotated[int | None, typer.Option("--threads", help="PyTorch CPU threads.")] = None,
-    report: Annotated[
-        bool, typer.Option("--report/--no-report", help="Also write DIR/report.html.")
-    ] = True,
+    report: Annotated[bool, typer.Option("--report/--no-report", help="Also write DIR/report.html.")] = True,
     progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Progress bars.")] = True,
 ) -> None:
     """Run benchmark suites that reproduce the paper's experiments (JSON, CSV, PNG per suite)."""
@@ -51,7 +49,9 @@ def bench_cmd(
     names = list(SUITES) if "all" in suites else list(dict.fromkeys(suites))
     unknown = [s for s in names if s not in SUITES]
     if unknown:
-        raise InputDataError(f"unknown suite(s) {', '.join(unknown)}; the suites are: {', '.join(SUITES)}, all")
+        raise InputDataError(
+            f"unknown suite(s) {', '.join(unknown)}; the suites are: {', '.join(SUITES)}, all"
+        )
     if threads is not None:
         if threads < 1:
             raise InputDataError(f"--threads must be at least 1, got {threads}")
@@ -62,9 +62,7 @@ def bench_cmd(
         t0 = time.perf_counter()
         console.print(f"[bold]{escape(name)}[/]: {escape(SUITES[name].title)}{' (quick)' if quick else ''}")
         manifest = run_suite(name, out, quick=quick, data=data, seed=seed, progress=progress)
-        console.print(
-            f"  done in {time.perf_counter() - t0:.1f} s: [cyan]{path_text(manifest.parent)}[/]"
-        )
+        console.print(f"  done in {time.perf_counter() - t0:.1f} s: [cyan]{path_text(manifest.parent)}[/]")
     if report:
         from dgse.bench.report import write_report
 

@@ -1,0 +1,73 @@
+"""Validation curves of the DGSE variants against the epoch (like the paper's fig4).
+
+    python benchmarks/training_curves.py \\
+        dgse-o=benchmarks/results/dgse-o-small_history.csv \\
+        dgse-p=benchmarks/results/dgse-p-small_history.csv \\
+        dgse-s=benchmarks/results/dgse-s-small_history.csv \\
+        -o benchmarks/results/training_curves.png
+
+Reads the ``history.csv`` files ``dgse train`` writes (one row per epoch;
+rows marked ``partial`` are epochs cut short by a time budget and are left
+out) and plots the training and validation source loss and the validation
+localization error per epoch, so variants are compared at equal epochs even
+when their runs reached different lengths.  Also writes a CSV of the plotted
+values next to the figure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+
+from dgse.bench.plots import style_of
+
+
+def _read(path: Path) -> list[dict[str, str]]:
+    with path.open() as f:
+        return [r for r in csv.DictReader(f) if r.get("partial", "0") in ("0", "")]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("runs", nargs="+", help="NAME=history.csv")
+    ap.add_argument("-o", "--out", type=Path, required=True)
+    args = ap.parse_args()
+    panels = [
+        ("train/source_loss", "training source loss (CE)"),
+        ("val/source_loss", "validation source loss (CE)"),
+        ("val/loc_error_m", "validation localization error (m)"),
+    ]
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.6))
+    table = []
+    for spec in args.runs:
+        name, _, file = spec.partition("=")
+        rows = _read(Path(file))
+        st = style_of(name)
+        for ax, (key, label) in zip(axes, panels, strict=True):
+            ep = [int(r["epoch"]) for r in rows if r.get(key)]
+            ys = [float(r[key]) for r in rows if r.get(key)]
+            ax.plot(ep, ys, marker=st["marker"], color=st["color"], label=st["label"], ms=3)
+            ax.set_xlabel("epoch")
+            ax.set_ylabel(label)
+            ax.grid(alpha=0.3)
+        for r in rows:
+            table.append({"method": name, "epoch": r["epoch"], **{k: r.get(k) for k, _ in panels}})
+    axes[0].legend()
+    fig.tight_layout()
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(args.out, dpi=110)
+    with args.out.with_suffix(".csv").open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=["method", "epoch", *(k for k, _ in panels)])
+        w.writeheader()
+        w.writerows(table)
+    print(f"wrote {args.out} and {args.out.with_suffix('.csv')}")
+
+
+if __name__ == "__main__":
+    main()
