@@ -61,6 +61,33 @@ def test_lognormal_concentration_moments():
     assert no_var.conc_var_ppm is None
 
 
+def test_concentration_space_point_map_and_interval():
+    occ = _occ()
+    p = normalize_source_probs(np.ones(occ.shape), occ)
+    m = np.full(occ.shape, 2.0)
+    v = np.full(occ.shape, 16.0)  # a large log-space variance: the lognormal mean is e^8 times the median
+    b = Belief(occ, 0.1, p, log_conc_mean=m, log_conc_var=v)
+    assert b.conc_space == "log"
+    np.testing.assert_allclose(b.conc_median_ppm, np.expm1(2.0))
+    np.testing.assert_allclose(b.conc_point_ppm, b.conc_median_ppm)
+    np.testing.assert_allclose(b.conc_mean_ppm, np.expm1(10.0))  # the mean stays the lognormal mean
+    lo, hi = b.conc_interval_ppm(1.0)
+    np.testing.assert_allclose(lo, np.expm1(-2.0))
+    np.testing.assert_allclose(hi, np.expm1(6.0))
+    # a ppm-native belief (as GasMap.to_belief writes it): its mean and a Gaussian interval
+    for info in ({"conc_space": "ppm"}, {"conc_representation": "ppm moments, lognormal moment match"}):
+        g = Belief(occ, 0.1, p, log_conc_mean=m, log_conc_var=np.full(occ.shape, 0.5), info=info)
+        assert g.conc_space == "ppm"
+        np.testing.assert_allclose(g.conc_point_ppm, g.conc_mean_ppm)
+        lo, hi = g.conc_interval_ppm(2.0)
+        np.testing.assert_allclose(hi - lo, 4.0 * np.sqrt(g.conc_var_ppm))
+        np.testing.assert_allclose((hi + lo) / 2, g.conc_mean_ppm)
+    assert Belief(occ, 0.1, p, log_conc_mean=m).conc_interval_ppm() is None
+    assert Belief(occ, 0.1, p).conc_point_ppm is None and Belief(occ, 0.1, p).conc_median_ppm is None
+    with pytest.raises(InputDataError, match="conc_space"):
+        Belief(occ, 0.1, p, info={"conc_space": "linear"})
+
+
 def test_validation_errors():
     occ = _occ()
     p = normalize_source_probs(np.ones(occ.shape), occ)

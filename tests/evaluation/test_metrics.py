@@ -14,6 +14,7 @@ from dgse.evaluation.metrics import (
     PROB_FLOOR,
     evaluate_belief,
     gaussian_nll,
+    lognormal_nll_ppm,
     rmse,
     source_cross_entropy,
     source_localization_error,
@@ -37,11 +38,11 @@ def _case() -> Case:
     return Case(occ, wind, conc, np.array([0.05, 0.15]), RES, {"name": "hand"})
 
 
-def _belief(**fields) -> Belief:
+def _belief(info: dict | None = None, **fields) -> Belief:
     occ = _case().occupancy
     p = np.zeros((3, 4))
     p[0, 0] = p[0, 2] = 0.5
-    return Belief(occ, RES, fields.pop("source_probs", p), info={"method": "hand"}, **fields)
+    return Belief(occ, RES, fields.pop("source_probs", p), info={"method": "hand", **(info or {})}, **fields)
 
 
 def _fields(solid_garbage: float = 0.0) -> dict[str, np.ndarray]:
@@ -101,12 +102,62 @@ def test_all_metrics_hand_computed():
     # log concentration: error 0.5, variance 0.25
     assert m["cf_rmse"] == pytest.approx(0.5)
     assert m["cf_nll"] == pytest.approx(0.5 * (math.log(2 * math.pi * 0.25) + 1.0))
-    # ppm: log-normal moments of N(1.5, 0.25) against c = e - 1
+    # ppm, a log-space belief (DGSE): the median exp(1.5) - 1 against c = e - 1, and the exact
+    # density of c: NLL of log(1 + c) = 1 under N(1.5, 0.25) plus log(1 + c) = 1
+    assert m["cf_rmse_ppm"] == pytest.approx(math.exp(1.5) - E)
+    assert m["cf_nll_ppm"] == pytest.approx(m["cf_nll"] + 1.0)
+
+
+def test_ppm_space_belief_is_scored_by_its_own_gaussian():
+    """A GDM-style belief (ppm moments, lognormal moment match) keeps its ppm mean and Gaussian NLL."""
+    case = _case()
+    f = _fields()
     mean_ppm = math.exp(1.5 + 0.125) - 1.0
     var_ppm = (math.exp(0.25) - 1.0) * math.exp(3.0 + 0.25)
     err = mean_ppm - (E - 1.0)
-    assert m["cf_rmse_ppm"] == pytest.approx(abs(err))
-    assert m["cf_nll_ppm"] == pytest.approx(0.5 * (math.log(2 * math.pi * var_ppm) + err**2 / var_ppm))
+    expected_nll = 0.5 * (math.log(2 * math.pi * var_ppm) + err**2 / var_ppm)
+    for info in ({"conc_space": "ppm"}, {"conc_representation": "ppm moments, lognormal moment match"}):
+        m = evaluate_belief(_belief(info=info, **f), case).to_dict()
+        assert m["cf_rmse_ppm"] == pytest.approx(abs(err))
+        assert m["cf_nll_ppm"] == pytest.approx(expected_nll)
+        assert m["cf_rmse"] == pytest.approx(0.5)  # log-space metrics do not depend on the space
+    # the same fields read as a log-space belief give the other numbers
+    log = evaluate_belief(_belief(info={"conc_space": "log"}, **f), case).to_dict()
+    assert log["cf_rmse_ppm"] == pytest.approx(math.exp(1.5) - E)
+
+
+def test_lognormal_nll_ppm_is_the_exact_density():
+    from scipy import stats
+
+    rng = np.random.default_rng(1)
+    c = rng.uniform(0.0, 5000.0, 50)
+    m = rng.normal(3.0, 2.0, 50)
+    v = rng.uniform(0.01, 20.0, 50)
+    # 1 + c ~ lognormal(m, v): scipy's lognorm with s = sqrt(v), scale = e^m, evaluated at 1 + c
+    ref = -stats.lognorm.logpdf(1.0 + c, s=np.sqrt(v), scale=np.exp(m))
+    assert lognormal_nll_ppm(c, m, v) == pytest.approx(float(ref.mean()), rel=1e-10)
+    # it integrates to 1 over c >= 0 (here a narrow one, numerically)
+    grid = np.linspace(0.0, 200.0, 400_001)
+    dens = np.exp(
+        -np.array([lognormal_nll_ppm(np.array([x]), np.array([3.0]), np.array([0.1])) for x in grid[::1000]])
+    )
+    assert dens.shape == (401,)
+    full = np.exp(-(0.5 * (math.log(2 * math.pi * 0.1) + (np.log1p(grid) - 3.0) ** 2 / 0.1) + np.log1p(grid)))
+    assert np.trapezoid(full, grid) == pytest.approx(1.0, abs=1e-6)
+    np.testing.assert_allclose(dens, full[::1000], rtol=1e-9)
+    with pytest.raises(InputDataError):
+        lognormal_nll_ppm(np.zeros(2), np.zeros(3), np.ones(3))
+    assert math.isnan(lognormal_nll_ppm(np.zeros(0), np.zeros(0), np.zeros(0)))
+
+
+def test_ppm_nll_does_not_explode_with_a_large_log_variance():
+    """The old Gaussian-with-lognormal-moments NLL and mean blew up where v is large; these do not."""
+    case = _case()
+    f = _fields()
+    f["log_conc_var"] = np.full((3, 4), 20.0)
+    m = evaluate_belief(_belief(**f), case).to_dict()
+    assert m["cf_rmse_ppm"] == pytest.approx(math.exp(1.5) - E)  # the median, not e^(1.5 + 10)
+    assert m["cf_nll_ppm"] == pytest.approx(0.5 * (math.log(2 * math.pi * 20.0) + 0.25 / 20.0) + 1.0)
 
 
 def test_missing_fields_are_nan():

@@ -17,6 +17,31 @@ spec section 1: cell ``(i, j)`` has its centre at ``x = (j + 0.5) * res``,
   gives no variance: then ``E[c] = exp(m) - 1`` and no variance).
 
 Methods without a wind or concentration estimate leave those fields None.
+
+Native space of the concentration (:attr:`Belief.conc_space`)
+-------------------------------------------------------------
+Two kinds of methods fill ``log_conc_*``:
+
+* ``"log"``: the Gaussian over ``L`` *is* the method's prediction (the DGSE
+  networks are trained with a Gaussian NLL on ``L``).  Its ppm point map
+  (:attr:`Belief.conc_point_ppm`) is the median ``exp(m) - 1``, the
+  back-transformed mean of ``L``: the lognormal mean ``exp(m + v/2) - 1``
+  grows like ``exp(v/2)`` and explodes where the network is unsure (log-space
+  variances of 10 to 20 occur near unseen plumes: a factor of 150 to 22 000),
+  so it is not a usable map.  Its density in ppm is the exact change of
+  variables ``p(c) = N(log(1 + c); m, v) / (1 + c)`` (no moment matching).
+* ``"ppm"``: the method predicts a ppm mean and variance (the GDM baselines,
+  whose ``log_conc_*`` is a lognormal moment match of them,
+  :func:`dgse.mapping.ppm_to_log_moments`).  Its point map is the mean
+  :attr:`Belief.conc_mean_ppm` (its own mean, given back exactly) and its
+  density is its own Gaussian ``N(c; mean, var)``.
+
+``info["conc_space"]`` (``"log"`` or ``"ppm"``) says which; without it a
+belief whose ``info["conc_representation"]`` starts with ``"ppm"`` (what
+:meth:`dgse.mapping.GasMap.to_belief` writes) is ``"ppm"``, every other one
+``"log"``.  :func:`dgse.evaluation.metrics.concentration_metrics` scores
+``cf_rmse_ppm`` and ``cf_nll_ppm`` this way, so both are the methods' own
+predictions and densities in ppm and comparable across the two kinds.
 """
 
 from __future__ import annotations
@@ -30,10 +55,12 @@ import numpy as np
 from dgse.errors import InputDataError
 from dgse.world.grid import Grid
 
-__all__ = ["Belief", "normalize_source_probs"]
+__all__ = ["CONC_SPACES", "Belief", "normalize_source_probs"]
 
 #: Tolerance on ``sum(source_probs) == 1``.
 PROB_TOL = 1e-6
+#: The native spaces of a concentration prediction (module docstring).
+CONC_SPACES = ("log", "ppm")
 
 
 def normalize_source_probs(probs: np.ndarray, occupancy: np.ndarray) -> np.ndarray:
@@ -129,6 +156,9 @@ class Belief:
         info = dict(self.info)
         info.setdefault("method", "unknown")
         info.setdefault("seconds", float("nan"))
+        space = info.get("conc_space")
+        if space is not None and space not in CONC_SPACES:
+            raise InputDataError(f"info['conc_space'] must be one of {CONC_SPACES}, got {space!r}")
         object.__setattr__(self, "info", info)
 
     # -- geometry ------------------------------------------------------------------------
@@ -160,6 +190,45 @@ class Belief:
             return None
         v = 0.0 if self.log_conc_var is None else self.log_conc_var
         return np.expm1(self.log_conc_mean + 0.5 * v)
+
+    @property
+    def conc_space(self) -> str:
+        """``"log"`` or ``"ppm"``: where the concentration prediction is native (module docstring)."""
+        space = self.info.get("conc_space")
+        if space is not None:
+            return str(space)
+        rep = self.info.get("conc_representation")
+        return "ppm" if isinstance(rep, str) and rep.startswith("ppm") else "log"
+
+    @property
+    def conc_median_ppm(self) -> np.ndarray | None:
+        """``(H, W)`` median concentration in ppm, ``exp(m) - 1`` (the back-transformed mean of ``L``)."""
+        if self.log_conc_mean is None:
+            return None
+        return np.expm1(self.log_conc_mean)
+
+    @property
+    def conc_point_ppm(self) -> np.ndarray | None:
+        """``(H, W)`` ppm map to plot and score: the median of ``"log"``, the mean of ``"ppm"`` beliefs."""
+        return self.conc_mean_ppm if self.conc_space == "ppm" else self.conc_median_ppm
+
+    def conc_interval_ppm(self, z: float = 1.0) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(lower, upper)`` ppm maps of the central interval of ``+-z`` standard deviations.
+
+        ``"log"`` beliefs: ``exp(m +- z sqrt(v)) - 1`` (the quantiles of the
+        lognormal); ``"ppm"`` beliefs: ``mean +- z sqrt(var)``.  None without a
+        variance.  Half its width is a spread in ppm that stays finite where the
+        lognormal standard deviation explodes (for a Gaussian it is ``z`` sigma).
+        """
+        if self.log_conc_mean is None or self.log_conc_var is None:
+            return None
+        if self.conc_space == "ppm":
+            mean, var = self.conc_mean_ppm, self.conc_var_ppm
+            assert mean is not None and var is not None
+            s = z * np.sqrt(var)
+            return mean - s, mean + s
+        s = z * np.sqrt(self.log_conc_var)
+        return np.expm1(self.log_conc_mean - s), np.expm1(self.log_conc_mean + s)
 
     @property
     def conc_var_ppm(self) -> np.ndarray | None:

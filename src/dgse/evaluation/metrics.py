@@ -29,13 +29,26 @@ Definitions (``F`` = the free cells of the case, ``|F|`` their number):
   ``L = log(1 + c)`` (``c`` in ppm) at free cells, against the belief's
   ``log_conc_mean`` / ``log_conc_var`` (the networks' scale, paper Fig. 5).
 * **concentration, ppm space** ``cf_rmse_ppm`` (ppm), ``cf_nll_ppm`` (nats
-  per cell, density in ppm^-1): against :attr:`Belief.conc_mean_ppm` and
-  :attr:`Belief.conc_var_ppm`, i.e. the mean and variance of the belief
-  in ppm (the log-normal moments for a log-space Gaussian), scored as a
-  Gaussian ``N(mean, var)`` in ppm: the comparison with the classical GDM
-  methods, whose outputs are Gaussians in ppm (paper Sec. V-B, Fig. 8: "DGSE-S
-  predictions were transformed back to the original scale").  A belief
-  without a concentration variance has ``cf_nll = cf_nll_ppm = NaN``.
+  per cell, density in ppm^-1): each belief's own prediction in ppm, by its
+  native space (:attr:`Belief.conc_space`; paper Sec. V-B, Fig. 8: "DGSE-S
+  predictions were transformed back to the original scale"):
+
+  - ``"log"`` beliefs (DGSE): the RMSE of the median map ``exp(m) - 1``
+    (:attr:`Belief.conc_point_ppm`) and the NLL of the exact density of
+    ``c = exp(L) - 1`` with ``L ~ N(m, v)``:
+    ``-log p(c) = NLL_log(log(1 + c)) + log(1 + c)`` (:func:`lognormal_nll_ppm`,
+    the change of variables ``dL/dc = 1 / (1 + c)``).  The lognormal *mean*
+    ``exp(m + v/2) - 1`` is not used: it grows like ``exp(v/2)`` where the
+    log-space variance is large, and a Gaussian with the lognormal moments
+    misstates a skewed density;
+  - ``"ppm"`` beliefs (the GDM baselines, whose outputs are Gaussians in
+    ppm): the RMSE of their mean and the Gaussian NLL ``N(c; mean, var)``
+    with their own mean and variance (:attr:`Belief.conc_mean_ppm`,
+    :attr:`Belief.conc_var_ppm`).
+
+  Both NLLs are densities of the same variable ``c`` in ppm^-1, so they are
+  comparable.  A belief without a concentration variance has
+  ``cf_nll = cf_nll_ppm = NaN``.
 
 Variances are floored at ``VAR_FLOOR`` (``1e-12`` in the field's squared
 unit) inside the NLL so that a zero variance gives a large finite value
@@ -67,6 +80,7 @@ __all__ = [
     "concentration_metrics",
     "evaluate_belief",
     "gaussian_nll",
+    "lognormal_nll_ppm",
     "rmse",
     "source_cross_entropy",
     "source_localization_error",
@@ -109,6 +123,26 @@ def gaussian_nll(truth: np.ndarray, mean: np.ndarray, var: np.ndarray, var_floor
         return NAN
     v = np.maximum(v, var_floor)
     return float(np.mean(0.5 * (LOG_2PI + np.log(v) + np.square(t - m) / v)))
+
+
+def lognormal_nll_ppm(
+    truth_ppm: np.ndarray, log_mean: np.ndarray, log_var: np.ndarray, var_floor: float = VAR_FLOOR
+) -> float:
+    """Mean NLL (nats, density in ppm^-1) of ``c`` when ``log(1 + c) ~ N(log_mean, log_var)``.
+
+    The exact density by the change of variables:
+    ``-log p(c) = 0.5 [log(2 pi v) + (log(1 + c) - m)^2 / v] + log(1 + c)``
+    (``c >= 0``; negative truths are clipped at 0).
+    """
+    t = np.log1p(np.maximum(np.asarray(truth_ppm, dtype=np.float64), 0.0))
+    m = np.asarray(log_mean, dtype=np.float64)
+    v = np.asarray(log_var, dtype=np.float64)
+    if not (t.shape == m.shape == v.shape):
+        raise InputDataError(f"lognormal_nll_ppm: shapes {t.shape}, {m.shape}, {v.shape} differ")
+    if t.size == 0:
+        return NAN
+    v = np.maximum(v, var_floor)
+    return float(np.mean(0.5 * (LOG_2PI + np.log(v) + np.square(t - m) / v) + t))
 
 
 def _check_same_grid(belief: Belief, case: Case) -> None:
@@ -158,7 +192,9 @@ def concentration_metrics(belief: Belief, case: Case) -> tuple[float, float, flo
     """``(cf_rmse, cf_nll, cf_rmse_ppm, cf_nll_ppm)`` over the free cells (NaN where unavailable).
 
     Log space against ``log(1 + c)``; ppm space against ``c`` with the belief's
-    ppm mean and variance (:attr:`Belief.conc_mean_ppm`, :attr:`Belief.conc_var_ppm`).
+    own prediction in its native space (module docstring): ``"log"`` beliefs by
+    their median map and exact lognormal density, ``"ppm"`` beliefs by their
+    mean and Gaussian (:attr:`Belief.conc_mean_ppm`, :attr:`Belief.conc_var_ppm`).
     """
     _check_same_grid(belief, case)
     if belief.log_conc_mean is None:
@@ -169,11 +205,17 @@ def concentration_metrics(belief: Belief, case: Case) -> tuple[float, float, flo
     m = belief.log_conc_mean[free]
     cf_rmse = rmse(m, logc)
     cf_nll = NAN if belief.log_conc_var is None else gaussian_nll(logc, m, belief.log_conc_var[free])
-    mean_ppm = belief.conc_mean_ppm
-    var_ppm = belief.conc_var_ppm
-    assert mean_ppm is not None
-    cf_rmse_ppm = rmse(mean_ppm[free], c)
-    cf_nll_ppm = NAN if var_ppm is None else gaussian_nll(c, mean_ppm[free], var_ppm[free])
+    point = belief.conc_point_ppm
+    assert point is not None
+    cf_rmse_ppm = rmse(point[free], c)
+    if belief.log_conc_var is None:
+        cf_nll_ppm = NAN
+    elif belief.conc_space == "ppm":
+        mean_ppm, var_ppm = belief.conc_mean_ppm, belief.conc_var_ppm
+        assert mean_ppm is not None and var_ppm is not None
+        cf_nll_ppm = gaussian_nll(c, mean_ppm[free], var_ppm[free])
+    else:
+        cf_nll_ppm = lognormal_nll_ppm(c, m, belief.log_conc_var[free])
     return cf_rmse, cf_nll, cf_rmse_ppm, cf_nll_ppm
 
 
@@ -189,7 +231,8 @@ class EstimateMetrics:
         normalized_entropy: ``entropy / log(number of free cells)`` (the paper's eta test).
         wf_rmse, wf_nll: wind RMSE (m/s) and Gaussian NLL per component (nats).
         cf_rmse, cf_nll: log(1 + ppm) concentration RMSE and Gaussian NLL (nats).
-        cf_rmse_ppm, cf_nll_ppm: concentration RMSE (ppm) and Gaussian NLL in ppm space (nats).
+        cf_rmse_ppm, cf_nll_ppm: concentration RMSE (ppm) of the belief's point map and NLL of its
+            density in ppm (nats; module docstring).
     """
 
     sl_error_m: float
