@@ -104,5 +104,5 @@ def test_gsl_quick(bench_root: Path) -> None:
         assert r["seconds_median"] > 0
     pooled = {r["method"]: r for r in rows if r["scenario"] == "all"}
     assert set(pooled) == set(GSL_METHODS)
-    # the oracle and the practical adjoint see the same readings: same number of estimates
-    assert pooled["adjoint-oracle"]["trials"] == pooled["adjoint"]["trials"] == pooled["dgse-s"]["trials"]
+    # the oracle sees the same readings as DGSE-S: the same number of estimates
+    assert pooled["adjoint-oracle"]["trials"] == pooled["dgse-s"]["trials"] == 2  # 2 scenarios x 1 trial

@@ -201,6 +201,8 @@ def run(ctx: BenchContext) -> None:
     method_trials["pmfs"] = ctx.pick(3, 1)
     method_limit: dict[str, int | None] = {m: None for m in METHODS}
     method_limit["pmfs"] = ctx.pick(None, 1)
+    # quick runs: the adjoint's flow solves for the candidate inlet speeds dominate, one scenario
+    method_limit["adjoint"] = ctx.pick(None, 1)
     cases_dir = ctx.scenarios(n_scen, "test")
     files = sorted(cases_dir.glob("*.npz"))
     cases = [f.stem for f in files]
