@@ -39,7 +39,17 @@ import numpy as np
 from dgse.bench.core import BenchContext
 from dgse.bench.plots import plt
 
-__all__ = ["METHODS", "NLL_METHODS", "STYLE", "run", "style"]
+__all__ = [
+    "METHODS",
+    "NLL_METHODS",
+    "STYLE",
+    "case_label",
+    "estimator_kwargs",
+    "eval_time_text",
+    "evaluate_cached",
+    "run",
+    "style",
+]
 
 #: Methods of the comparison, in plotting order.
 METHODS = ("dgse-s", "kdmvw", "ggmrf", "gwgmrf", "gabp")
@@ -119,6 +129,17 @@ def evaluate_cached(
         torch.set_num_threads(threads)
     ctx.save_json(name, res)
     return ctx.load_json(name)
+
+
+def eval_time_text(results: dict[str, dict[str, Any]]) -> str:
+    """The evaluation wall time per method (from the results, so also right for a resumed run)."""
+    parts = [
+        f"{style(m)['label']} {r['seconds_total']:.0f} s"
+        for m, r in results.items()
+        if r.get("seconds_total") is not None
+    ]
+    total = sum(r.get("seconds_total") or 0.0 for r in results.values())
+    return f"Evaluation wall time (estimates and metrics): {', '.join(parts)}; {total / 60:.1f} min in all."
 
 
 def case_label(case: Any) -> str:
@@ -494,7 +515,7 @@ def run(ctx: BenchContext) -> None:
     )
     sec = ctx.section(
         "Concentration RMSE and NLL in ppm (fig8)",
-        protocol + "\n\n" + ppm_text + "\n\n" + _wins_text(results, cases),
+        protocol + "\n\n" + ppm_text + "\n\n" + _wins_text(results, cases) + "\n\n" + eval_time_text(results),
     )
     sec.figure(
         _fig8(results, cases, labels),
