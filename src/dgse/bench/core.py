@@ -64,6 +64,8 @@ __all__ = [
 
 #: The manifest file of a suite's directory.
 MANIFEST = "suite.json"
+#: Seconds each cached result took to compute (so resumed runs still report their cost).
+TIMINGS = "_timings.json"
 #: Format tag of the manifest.
 MANIFEST_FORMAT = "dgse-bench-suite"
 
@@ -267,9 +269,38 @@ class BenchContext:
         got = self.load_json(name)
         if got is not None:
             return got
+        t0 = time.perf_counter()
         result = compute()
         self.save_json(name, result)
+        self._record_seconds(name, time.perf_counter() - t0)
         return jsonable(result)
+
+    def _record_seconds(self, name: str, seconds: float) -> None:
+        path = self.out / TIMINGS
+        timings = json.loads(path.read_text()) if path.is_file() else {}
+        timings[name] = round(float(seconds), 2)
+        path.write_text(json.dumps(timings, indent=1))
+
+    def compute_seconds(self) -> float:
+        """Seconds spent computing this suite's results, over all (resumed) runs.
+
+        The times :meth:`cached` recorded, plus ``seconds_total`` of result files it
+        did not time (e.g. :func:`dgse.evaluation.evaluate` results saved directly).
+        Work outside those pieces (figures, tables) counts only in ``wall_seconds``.
+        """
+        path = self.out / TIMINGS
+        timings = json.loads(path.read_text()) if path.is_file() else {}
+        total = sum(float(v) for v in timings.values())
+        for f in self.out.glob("*.json"):
+            if f.stem in timings or f.name in (MANIFEST, TIMINGS):
+                continue
+            try:
+                v = json.loads(f.read_text())
+            except (OSError, json.JSONDecodeError):
+                continue
+            if isinstance(v, dict) and isinstance(v.get("seconds_total"), (int, float)):
+                total += float(v["seconds_total"])
+        return round(total, 2)
 
     def note(self, text: str) -> None:
         """A remark for the report (e.g. skipped scenarios)."""
@@ -290,6 +321,7 @@ class BenchContext:
             "started": self.started,
             "finished": _now(),
             "wall_seconds": round(time.perf_counter() - self._t0, 2),
+            "compute_seconds": self.compute_seconds(),
             "environment": environment_info(),
             "notes": self.notes,
             "sections": [s.to_dict() for s in self.sections],

@@ -37,18 +37,16 @@ from typing import Any
 import numpy as np
 
 from dgse.bench.core import BenchContext
-from dgse.bench.plots import plt
+from dgse.bench.plots import plt, style_of
 
 __all__ = [
     "METHODS",
     "NLL_METHODS",
-    "STYLE",
     "case_label",
     "estimator_kwargs",
     "eval_time_text",
     "evaluate_cached",
     "run",
-    "style",
 ]
 
 #: Methods of the comparison, in plotting order.
@@ -60,25 +58,6 @@ NLL_EXCLUDED = {
     "kdmvw": "its variance is a confidence-weighted spread, not a predictive variance",
     "gabp": "loopy-BP variances are overconfident and it has no global probability map",
 }
-
-#: Colours, markers and labels of every method of the gdm and gsl suites.
-STYLE: dict[str, dict[str, Any]] = {
-    "dgse-s": {"color": "#d62728", "marker": "o", "label": "DGSE-S"},
-    "kdmvw": {"color": "#9467bd", "marker": "v", "label": "KDM+V/W"},
-    "kdmv": {"color": "#c5b0d5", "marker": "v", "label": "KDM+V"},
-    "ggmrf": {"color": "#1f77b4", "marker": "s", "label": "G-GMRF"},
-    "gwgmrf": {"color": "#2ca02c", "marker": "^", "label": "GW-GMRF"},
-    "gabp": {"color": "#ff7f0e", "marker": "D", "label": "GaBP+"},
-    "dualmode": {"color": "#8c564b", "marker": "P", "label": "Dual-mode PF"},
-    "pmfs": {"color": "#e377c2", "marker": "X", "label": "PMFS"},
-    "adjoint": {"color": "#17becf", "marker": "*", "label": "Adjoint (est. wind)"},
-    "adjoint-oracle": {"color": "#7f7f7f", "marker": "*", "label": "Adjoint oracle (true wind)"},
-}
-
-
-def style(method: str) -> dict[str, Any]:
-    """Plot style of ``method``."""
-    return STYLE.get(method, {"color": None, "marker": "x", "label": method})
 
 
 def estimator_kwargs(method: str) -> dict[str, Any]:
@@ -134,7 +113,7 @@ def evaluate_cached(
 def eval_time_text(results: dict[str, dict[str, Any]]) -> str:
     """The evaluation wall time per method (from the results, so also right for a resumed run)."""
     parts = [
-        f"{style(m)['label']} {r['seconds_total']:.0f} s"
+        f"{style_of(m)['label']} {r['seconds_total']:.0f} s"
         for m, r in results.items()
         if r.get("seconds_total") is not None
     ]
@@ -186,7 +165,7 @@ def _fig8(results: dict[str, dict[str, Any]], cases: list[str], labels: dict[str
                     es.append((a.get(f"{key}_std") or 0.0) / max(a.get(f"{key}_count") or 1, 1) ** 0.5)
                 if not xs:
                     continue
-                st = style(method)
+                st = style_of(method)
                 ax.errorbar(
                     xs,
                     ys,
@@ -274,7 +253,7 @@ def _wins_text(results: dict[str, dict[str, Any]], cases: list[str]) -> str:
                     others = [v for m, v in vals.items() if m != "dgse-s"]
                     if others and min(others) > 0:
                         ratios.append(vals["dgse-s"] / min(others))
-        parts = ", ".join(f"{style(m)['label']} {k}" for m, k in wins.items() if k)
+        parts = ", ".join(f"{style_of(m)['label']} {k}" for m, k in wins.items() if k)
         line = f"Lowest mean {what}: {parts} (of {total} scenario x count cells)."
         if ratios:
             line += (
@@ -396,7 +375,7 @@ def _fig7(entry: dict[str, Any], label: str) -> Any:
         ax.set_ylim(0, H * res)
     for col, m in enumerate(METHODS, start=1):
         b = beliefs[m]
-        lab = style(m)["label"]
+        lab = style_of(m)["label"]
         point = b.conc_point_ppm
         show(axes[0, col], point, title=f"{lab}: mean" + (" (median)" if b.conc_space == "log" else ""))
         err = None if point is None else np.abs(point - truth)
@@ -439,10 +418,10 @@ def _timing_rows(results: dict[str, dict[str, Any]], n_obs: int) -> list[dict[st
 
 def _fig9(rows: list[dict[str, Any]]) -> Any:
     fig, ax = plt.subplots(figsize=(5.2, 3.2))
-    labels = [style(r["method"])["label"] for r in rows]
+    labels = [style_of(r["method"])["label"] for r in rows]
     med = [r["seconds_median"] for r in rows]
     up = [max(r["seconds_p90"] - r["seconds_median"], 0.0) for r in rows]
-    colors = [style(r["method"])["color"] for r in rows]
+    colors = [style_of(r["method"])["color"] for r in rows]
     bars = ax.bar(labels, med, color=colors, yerr=[[0.0] * len(rows), up], capsize=3)
     for b, v in zip(bars, med, strict=True):
         ax.text(b.get_x() + b.get_width() / 2, v, f"{v:.3g} s", ha="center", va="bottom", fontsize=7)
@@ -478,7 +457,7 @@ def run(ctx: BenchContext) -> None:
     for m in METHODS:
         results[m] = evaluate_cached(ctx, f"eval_{m}", cases_dir, m, counts, method_trials[m])
 
-    reduced = [f"{style(m)['label']} {t}" for m, t in method_trials.items() if t != trials]
+    reduced = [f"{style_of(m)['label']} {t}" for m, t in method_trials.items() if t != trials]
     protocol = (
         f"{n_scen} test scenarios, {', '.join(map(str, counts))} random observations (distinct free cells, "
         f"Table I noise), {trials} trials per scenario and count"
@@ -508,7 +487,7 @@ def run(ctx: BenchContext) -> None:
         "scored by their ppm mean and their "
         "Gaussian N(mean, var). Both NLLs are densities of c in 1/ppm, so they compare. As in the paper, "
         + "; ".join(
-            f"{style(m)['label']} is left out of the NLL panels ({why})" for m, why in NLL_EXCLUDED.items()
+            f"{style_of(m)['label']} is left out of the NLL panels ({why})" for m, why in NLL_EXCLUDED.items()
         )
         + " (their NLLs are still in the tables, nll_comparable = False). Error bars: standard error over "
         "trials."

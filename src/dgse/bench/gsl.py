@@ -36,8 +36,8 @@ from typing import Any
 import numpy as np
 
 from dgse.bench.core import BenchContext
-from dgse.bench.gdm import case_label, eval_time_text, evaluate_cached, style
-from dgse.bench.plots import plt
+from dgse.bench.gdm import case_label, eval_time_text, evaluate_cached
+from dgse.bench.plots import plt, style_of
 
 __all__ = ["EXCLUDED", "METHODS", "ORACLES", "run"]
 
@@ -71,7 +71,7 @@ def _bars(results: dict[str, dict[str, Any]], cases: list[str], labels: dict[str
     fig, axes = plt.subplots(2, 1, figsize=(max(6.0, 1.25 * len(groups) + 2.5), 6.4), squeeze=False)
     for ax, (key, ylabel) in zip(axes[:, 0], _METRICS, strict=True):
         for k, m in enumerate(methods):
-            st = style(m)
+            st = style_of(m)
             means, stds = [], []
             for g in groups:
                 mu, sd, _ = _group_stats(results[m], g, n_obs, key)
@@ -141,7 +141,7 @@ def _summary(results: dict[str, dict[str, Any]], cases: list[str], n_obs: int) -
             vals = {m: v for m, v in vals.items() if np.isfinite(v)}
             if vals:
                 wins[min(vals, key=lambda m: vals[m])] += 1
-        parts = ", ".join(f"{style(m)['label']} {k}" for m, k in wins.items() if k)
+        parts = ", ".join(f"{style_of(m)['label']} {k}" for m, k in wins.items() if k)
         lines.append(
             f"Lowest mean {what} among the practical methods, per scenario: {parts} (of {len(cases)})."
         )
@@ -161,9 +161,9 @@ def _summary(results: dict[str, dict[str, Any]], cases: list[str], n_obs: int) -
                     if a < b - float(np.sqrt(sa**2 / na + sb**2 / nb)):
                         n += 1
                 if n:
-                    beaten.append(f"{style(m)['label']} in {n} scenario(s) on {what}")
+                    beaten.append(f"{style_of(m)['label']} in {n} scenario(s) on {what}")
         lines.append(
-            f"The {style(o)['label']} is the intended lower bound (it knows the true wind); it is "
+            f"The {style_of(o)['label']} is the intended lower bound (it knows the true wind); it is "
             "(mean lower by more than one standard error of the difference) "
             + (
                 "beaten by " + "; ".join(beaten) + ", so with these readings it is a physics reference "
@@ -179,9 +179,9 @@ def _summary(results: dict[str, dict[str, Any]], cases: list[str], n_obs: int) -
 def _time_fig(rows: list[dict[str, Any]]) -> Any:
     allrows = [r for r in rows if r["scenario"] == "all"]
     fig, ax = plt.subplots(figsize=(5.2, 3.0))
-    labels = [style(r["method"])["label"].replace(" (", "\n(") for r in allrows]
+    labels = [style_of(r["method"])["label"].replace(" (", "\n(") for r in allrows]
     med = [r["seconds_median"] for r in allrows]
-    bars = ax.bar(labels, med, color=[style(r["method"])["color"] for r in allrows])
+    bars = ax.bar(labels, med, color=[style_of(r["method"])["color"] for r in allrows])
     for b, r in zip(bars, allrows, strict=True):
         if r["oracle"]:
             b.set_hatch("//")
@@ -228,7 +228,8 @@ def run(ctx: BenchContext) -> None:
     for m in METHODS:
         if method_trials[m] != trials or method_limit[m] is not None:
             scen = f"the first {method_limit[m]} scenario(s), " if method_limit[m] is not None else ""
-            reduced.append(f"{style(m)['label']}: {scen}{method_trials[m]} trial(s) per scenario (its cost)")
+            lab = style_of(m)["label"]
+            reduced.append(f"{lab}: {scen}{method_trials[m]} trial(s) per scenario (its cost)")
     text = (
         f"{n_scen} test scenarios, {n_obs} random observations (distinct free cells, Table I noise), "
         f"{trials} trials per scenario"

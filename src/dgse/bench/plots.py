@@ -18,6 +18,16 @@ METHOD_STYLE: dict[str, dict[str, Any]] = {
     "dgse-s": {"color": "#d62728", "marker": "o", "label": "DGSE-S"},
     "dgse-p": {"color": "#1f77b4", "marker": "s", "label": "DGSE-P"},
     "dgse-o": {"color": "#2ca02c", "marker": "^", "label": "DGSE-O"},
+    "kdmvw": {"color": "#9467bd", "marker": "v", "label": "KDM+V/W"},
+    "kdmv": {"color": "#c5b0d5", "marker": "v", "label": "KDM+V"},
+    "ggmrf": {"color": "#17a2b8", "marker": "s", "label": "G-GMRF"},
+    "gwgmrf": {"color": "#6b8e23", "marker": "^", "label": "GW-GMRF"},
+    "gabp": {"color": "#ff7f0e", "marker": "D", "label": "GaBP+"},
+    "dualmode": {"color": "#8c564b", "marker": "P", "label": "Dual-mode PF"},
+    "pmfs": {"color": "#e377c2", "marker": "X", "label": "PMFS"},
+    "grgsl": {"color": "#bcbd22", "marker": "h", "label": "GrGSL"},
+    "adjoint": {"color": "#17becf", "marker": "*", "label": "Adjoint (est. wind)"},
+    "adjoint-oracle": {"color": "#7f7f7f", "marker": "*", "label": "Adjoint oracle (true wind)"},
 }
 
 

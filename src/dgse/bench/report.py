@@ -387,12 +387,23 @@ def _data_text(data: Any) -> str:
     return "; ".join(parts)
 
 
+def _cost(m: Mapping[str, Any]) -> Any:
+    """A suite's time: its wall time, or its compute time over resumed runs when that is larger."""
+    w, c = m.get("wall_seconds"), m.get("compute_seconds")
+    if _is_number(w) and _is_number(c):
+        return max(float(w), float(c))
+    return w
+
+
 def _meta_html(m: Mapping[str, Any]) -> str:
     env = m.get("environment") if isinstance(m.get("environment"), Mapping) else {}
     rows: list[tuple[str, str]] = []
     if m.get("command"):
         rows.append(("Command", f'<pre class="cmd"><code>{_esc(m["command"])}</code></pre>'))
     run = [f"wall time <strong>{_fmt_duration(m.get('wall_seconds'))}</strong>"]
+    if _is_number(m.get("compute_seconds")) and _is_number(m.get("wall_seconds")):
+        if float(m["compute_seconds"]) > float(m["wall_seconds"]):
+            run.append(f"compute time over all resumed runs {_fmt_duration(m['compute_seconds'])}")
     run.append("quick run" if m.get("quick") else "full run")
     if m.get("seed") is not None:
         run.append(f"seed {_esc(m['seed'])}")
@@ -465,7 +476,7 @@ def _toc_html(manifests: Sequence[Mapping[str, Any]], anchors: Sequence[str]) ->
         parts.append(
             f'<li><span class="goto" data-goto="{anchor}" tabindex="0" role="button">'
             f'<span class="idx">{n}</span> {_inline(title)}</span>'
-            f'<span class="toc-meta">{_fmt_duration(m.get("wall_seconds"))}{quick}</span>'
+            f'<span class="toc-meta">{_fmt_duration(_cost(m))}{quick}</span>'
         )
         sections = m.get("sections") or []
         if sections:
@@ -662,7 +673,7 @@ def write_report(directory: str | os.PathLike[str], output: str | os.PathLike[st
         for p in root.iterdir()
         if p.is_dir() and not p.name.startswith(("_", ".")) and p.name not in done
     )
-    total = sum(float(m["wall_seconds"]) for m in manifests if _is_number(m.get("wall_seconds")))
+    total = sum(float(_cost(m)) for m in manifests if _is_number(_cost(m)))
     quick = any(m.get("quick") for m in manifests)
     generated = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
 

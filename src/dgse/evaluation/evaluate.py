@@ -128,8 +128,10 @@ METRIC_DESCRIPTIONS: dict[str, str] = {
     "wf_nll": "wind Gaussian NLL per component, mean over free cells (nats)",
     "cf_rmse": "RMSE of log(1 + ppm) at free cells",
     "cf_nll": "Gaussian NLL of log(1 + ppm), mean over free cells (nats)",
-    "cf_rmse_ppm": "concentration RMSE at free cells (ppm), belief mean in ppm",
-    "cf_nll_ppm": "Gaussian NLL in ppm space with the belief's ppm mean and variance (nats)",
+    "cf_rmse_ppm": "concentration RMSE at free cells (ppm) of the belief's ppm point map "
+    "(median expm1(mu) for log-space beliefs, the mean for ppm-space ones)",
+    "cf_nll_ppm": "NLL of the true ppm values under the belief's own density: the exact "
+    "lognormal density for log-space beliefs, the Gaussian for ppm-space ones (nats)",
     "seconds": "wall time of estimator.estimate (s)",
 }
 

@@ -684,6 +684,7 @@ class AdjointEstimator:
             "conc_components": len(top),
             "response_model": model,
             "timings": {"preprocessing": t_flow},
+            "conc_space": "ppm",  # ppm moments of a mixture, stored as lognormal moments
         }
         info["seconds"] = time.perf_counter() - t0
         return Belief(

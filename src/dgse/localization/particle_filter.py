@@ -394,6 +394,7 @@ class ParticleFilterEstimator:
             "alpha": self.alpha,
             "response_model": model,
             "seed": self.seed,
+            "conc_space": "ppm",  # ppm moments of a mixture, stored as lognormal moments
         }
         info["seconds"] = time.perf_counter() - t0
         return Belief(occ, res, probs, log_conc_mean=mu, log_conc_var=s2, info=info)
