@@ -1,0 +1,94 @@
+"""The ``search`` benchmark suite, quick: every part runs, lists its files, and resumes from its pieces.
+
+The ``filament`` and ``ood`` scenario files are written here beforehand
+(scenario files that exist are reused, :mod:`dgse.bench.core`): the quick
+``test`` scenarios with synthetic intermittent frames, and a small solved
+two-room case as the out-of-domain one.  Generating real ones (the filament
+model, the built-in solver on an out-of-domain layout) takes minutes of CPU
+for some layouts; this test is about the suite, not about those generators.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import torch
+
+from dgse.bench import run_suite
+from dgse.bench.search import METHODS
+from dgse.world.case import Case
+from tests.search import solved_two_rooms
+
+torch.set_num_threads(1)
+
+
+def _prepare(bench_root, root):
+    src = bench_root / "_scenarios" / "test"
+    (root / "_scenarios").mkdir(parents=True)
+    shutil.copytree(src, root / "_scenarios" / "test")
+    fil = root / "_scenarios" / "filament"
+    fil.mkdir()
+    rng = np.random.default_rng(0)
+    for p in sorted(src.glob("*.npz")):
+        c = Case.load(p)
+        gate = rng.random((20, *c.occupancy.shape)) < 0.5  # the plume is there half of the time
+        frames = np.where(gate, 2.0 * c.concentration, 0.0).astype(np.float32)
+        Case(
+            c.occupancy, c.wind, c.concentration, c.source, c.resolution, {**c.meta, "frame_dt": 1.0}, frames
+        ).save(fil / p.name)
+    ood = root / "_scenarios" / "ood"
+    ood.mkdir()
+    solved_two_rooms().save(ood / "ood000.npz")
+
+
+def test_search_suite_quick(bench_root, tmp_path):
+    _prepare(bench_root, tmp_path)
+    manifest = run_suite("search", tmp_path, quick=True, seed=0)
+    m = json.loads(manifest.read_text())
+    assert m["suite"] == "search" and m["quick"] is True
+    out = manifest.parent
+    titles = [s["title"] for s in m["sections"]]
+    assert any("tab:active_search_results" in t for t in titles)
+    assert any("fig:path_compare" in t for t in titles) and any("table de" in t for t in titles)
+    assert all(s["text"] for s in m["sections"])
+    figures = {f["file"] for s in m["sections"] for f in s["figures"]}
+    tables = {t["file"]: t for s in m["sections"] for t in s["tables"]}
+    assert {"path_compare.png", "search_process.png"} <= figures
+    assert {"search_steady.csv", "search_filament.csv", "dgse_s_summary.csv", "ood.csv"} <= set(tables)
+    for f in [*figures, *tables, "search_process.gif", "search_results.json"]:
+        assert (out / f).is_file() and (out / f).stat().st_size > 0, f
+    # every method in both comparison tables (per scenario and "all"); success rates are percentages
+    for name in ("search_steady.csv", "search_filament.csv"):
+        t = tables[name]
+        cols = t["columns"]
+        assert {r[cols.index("method")] for r in t["rows"]} == {mm.label for mm in METHODS}
+        assert len(t["rows"]) == 3 * len(METHODS)  # two scenarios and "all"
+        for r in t["rows"]:
+            assert 0.0 <= r[cols.index("SR [%]")] <= 100.0
+    res = json.loads((out / "search_results.json").read_text())
+    for kind in ("test", "filament"):
+        for mm in METHODS:
+            agg = res["comparison"][kind][mm.key]
+            assert agg["n_trials"] == 2 and 0.0 <= agg["success_rate"] <= 1.0
+        assert res["dgse_s"][kind]["n_trials"] == 2
+    assert res["ood"]["n_trials"] == 1 and 0.0 <= res["ood"]["success_rate"] <= 1.0
+    # the filament runs read the frames, the steady ones do not; every method met the same starts
+    runs = {k: json.loads((out / f"run_{k}.json").read_text()) for k in ("dgse-s_test", "pmfs_filament")}
+    assert runs["dgse-s_test"]["settings"]["frames"] is False
+    assert runs["pmfs_filament"]["per_case"][0]["trials"][0]["settings"]["use_frames"] is True
+    starts = {
+        k: [
+            c["trials"][0]["start_cell"]
+            for c in json.loads((out / f"run_{k}_test.json").read_text())["per_case"]
+        ]
+        for k in ("dgse-s", "dualmode", "grgsl")
+    }
+    assert starts["dgse-s"] == starts["dualmode"] == starts["grgsl"]
+    # a second run reuses every piece (no episode runs again)
+    pieces = sorted((out / "runs").glob("*.json"))
+    assert len(pieces) == 2 * 2 * len(METHODS) + 1
+    before = {p.name: p.stat().st_mtime_ns for p in pieces}
+    run_suite("search", tmp_path, quick=True, seed=0)
+    assert {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.json")} == before
