@@ -138,6 +138,7 @@ def run(ctx: BenchContext) -> None:
             w1, w2 = _sigma_coverage(res["levels"], r["wind_coverage"])
             c1, c2 = _sigma_coverage(res["levels"], r["conc_coverage"])
             lv = res["levels"]
+            has_src = method in SOURCE_METHODS
             wc, cc = r["wind_coverage"], r["conc_coverage"]
             rows.append(
                 {
@@ -150,8 +151,9 @@ def run(ctx: BenchContext) -> None:
                     "conc_cov_2sigma": c2,
                     "wind_cal_error": None if wc is None else calibration_error(wc, lv),
                     "conc_cal_error": None if cc is None else calibration_error(cc, lv),
-                    "source_cal_error": calibration_error(r["source_coverage"], lv),
-                    "source_median_level": float(np.median(r["source_levels"])),
+                    # methods without a source model (GMRFs: uniform posterior) get no source columns
+                    "source_cal_error": calibration_error(r["source_coverage"], lv) if has_src else None,
+                    "source_median_level": float(np.median(r["source_levels"])) if has_src else None,
                 }
             )
     field = {m: results[m] for m in FIELD_METHODS if m in results}
