@@ -56,7 +56,7 @@ def test_search_suite_quick(bench_root, tmp_path):
     figures = {f["file"] for s in m["sections"] for f in s["figures"]}
     tables = {t["file"]: t for s in m["sections"] for t in s["tables"]}
     assert {"path_compare.png", "search_process.png"} <= figures
-    assert {"search_steady.csv", "search_filament.csv", "dgse_s_summary.csv", "ood.csv"} <= set(tables)
+    assert {"search_steady.csv", "search_filament.csv", "dgse_s_summary.csv"} <= set(tables)
     for f in [*figures, *tables, "search_process.gif", "search_results.json"]:
         assert (out / f).is_file() and (out / f).stat().st_size > 0, f
     # every method in both comparison tables (per scenario and "all"); success rates are percentages
@@ -73,7 +73,9 @@ def test_search_suite_quick(bench_root, tmp_path):
             agg = res["comparison"][kind][mm.key]
             assert agg["n_trials"] == 2 and 0.0 <= agg["success_rate"] <= 1.0
         assert res["dgse_s"][kind]["n_trials"] == 2
-    assert res["ood"]["n_trials"] == 1 and 0.0 <= res["ood"]["success_rate"] <= 1.0
+    assert {"ood_eta075.csv", "ood_eta088.csv"} <= set(tables)
+    for eta in ("0.75", "0.88"):
+        assert res["ood"][eta]["n_trials"] == 1 and 0.0 <= res["ood"][eta]["success_rate"] <= 1.0
     # the filament runs read the frames, the steady ones do not; every method met the same starts
     runs = {k: json.loads((out / f"run_{k}.json").read_text()) for k in ("dgse-s_test", "pmfs_filament")}
     assert runs["dgse-s_test"]["settings"]["frames"] is False
@@ -88,7 +90,7 @@ def test_search_suite_quick(bench_root, tmp_path):
     assert starts["dgse-s"] == starts["dualmode"] == starts["grgsl"]
     # a second run reuses every piece (no episode runs again)
     pieces = sorted((out / "runs").glob("*.json"))
-    assert len(pieces) == 2 * 2 * len(METHODS) + 1
+    assert len(pieces) == 2 * 2 * len(METHODS) + 2  # 2 scenarios x 2 kinds x methods; ood x 2 etas
     before = {p.name: p.stat().st_mtime_ns for p in pieces}
     run_suite("search", tmp_path, quick=True, seed=0)
     assert {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.json")} == before
