@@ -192,6 +192,7 @@ def _run_method(
     use_frames: bool,
     keep_paths: int = 0,
     keep_record: dict[str, Any] | None = None,
+    counts: dict[str, int] | None = None,
 ) -> dict[str, Any]:
     """:func:`run_trials` of ``method`` on ``cases``, one scenario at a time.
 
@@ -224,7 +225,8 @@ def _run_method(
         piece = ctx.out / "runs" / f"{method.key}_{kind}_{path.stem}.json"
         plan = _jsonable({**base, "case": path.stem, "keep_path": i < keep_paths})
         got = _read_piece(piece)
-        if got is None or got.get("plan") != plan:
+        fresh = got is None or got.get("plan") != plan
+        if fresh:
             kept: dict[str, Any] = {}
 
             def keep(
@@ -264,6 +266,9 @@ def _run_method(
             _write_piece(piece, got)
             got = _read_piece(piece)
             assert got is not None
+        if counts is not None:
+            key = "computed" if fresh else "reused"
+            counts[key] = counts.get(key, 0) + len(got["per_case"][0]["trials"])
         settings = got["settings"]
         per_case.extend(got["per_case"])
         if got.get("path") is not None:
@@ -411,7 +416,7 @@ def _path_figure(
     return fig
 
 
-def _process_figure(result: Any, case: Any, n_frames: int = 4) -> Any:
+def _process_figure(result: Any, case: Any, n_frames: int = 4, dpi: int = 60) -> Any:
     """Several steps of one episode (the three panels of :func:`plot_search_step`), stacked."""
     from dgse.search.animate import frame_steps, plot_search_step
 
@@ -419,13 +424,16 @@ def _process_figure(result: Any, case: Any, n_frames: int = 4) -> Any:
     images = []
     for k in ks:
         f = plot_search_step(result, case, k)
-        f.set_dpi(80)
+        f.set_dpi(dpi)
         f.canvas.draw()
         images.append(np.asarray(f.canvas.buffer_rgba()))
     w = max(im.shape[1] for im in images)
-    fig, axes = plt.subplots(len(images), 1, figsize=(w / 80, sum(im.shape[0] for im in images) / 80))
+    save_dpi = 110  # Section.figure's
+    fig, axes = plt.subplots(
+        len(images), 1, figsize=(w / save_dpi, sum(im.shape[0] for im in images) / save_dpi)
+    )
     for ax, im in zip(np.atleast_1d(axes), images, strict=True):
-        ax.imshow(im)
+        ax.imshow(im, interpolation="none")
         ax.axis("off")
     fig.subplots_adjust(left=0, right=1, top=1, bottom=0, hspace=0.02)
     return fig
@@ -462,6 +470,7 @@ def run(ctx: BenchContext) -> None:
     }
     dgse = METHODS[0]
     record: dict[str, Any] = {}
+    counts: dict[str, int] = {"computed": 0, "reused": 0}
 
     def run_method(m: Method, kind: str, cases: list[tuple[Path, Any]], **kw: Any) -> dict[str, Any]:
         o = plan.overrides.get(m.key, {})
@@ -477,6 +486,7 @@ def run(ctx: BenchContext) -> None:
             use_frames=kind == "filament",
             keep_paths=2 if kind == "test" else 0,
             keep_record=record if (m.key == dgse.key and kind == "test") else None,
+            counts=counts,
             **kw,
         )
 
@@ -508,7 +518,13 @@ def run(ctx: BenchContext) -> None:
     summary["episodes"] = {
         kind: {k: r["aggregate"]["n_trials"] for k, r in rr.items()} for kind, rr in runs.items()
     }
+    summary["episodes_computed_here"] = counts
     ctx.save_json("search_results", summary)
+    ctx.note(
+        f"{counts['computed']} episodes were run in this invocation and {counts['reused']} were reused "
+        f"from the per-scenario results (runs/) of an earlier invocation with the same settings; the "
+        f"wall time covers this invocation only."
+    )
 
 
 def _caveat(plan: Plan) -> str:
@@ -701,7 +717,7 @@ def _report_process(
         f"DGSE-S search on {name}: end reason {result.reason}, error {result.error_m:.2f} m after "
         f"{result.n_steps} steps.",
     )
-    animate_episode(result, case, ctx.out / "search_process.gif", max_frames=ctx.pick(30, 4), dpi=60)
+    animate_episode(result, case, ctx.out / "search_process.gif", max_frames=ctx.pick(20, 4), dpi=60)
 
 
 def _threads() -> int:
