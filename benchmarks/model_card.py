@@ -69,11 +69,15 @@ def main() -> None:
         "| epoch | train loss | val source loss (CE) | val wind NLL | val conc NLL | val loc. error m |",
         "|---|---|---|---|---|---|",
     ]
+
+    def num(v: str | None, fmt: str = ".3f") -> str:
+        return "n/a" if not v else format(float(v), fmt)
+
     for r in rows:
         lines.append(
-            f"| {r['epoch']} | {float(r['train/loss']):.3f} | {float(r['val/source_loss']):.3f} | "
-            f"{float(r['val/wind_nll']):.3f} | {float(r['val/conc_nll']):.3f} | "
-            f"{float(r['val/loc_error_m']):.2f} |"
+            f"| {r['epoch']} | {num(r['train/loss'])} | {num(r['val/source_loss'])} | "
+            f"{num(r.get('val/wind_nll'))} | {num(r.get('val/conc_nll'))} | "
+            f"{num(r['val/loc_error_m'], '.2f')} |"
         )
     for spec in args.eval:
         name, _, path = spec.partition("=")
@@ -92,7 +96,8 @@ def main() -> None:
         "",
         "## Limits",
         "",
-        "Trained on a CPU for about an hour on 1,000 layouts: far less than the paper's 100 epochs on "
+        f"Trained on a CPU for {train_s / 3600:.1f} h ({len(rows)} epochs) on 1,000 layouts: far less than "
+        "the paper's 100 epochs on "
         "3,000 layouts with 30 configurations per environment. It is a working default, not the paper's "
         "accuracy; `configs/train/` and `dgse train --resume` continue from here on better hardware.",
     ]

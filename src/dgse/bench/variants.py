@@ -61,6 +61,24 @@ def _ordering_text(results: dict[str, dict[str, Any]]) -> str:
     )
 
 
+def _training_text() -> str:
+    """The epochs and selection of each shipped checkpoint (their budgets differ; say so)."""
+    from dgse.estimators.dgse import default_model_path
+    from dgse.models.checkpoint import read_checkpoint_info
+
+    parts = []
+    for m in METHODS:
+        t = read_checkpoint_info(default_model_path(m)).training
+        ep = t.get("epoch")
+        parts.append(f"{style_of(m)['label']} epoch {ep if ep is not None else '?'}")
+    return (
+        "Checkpoints (0-based epoch of the lowest validation source loss): "
+        + ", ".join(parts)
+        + ". The variants did not get equal training: compare at equal epochs with the validation "
+        "curves of benchmarks/training_curves.py."
+    )
+
+
 def run(ctx: BenchContext) -> None:
     """Evaluate the three variants and write fig5's panels and table."""
     from dgse.evaluation import evaluate
@@ -88,7 +106,7 @@ def run(ctx: BenchContext) -> None:
         f"{n_scen} test scenarios x {trials} random sensor configuration(s) per observation count, "
         "Table I noise, identical observations for the three variants; shipped default weights; "
         "DGSE-S with K = T = 5. Field metrics over free cells; concentration in log(1 + ppm). "
-        "Bands: standard error of the mean.\n\n" + _ordering_text(results),
+        "Bands: standard error of the mean. " + _training_text() + "\n\n" + _ordering_text(results),
     )
     sec.figure(
         curves_vs_observations(results, _PANELS),
