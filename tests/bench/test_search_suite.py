@@ -92,5 +92,8 @@ def test_search_suite_quick(bench_root, tmp_path):
     pieces = sorted((out / "runs").glob("*.json"))
     assert len(pieces) == 2 * 2 * len(METHODS) + 2  # 2 scenarios x 2 kinds x methods; ood x 2 etas
     before = {p.name: p.stat().st_mtime_ns for p in pieces}
-    run_suite("search", tmp_path, quick=True, seed=0)
+    n = len(pieces) * 1  # one trial per piece
+    assert m["notes"] == [f"All {n} episodes were run in this invocation."]
+    again = json.loads(run_suite("search", tmp_path, quick=True, seed=0).read_text())
     assert {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.json")} == before
+    assert again["notes"][0].startswith(f"0 episodes were run in this invocation and {n} were reused")

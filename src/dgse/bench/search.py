@@ -192,7 +192,7 @@ def _run_method(
     use_frames: bool,
     keep_paths: int = 0,
     keep_record: dict[str, Any] | None = None,
-    counts: dict[str, int] | None = None,
+    ledger: dict[str, tuple[str, int]] | None = None,
 ) -> dict[str, Any]:
     """:func:`run_trials` of ``method`` on ``cases``, one scenario at a time.
 
@@ -266,9 +266,10 @@ def _run_method(
             _write_piece(piece, got)
             got = _read_piece(piece)
             assert got is not None
-        if counts is not None:
-            key = "computed" if fresh else "reused"
-            counts[key] = counts.get(key, 0) + len(got["per_case"][0]["trials"])
+        if ledger is not None:  # the first use of a piece in this invocation says where it came from
+            ledger.setdefault(
+                piece.name, ("computed" if fresh else "reused", len(got["per_case"][0]["trials"]))
+            )
         settings = got["settings"]
         per_case.extend(got["per_case"])
         if got.get("path") is not None:
@@ -470,7 +471,7 @@ def run(ctx: BenchContext) -> None:
     }
     dgse = METHODS[0]
     record: dict[str, Any] = {}
-    counts: dict[str, int] = {"computed": 0, "reused": 0}
+    ledger: dict[str, tuple[str, int]] = {}
 
     def run_method(m: Method, kind: str, cases: list[tuple[Path, Any]], **kw: Any) -> dict[str, Any]:
         o = plan.overrides.get(m.key, {})
@@ -486,7 +487,7 @@ def run(ctx: BenchContext) -> None:
             use_frames=kind == "filament",
             keep_paths=2 if kind == "test" else 0,
             keep_record=record if (m.key == dgse.key and kind == "test") else None,
-            counts=counts,
+            ledger=ledger,
             **kw,
         )
 
@@ -518,13 +519,17 @@ def run(ctx: BenchContext) -> None:
     summary["episodes"] = {
         kind: {k: r["aggregate"]["n_trials"] for k, r in rr.items()} for kind, rr in runs.items()
     }
-    summary["episodes_computed_here"] = counts
+    counts = {k: sum(n for how, n in ledger.values() if how == k) for k in ("computed", "reused")}
+    summary["episodes_this_invocation"] = counts
     ctx.save_json("search_results", summary)
-    ctx.note(
-        f"{counts['computed']} episodes were run in this invocation and {counts['reused']} were reused "
-        f"from the per-scenario results (runs/) of an earlier invocation with the same settings; the "
-        f"wall time covers this invocation only."
-    )
+    if counts["reused"]:
+        ctx.note(
+            f"{counts['computed']} episodes were run in this invocation and {counts['reused']} were "
+            f"reused from the per-scenario results (runs/) of an earlier invocation with the same "
+            f"settings; the wall time covers this invocation only."
+        )
+    else:
+        ctx.note(f"All {counts['computed']} episodes were run in this invocation.")
 
 
 def _caveat(plan: Plan) -> str:
