@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from dgse.bench.core import cpu_model
 from dgse.data.rasterize import rasterize
 from dgse.estimators.dgse import DGSEEstimator
 from dgse.models.networks import DGSEModel, count_parameters, create_model
@@ -144,16 +145,6 @@ def _load() -> list[float]:
         return []
 
 
-def _cpu_name() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
-
-
 def _label(r: dict[str, Any]) -> str:
     return "bf16 + channels-last" if r["dtype"] == "bfloat16" else "float32"
 
@@ -242,7 +233,7 @@ def main() -> None:
     model.eval()
     result: dict[str, Any] = {
         "machine": {
-            "cpu": _cpu_name(),
+            "cpu": cpu_model(),
             "cores": os.cpu_count(),
             "torch": torch.__version__,
             "platform": platform.platform(),

@@ -58,6 +58,7 @@ __all__ = [
     "MANIFEST",
     "BenchContext",
     "Section",
+    "cpu_model",
     "environment_info",
     "jsonable",
 ]
@@ -94,7 +95,8 @@ def _version(dist: str) -> str | None:
         return None
 
 
-def _cpu_model() -> str:
+def cpu_model() -> str:
+    """The CPU's model name (``/proc/cpuinfo``), else what :mod:`platform` knows."""
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
             if line.startswith("model name"):
@@ -112,7 +114,7 @@ def environment_info() -> dict[str, Any]:
         "versions": {
             d: _version(d) for d in ("dgse", "numpy", "scipy", "torch", "numba", "lightning", "matplotlib")
         },
-        "cpu": _cpu_model(),
+        "cpu": cpu_model(),
         "cpu_count": os.cpu_count(),
         "gpu": None,
     }
