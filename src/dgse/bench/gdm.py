@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from dgse.bench.core import BenchContext
-from dgse.bench.plots import plt, style_of
+from dgse.bench.plots import plt, seconds_bars, style_of
 
 __all__ = [
     "METHODS",
@@ -417,20 +417,11 @@ def _timing_rows(results: dict[str, dict[str, Any]], n_obs: int) -> list[dict[st
 
 
 def _fig9(rows: list[dict[str, Any]]) -> Any:
-    fig, ax = plt.subplots(figsize=(5.2, 3.2))
-    labels = [style_of(r["method"])["label"] for r in rows]
-    med = [r["seconds_median"] for r in rows]
-    up = [max(r["seconds_p90"] - r["seconds_median"], 0.0) for r in rows]
-    colors = [style_of(r["method"])["color"] for r in rows]
-    bars = ax.bar(labels, med, color=colors, yerr=[[0.0] * len(rows), up], capsize=3)
-    for b, v in zip(bars, med, strict=True):
-        ax.text(b.get_x() + b.get_width() / 2, v, f"{v:.3g} s", ha="center", va="bottom", fontsize=7)
-    ax.set_yscale("log")
-    ax.set_ylabel("seconds per estimate (median)")
-    ax.grid(axis="y", alpha=0.3)
-    ax.tick_params(axis="x", labelsize=8)
-    fig.tight_layout()
-    return fig
+    return seconds_bars(
+        [r["method"] for r in rows],
+        [r["seconds_median"] for r in rows],
+        upper=[max(r["seconds_p90"] - r["seconds_median"], 0.0) for r in rows],
+    )
 
 
 # -- the suite ------------------------------------------------------------------------------------

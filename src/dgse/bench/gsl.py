@@ -37,7 +37,7 @@ import numpy as np
 
 from dgse.bench.core import BenchContext
 from dgse.bench.gdm import case_label, eval_time_text, evaluate_cached
-from dgse.bench.plots import plt, style_of
+from dgse.bench.plots import plt, seconds_bars, style_of
 
 __all__ = ["EXCLUDED", "METHODS", "ORACLES", "run"]
 
@@ -178,22 +178,12 @@ def _summary(results: dict[str, dict[str, Any]], cases: list[str], n_obs: int) -
 
 def _time_fig(rows: list[dict[str, Any]]) -> Any:
     allrows = [r for r in rows if r["scenario"] == "all"]
-    fig, ax = plt.subplots(figsize=(5.2, 3.0))
-    labels = [style_of(r["method"])["label"].replace(" (", "\n(") for r in allrows]
-    med = [r["seconds_median"] for r in allrows]
-    bars = ax.bar(labels, med, color=[style_of(r["method"])["color"] for r in allrows])
-    for b, r in zip(bars, allrows, strict=True):
-        if r["oracle"]:
-            b.set_hatch("//")
-            b.set_edgecolor("k")
-        ax.text(b.get_x() + b.get_width() / 2, b.get_height(), f"{b.get_height():.3g} s", ha="center",
-                va="bottom", fontsize=7)  # fmt: skip
-    ax.set_yscale("log")
-    ax.set_ylabel("seconds per estimate (median)")
-    ax.tick_params(axis="x", labelsize=7)
-    ax.grid(axis="y", alpha=0.3)
-    fig.tight_layout()
-    return fig
+    return seconds_bars(
+        [r["method"] for r in allrows],
+        [r["seconds_median"] for r in allrows],
+        hatched=[bool(r["oracle"]) for r in allrows],
+        figsize=(5.2, 3.0),
+    )
 
 
 def run(ctx: BenchContext) -> None:

@@ -11,7 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 from matplotlib.figure import Figure
 
-__all__ = ["METHOD_STYLE", "curves_vs_observations", "style_of"]
+__all__ = ["METHOD_STYLE", "curves_vs_observations", "seconds_bars", "style_of"]
 
 #: Colours and markers per method, so every figure shows a method alike.
 METHOD_STYLE: dict[str, dict[str, Any]] = {
@@ -88,4 +88,37 @@ def curves_vs_observations(
     if title:
         fig.suptitle(title, y=1.04)
     fig.tight_layout(rect=(0, 0, 1, 0.93))
+    return fig
+
+
+def seconds_bars(
+    methods: Sequence[str],
+    seconds: Sequence[float],
+    upper: Sequence[float] | None = None,
+    hatched: Sequence[bool] | None = None,
+    figsize: tuple[float, float] = (5.2, 3.2),
+) -> Figure:
+    """Bars of the median seconds per estimate of each method, log scale, values written on top.
+
+    Args:
+        methods: method names (labels and colours from :func:`style_of`).
+        seconds: the bar heights.
+        upper: optional upper whiskers (added to the bar height, e.g. p90 - median).
+        hatched: which bars to hatch (e.g. oracles).
+    """
+    fig, ax = plt.subplots(figsize=figsize)
+    labels = [style_of(m)["label"].replace(" (", "\n(") for m in methods]
+    colors = [style_of(m)["color"] for m in methods]
+    yerr = None if upper is None else [[0.0] * len(methods), list(upper)]
+    bars = ax.bar(labels, seconds, color=colors, yerr=yerr, capsize=3)
+    for k, (b, v) in enumerate(zip(bars, seconds, strict=True)):
+        if hatched is not None and hatched[k]:
+            b.set_hatch("//")
+            b.set_edgecolor("k")
+        ax.text(b.get_x() + b.get_width() / 2, v, f"{v:.3g} s", ha="center", va="bottom", fontsize=7)
+    ax.set_yscale("log")
+    ax.set_ylabel("seconds per estimate (median)")
+    ax.grid(axis="y", alpha=0.3)
+    ax.tick_params(axis="x", labelsize=7)
+    fig.tight_layout()
     return fig
