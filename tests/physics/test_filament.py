@@ -202,6 +202,34 @@ def test_uniform_gas_reads_uniform_up_to_the_walls():
     assert frame[free].mean() == pytest.approx(2000.0, rel=0.02)
 
 
+def test_max_filaments_caps_the_prefill_and_keeps_the_mass():
+    """Over the cap, fewer and heavier filaments stand for the steady field; the release is unchanged."""
+    layout = two_rooms()
+    occ = layout.occupancy
+    free = occ == 0
+    settings = FilamentSettings(
+        release_rate=1e-3, filaments_per_second=1.0, noise="constant", noise_std=0.0, gamma=1.0,
+        sigma_max=0.2, prefill_max_age=1e4, warmup=0.0, duration=1.0, frame_dt=1.0,
+    )  # fmt: skip
+    steady = np.where(free, 2000.0, 0.0)
+    args = (occ, np.zeros((2, *occ.shape)), (0.35, 0.35))
+    full = run_filaments(*args, settings, 4, None, steady=steady)
+    capped = run_filaments(*args, settings.with_(max_filaments=400), 4, None, steady=steady)
+    assert full.info["n_prefilled"] > 2000
+    assert capped.info["n_prefilled"] == 400
+    weight = capped.info["prefill_filament_weight"]
+    assert weight == pytest.approx(full.info["n_prefilled"] / 400, rel=0.01)
+    assert capped.filament_mass == full.filament_mass
+    assert capped.info["n_released"] == full.info["n_released"]
+    assert capped.frames[0][free].sum() == pytest.approx(steady.sum(), rel=0.01)
+    assert capped.frames[0][free].mean() == pytest.approx(2000.0, rel=0.03)  # still uniform on average
+    # a cap above the count changes nothing
+    same = run_filaments(*args, settings.with_(max_filaments=10**7), 4, None, steady=steady)
+    np.testing.assert_array_equal(same.frames, full.frames)
+    with pytest.raises(InputDataError, match="max_filaments"):
+        settings.with_(max_filaments=0)
+
+
 # -- the turbulent random walk on a RANS flow ------------------------------------------------------
 def test_turbulent_mean_follows_the_builtin_steady_solution():
     from dgse.physics.builtin import BuiltinEngine

@@ -23,7 +23,9 @@ Scenarios (:meth:`BenchContext.scenarios`) are case files in
   paper App. D) solved with the built-in solver; layouts whose flow does not
   converge are skipped (and counted);
 * ``filament``: the ``test`` scenarios with ``frames`` from the filament
-  model (:func:`dgse.physics.filament.make_filament_case`).
+  model (:func:`dgse.physics.filament.make_filament_case`), at most
+  ``FILAMENT_CAP`` filaments standing for the steady field at the start (a
+  minute per scenario at most; poorly ventilated layouts would need millions).
 
 A scenario file that exists is reused, so an interrupted run continues
 where it stopped and every suite of one directory sees the same scenarios.
@@ -69,6 +71,8 @@ MANIFEST = "suite.json"
 TIMINGS = "_timings.json"
 #: Format tag of the manifest.
 MANIFEST_FORMAT = "dgse-bench-suite"
+#: ``FilamentSettings.max_filaments`` of the filament scenarios.
+FILAMENT_CAP = 20_000
 
 
 def jsonable(obj: Any) -> Any:
@@ -436,7 +440,7 @@ class BenchContext:
 
         d = self.scenario_dir("filament")
         out = []
-        settings = FilamentSettings(duration=self.pick(240.0, 60.0))
+        settings = FilamentSettings(duration=self.pick(240.0, 60.0), max_filaments=FILAMENT_CAP)
         for i, src in enumerate(self._test_scenarios(n)):
             path = d / src.name
             if not path.is_file():

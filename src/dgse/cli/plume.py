@@ -51,6 +51,14 @@ def plume_cmd(
     prefill: Annotated[
         bool, typer.Option("--prefill/--no-prefill", help="Start from the case's steady concentration.")
     ] = True,
+    max_filaments: Annotated[
+        int,
+        typer.Option(
+            "--max-filaments",
+            help="Cap of the filaments standing for the steady field at the start (heavier ones carry "
+            "the rest; bounds the cost in poorly ventilated rooms); 0: no cap.",
+        ),
+    ] = 20_000,
 ) -> None:
     """Simulate filament dispersion on a case and write it with concentration frames."""
     import secrets
@@ -66,6 +74,7 @@ def plume_cmd(
         noise=noise,
         noise_std=noise_std,
         prefill=prefill,
+        max_filaments=max_filaments or None,
         warmup=warmup,
         frame_dt=frame_dt,
         duration=duration,

@@ -83,7 +83,9 @@ The particle loop and the splatting are numba kernels, pure functions of
 arrays (``numba.njit(cache=True, nogil=True)``, as in :mod:`dgse.physics.fv`).
 Cost grows with the filaments in the air, ``filaments_per_second`` times the
 mean residence time: about 1 000 for a well ventilated 10 x 10 m case (300 s
-in a few seconds), 50 000 for a poorly ventilated one (about a minute).
+in a few seconds), 50 000 for a poorly ventilated one (about a minute), and
+hundreds of thousands in rooms the inlet hardly reaches; ``max_filaments``
+bounds it by releasing fewer, heavier filaments.
 """
 
 from __future__ import annotations
@@ -162,6 +164,13 @@ class FilamentSettings:
         frame_dt: seconds between frames.
         duration: recorded seconds; ``round(duration / frame_dt)`` frames.
         kernel_sigmas: a filament is evaluated within this many widths.
+        max_filaments: cap of the filaments that stand for the steady field
+            at the start (``prefill``).  Where ``M / Q_f`` exceeds it (rooms
+            the inlet hardly reaches hold millions), that many heavier
+            filaments carry the same mass ``M``; the release keeps its
+            ``Q_f``, so the fresh plume is as fine as without the cap, and
+            only the old, wide, well mixed background gets grainier.  It
+            bounds the cost of a run, with ``duration``.  ``None``: no cap.
         project_wind: make the face velocities divergence-free
             (:func:`face_velocities`); off, they are plain means of the cells.
     """
@@ -182,6 +191,7 @@ class FilamentSettings:
     frame_dt: float = 0.5
     duration: float = 120.0
     kernel_sigmas: float = 3.0
+    max_filaments: int | None = None
     project_wind: bool = True
 
     def __post_init__(self) -> None:
@@ -203,6 +213,9 @@ class FilamentSettings:
         for name in ("release_rate", "sigma_max"):
             if getattr(self, name) is not None:
                 check(name)
+        mf = self.max_filaments
+        if mf is not None and (not isinstance(mf, int) or isinstance(mf, bool) or mf < 1):
+            problems.append(f"max_filaments must be a positive integer or None, got {mf!r}")
         if not isinstance(self.prefill, bool):
             problems.append(f"prefill must be True or False, got {self.prefill!r}")
         if self.noise not in NOISE_MODELS:
@@ -492,13 +505,13 @@ def _transport(
 
 @_jit
 def _advance(
-    px, py, birth, n, t, n_steps, dt, rate, carry, sx, sy, sigma0, comp, t_grow,
+    px, py, birth, weight, n, t, n_steps, dt, rate, carry, sx, sy, sigma0, comp, t_grow,
     res, lims, occ, open_w, open_e, open_s, open_n, ufx, ufy, dp, state, counts,
 ):  # fmt: skip
     """Advance the ``n`` live filaments by ``n_steps`` steps of ``dt`` from time ``t``, releasing new ones.
 
-    ``px, py, birth`` hold the filaments (capacity ``len(px)``); a removed
-    filament is replaced by the last live one.  ``rate`` filaments per second
+    ``px, py, birth, weight`` hold the filaments (capacity ``len(px)``); a
+    removed filament is replaced by the last live one.  ``rate`` filaments per second
     are released at ``(sx, sy)`` plus ``N(0, sigma0^2)`` per axis; ``carry`` is
     the fraction of a filament owed from earlier steps.  Filaments younger
     than ``t_grow`` (still widening) walk with ``D - comp``, older ones with
@@ -520,6 +533,7 @@ def _advance(
                 px[f] = px[n]
                 py[f] = py[n]
                 birth[f] = birth[n]
+                weight[f] = weight[n]
                 counts[1] += 1
         owed = carry + rate * dt
         n_new = math.floor(owed + 1e-9)
@@ -537,6 +551,7 @@ def _advance(
             px[n] = x
             py[n] = y
             birth[n] = t0 + frac * dt
+            weight[n] = 1.0
             counts[0] += 1
             if _transport(px, py, n, (1.0 - frac) * dt, comp, res, lims, occ, open_w, open_e, open_s,
                           open_n, ufx, ufy, dp, state, counts):  # fmt: skip
@@ -625,14 +640,16 @@ def _axis_weights(w, k0, k1, kc, pos, c, res, line, erf_tab):
 
 
 @_jit
-def _splat(px, py, birth, n, t, sigma0, gamma, sigma_max, ksig, res, occ, sat, los, erf_tab, amp, out):
+def _splat(
+    px, py, birth, weight, n, t, sigma0, gamma, sigma_max, ksig, res, occ, sat, los, erf_tab, amp, out
+):  # fmt: skip
     """Add the ``n`` filaments' concentration at time ``t`` to ``out`` (``(H, W)``).
 
     Each filament adds its Gaussian (width ``min(sqrt(sigma0^2 + gamma age), sigma_max)``)
     integrated over each cell of its ``ksig``-sigma window, as the product of
     two axis weights folded at the walls in the filament's row and column
     (:func:`_axis_weights`), over the free cells in line of sight of its cell,
-    renormalized to sum to ``amp``.  ``sat`` is
+    renormalized to sum to ``amp * weight``.  ``sat`` is
     the summed-area table ``(H + 1, W + 1)`` of ``occ``; ``los`` the offsets
     ``(a, b, parent_a, parent_b)`` in ring order (:func:`_los_table`),
     ``erf_tab`` :func:`_erf_table`.
@@ -688,7 +705,7 @@ def _splat(px, py, birth, n, t, sigma0, gamma, sigma_max, ksig, res, occ, sat, l
             sy = _axis_weights(wy, i0, i1, ic, y, c, res, occ[:, jc], erf_tab)
             if sat[i1 + 1, j1 + 1] - sat[i0, j1 + 1] - sat[i1 + 1, j0] + sat[i0, j0] == 0:
                 if sx > 0.0 and sy > 0.0:
-                    scale = amp / (sx * sy)
+                    scale = amp * weight[f] / (sx * sy)
                     for i in range(i0, i1 + 1):
                         a = scale * wy[i]
                         for j in range(j0, j1 + 1):
@@ -702,7 +719,7 @@ def _splat(px, py, birth, n, t, sigma0, gamma, sigma_max, ksig, res, occ, sat, l
                         row += wx[j]
                 total += wy[i] * row
             if total > 0.0:
-                scale = amp / total
+                scale = amp * weight[f] / total
                 for i in range(i0, i1 + 1):
                     a = scale * wy[i]
                     for j in range(j0, j1 + 1):
@@ -987,14 +1004,15 @@ def run_filaments(
     rate = float(settings.filaments_per_second)
     mass = settings.release_rate / rate
     ppm_per_filament = mass / (physics.slab_depth * res * res) * physics.ppm_per_gm3
-    pre_x, pre_y, pre_age = _prefill(occ, steady, settings, ppm_per_filament, res, gen)
+    pre_x, pre_y, pre_age, pre_weight = _prefill(occ, steady, settings, ppm_per_filament, res, gen)
     t_end = (warm_steps + (T - 1) * steps_per_frame) * dt
     cap = math.ceil(rate * (t_end + dt)) + pre_x.size + 2
     px = np.zeros(cap)
     py = np.zeros(cap)
     birth = np.zeros(cap)
+    weight = np.ones(cap)  # mass in units of Q_f: 1, or more for capped prefilled filaments
     n = pre_x.size
-    px[:n], py[:n], birth[:n] = pre_x, pre_y, -pre_age
+    px[:n], py[:n], birth[:n], weight[:n] = pre_x, pre_y, -pre_age, pre_weight
     counts = np.zeros(3, dtype=np.int64)
     sigma_max = math.inf if settings.sigma_max is None else float(settings.sigma_max)
     s_top = min(sigma_max, math.sqrt(settings.sigma0**2 + settings.gamma * (t_end + pre_age.max(initial=0))))
@@ -1018,13 +1036,14 @@ def run_filaments(
         todo = warm_steps if k == 0 else steps_per_frame
         t0 = step_no * dt
         n, carry = _advance(
-            px, py, birth, n, t0, todo, dt, rate, carry, src[0], src[1], kernel[0], comp, t_grow, *walk
-        )
+            px, py, birth, weight, n, t0, todo, dt, rate, carry, src[0], src[1], kernel[0], comp, t_grow,
+            *walk,
+        )  # fmt: skip
         step_no += todo
         t = step_no * dt
         t1 = time.perf_counter()
         buf[:] = 0.0
-        _splat(px, py, birth, n, t, *kernel, res, occ, sat, los, erf_tab, ppm_per_filament, buf)
+        _splat(px, py, birth, weight, n, t, *kernel, res, occ, sat, los, erf_tab, ppm_per_filament, buf)
         t_splat += time.perf_counter() - t1
         frames[k] = np.where(occ == 1, 0.0, buf)
         times[k] = t
@@ -1036,6 +1055,7 @@ def run_filaments(
     info = {
         "settings": settings.to_dict(),
         "step_s": dt,
+        "prefill_filament_weight": pre_weight,
         "filament_mass_g": mass,
         "n_prefilled": int(pre_x.size),
         "prefill_age_s": float(pre_age.max(initial=0.0)),
@@ -1065,6 +1085,17 @@ def run_filaments(
     )
 
 
+def _steady_field(occ: np.ndarray, steady: np.ndarray) -> np.ndarray:
+    """The steady concentration (ppm) in the free cells, checked."""
+    c = np.asarray(steady, dtype=np.float64)
+    if c.shape != occ.shape:
+        raise InputDataError(f"steady concentration has shape {c.shape}, expected {occ.shape}")
+    c = np.where(occ == 0, c, 0.0)
+    if not np.isfinite(c).all() or (c < 0).any():
+        raise InputDataError("steady concentration must be finite and non-negative")
+    return c
+
+
 def _prefill(
     occ: np.ndarray,
     steady: np.ndarray | None,
@@ -1072,28 +1103,32 @@ def _prefill(
     ppm_per_filament: float,
     res: float,
     gen: np.random.Generator,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Positions and ages of the filaments that stand for the steady field (empty without one)."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Positions, ages and weight (mass in ``Q_f``) of the filaments that stand for the steady field.
+
+    Empty without one.  ``M / Q_f`` filaments of weight 1, or ``max_filaments``
+    of the weight that carries the same mass.
+    """
     empty = np.zeros(0)
     if steady is None or not settings.prefill:
-        return empty, empty, empty
-    c = np.asarray(steady, dtype=np.float64)
-    if c.shape != occ.shape:
-        raise InputDataError(f"steady concentration has shape {c.shape}, expected {occ.shape}")
-    c = np.where(occ == 0, c, 0.0)
-    if not np.isfinite(c).all() or (c < 0).any():
-        raise InputDataError("steady concentration must be finite and non-negative")
+        return empty, empty, empty, 1.0
+    c = _steady_field(occ, steady)
     total = c.sum()  # in filaments: ppm per filament spread over one cell
-    n = round(total / ppm_per_filament)
+    n_mass = total / ppm_per_filament
+    n = round(n_mass)
     if n == 0:
-        return empty, empty, empty
-    rate = settings.filaments_per_second
-    age = min(n / rate, settings.prefill_max_age)  # M / q: the mean residence time
+        return empty, empty, empty, 1.0
+    weight = 1.0
+    if settings.max_filaments is not None and n > settings.max_filaments:
+        n = settings.max_filaments
+        weight = n_mass / n
+    # the mean residence time M / q (capped)
+    age = min(n_mass / settings.filaments_per_second, settings.prefill_max_age)
     cells = gen.choice(c.size, size=n, p=(c / total).ravel())
     i, j = np.divmod(cells, occ.shape[1])
     x = (j + gen.random(n)) * res
     y = (i + gen.random(n)) * res
-    return x, y, np.full(n, age)
+    return x, y, np.full(n, age), weight
 
 
 def simulate_filaments(
