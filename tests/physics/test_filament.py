@@ -230,6 +230,20 @@ def test_max_filaments_caps_the_prefill_and_keeps_the_mass():
         settings.with_(max_filaments=0)
 
 
+def test_heavy_prefilled_filaments_leave_with_their_mass():
+    """Capped prefill in a ventilated channel: every frame holds the mass of the filaments in the air."""
+    occ, wind, mask = _channel(10, 30, u=0.5)
+    settings = FilamentSettings(
+        release_rate=0.05, noise="constant", warmup=0.0, duration=4.0, frame_dt=0.5, max_filaments=300
+    )
+    run = run_filaments(occ, wind, (0.55, 0.55), settings, 2, mask, steady=np.full(occ.shape, 500.0))
+    w = run.info["prefill_filament_weight"]
+    assert w > 2 and run.info["n_exited"] > 50  # heavy ones left through the outlet
+    assert set(np.unique(run.weights)) == {1.0, w}
+    grams = run.frames[-1].sum(dtype=np.float64) * RES**2 * DEFAULT_PHYSICS.slab_depth / PPM
+    assert grams == pytest.approx(run.weights.sum() * run.filament_mass, rel=1e-4)
+
+
 # -- the turbulent random walk on a RANS flow ------------------------------------------------------
 def test_turbulent_mean_follows_the_builtin_steady_solution():
     from dgse.physics.builtin import BuiltinEngine

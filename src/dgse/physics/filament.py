@@ -271,6 +271,8 @@ class FilamentRun:
         n_exited: ``(T,)`` filaments removed through openings up to each frame.
         positions: ``(n, 2)`` ``(x, y)`` in m of the filaments alive at the end.
         ages: ``(n,)`` their ages in s.
+        weights: ``(n,)`` their masses in units of ``filament_mass`` (1, more
+            for prefilled filaments over ``max_filaments``).
         filament_mass: grams per filament.
         step: time step used, s.
         info: settings, wall-clock seconds and counts (JSON-able).
@@ -283,6 +285,7 @@ class FilamentRun:
     n_exited: np.ndarray
     positions: np.ndarray
     ages: np.ndarray
+    weights: np.ndarray
     filament_mass: float
     step: float
     info: dict = field(default_factory=dict)
@@ -1079,6 +1082,7 @@ def run_filaments(
         n_exited=n_exited,
         positions=np.stack([px[:n], py[:n]], axis=1),
         ages=step_no * dt - birth[:n],
+        weights=weight[:n].copy(),
         filament_mass=mass,
         step=dt,
         info=info,
