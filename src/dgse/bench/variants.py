@@ -62,21 +62,30 @@ def _ordering_text(results: dict[str, dict[str, Any]]) -> str:
 
 
 def _training_text() -> str:
-    """The epochs and selection of each shipped checkpoint (their budgets differ; say so)."""
+    """The epoch and optimizer steps of each shipped checkpoint, and whether their budgets differ."""
     from dgse.estimators.dgse import default_model_path
     from dgse.models.checkpoint import read_checkpoint_info
 
-    parts = []
+    parts, steps = [], []
     for m in METHODS:
         t = read_checkpoint_info(default_model_path(m)).training
-        ep = t.get("epoch")
-        parts.append(f"{style_of(m)['label']} epoch {ep if ep is not None else '?'}")
-    return (
-        "Checkpoints (0-based epoch of the lowest validation source loss): "
+        ep, st = t.get("epoch"), t.get("global_step")
+        ep_text = "?" if ep is None else ep
+        st_text = "?" if st is None else st
+        parts.append(f"{style_of(m)['label']} epoch {ep_text} ({st_text} steps)")
+        if st:
+            steps.append(int(st))
+    text = (
+        "Checkpoints (0-based epoch of the lowest validation source loss, optimizer steps taken): "
         + ", ".join(parts)
-        + ". The variants did not get equal training: compare at equal epochs with the validation "
-        "curves of benchmarks/training_curves.py."
+        + "."
     )
+    if len(steps) < len(METHODS) or max(steps) > 1.1 * min(steps):
+        text += (
+            " Their training budgets differ by more than 10 %: compare them at equal steps with the "
+            "validation curves of benchmarks/training_curves.py."
+        )
+    return text
 
 
 def run(ctx: BenchContext) -> None:
