@@ -43,6 +43,11 @@ def test_variants_quick(bench_root: Path) -> None:
     # the three variants saw identical observations: equal case lists and counts
     evals = [json.loads((bench_root / "variants" / f"eval_{v}.json").read_text()) for v in methods]
     assert len({tuple(e["cases"]) for e in evals}) == 1
+    assert not any("reused" in n for n in m["notes"])
+    # a second run reuses the evaluations and says so
+    again = json.loads(run_suite("variants", bench_root, quick=True).read_text())
+    assert any("3 result(s) were reused" in n and "eval_dgse-s" in n for n in again["notes"])
+    assert again["sections"][0]["tables"][0]["rows"] == m["sections"][0]["tables"][0]["rows"]
 
 
 def test_samples_quick(bench_root: Path) -> None:

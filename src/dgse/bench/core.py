@@ -236,6 +236,7 @@ class BenchContext:
         self.description = description
         self.sections: list[Section] = []
         self.notes: list[str] = []
+        self.reused: list[str] = []  # results of cached() that an earlier run wrote
         self.started = _now()
         self._t0 = time.perf_counter()
         self.data_info: dict[str, Any] = {}
@@ -274,6 +275,7 @@ class BenchContext:
         """The JSON result ``name`` if an earlier run of this directory wrote it, else ``compute()`` saved."""
         got = self.load_json(name)
         if got is not None:
+            self.reused.append(name)
             return got
         t0 = time.perf_counter()
         result = compute()
@@ -313,7 +315,16 @@ class BenchContext:
         self.notes.append(text)
 
     def finish(self) -> Path:
-        """Write the manifest ``suite.json`` and return its path."""
+        """Write the manifest ``suite.json`` and return its path.
+
+        When results of an earlier run were reused, a note says which, so that
+        the wall time is not read as the cost of the whole suite.
+        """
+        if self.reused:
+            self.note(
+                f"{len(self.reused)} result(s) were reused from an earlier run in this directory "
+                f"({', '.join(self.reused)}); the wall time covers this run only."
+            )
         manifest = {
             "format": MANIFEST_FORMAT,
             "format_version": 1,
