@@ -123,6 +123,23 @@ def test_entropy_termination():
     assert UtilityPlanner(entropy_cells=10_000).should_stop(_belief(occ, p), None)
 
 
+def test_min_observations_delays_the_entropy_test():
+    occ = np.zeros((10, 10), np.uint8)
+    peaked = np.zeros((10, 10))
+    peaked[5, 5] = 1.0
+    belief = _belief(occ, peaked)
+    history = _history(FreeSpaceGraph(occ, 1.0))
+    planner = UtilityPlanner(min_observations=5)
+    for step, stops in ((1, False), (4, False), (5, True), (9, True)):
+        history.step = step
+        assert planner.should_stop(belief, history) is stops, step
+    history.step = 1
+    assert UtilityPlanner().should_stop(belief, history)  # the paper's rule: from the first reading
+    for bad in (-1, 2.5, True):
+        with pytest.raises(InputDataError, match="min_observations"):
+            UtilityPlanner(min_observations=bad)
+
+
 def test_registry():
     assert "utility" in planner_names()
     p = get_planner("utility", eta=0.75)

@@ -3,7 +3,8 @@
 1. draw a random multi-room scenario of the training distribution and solve
    its flow and one gas release with the built-in solver;
 2. run one active search (paper Algorithm 1) with the shipped DGSE-S model
-   and the utility planner, the robot starting at least 2 m from the source;
+   and the utility planner (entropy test from the 5th reading on, the fewest
+   the network was trained with), the robot starting at least 2 m from the source;
 3. print the outcome and write the case figure, the final belief, the last
    search step and the animation of the search into the output folder.
 """
@@ -52,6 +53,7 @@ def demo_cmd(
     from dgse.search.episode import run_episode
     from dgse.search.metrics import episode_metrics
     from dgse.search.planners import get_planner
+    from dgse.sensing.sensors import MIN_SENSORS
     from dgse.viz.case import plot_case
 
     torch.set_num_threads(max(1, threads))
@@ -72,7 +74,7 @@ def demo_cmd(
         result = run_episode(
             case,
             estimator,
-            get_planner("utility", eta=eta),
+            get_planner("utility", eta=eta, min_observations=MIN_SENSORS),
             rng=seed,
             time_limit=time_limit,
             min_start_distance=2.0,
