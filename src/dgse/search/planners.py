@@ -51,10 +51,9 @@ what the paper leaves open:
 * ``min_observations`` (default 0, the paper's rule): the entropy test waits
   for that many readings.  A network trained on 5 to 300 readings (the
   paper's range, ``dgse.sensing.sensors.MIN_SENSORS``) has never seen fewer
-  than 5, and the shipped DGSE-S can be confident after one: on a poorly
-  ventilated test layout one reading gave a normalized entropy of 0.59-0.75
-  and 4 m of error.  ``dgse demo`` and the search benchmark pass
-  ``MIN_SENSORS``.
+  than 5, and the shipped DGSE-S can be confidently wrong after one
+  (``benchmarks/few_readings.py``).  ``dgse demo`` and the search benchmark
+  pass ``MIN_SENSORS``.
 """
 
 from __future__ import annotations
