@@ -55,7 +55,7 @@ def main() -> None:
             steps = [int(r["global_step"]) for r in rows if r.get(key)]
             ys = [float(r[key]) for r in rows if r.get(key)]
             ax.plot(steps, ys, marker=st["marker"], color=st["color"], label=st["label"], ms=3)
-            ax.set_xlabel("optimizer steps (batch 32)")
+            ax.set_xlabel("optimizer steps")
             ax.set_ylabel(label)
             ax.grid(alpha=0.3)
         for r in rows:

@@ -7,7 +7,14 @@ import math
 import pytest
 
 from dgse.search.episode import EpisodeResult, StepRecord
-from dgse.search.metrics import METRICS, aggregate, episode_metrics, is_success, path_efficiency_ratio
+from dgse.search.metrics import (
+    METRICS,
+    aggregate,
+    episode_metrics,
+    format_mean_std,
+    is_success,
+    path_efficiency_ratio,
+)
 
 
 def _result(
@@ -79,3 +86,12 @@ def test_aggregate():
     assert one["error_m_std"] == 0.0
     empty = aggregate([])
     assert empty["n_trials"] == 0 and empty["success_rate"] is None and empty["error_m_mean"] is None
+
+
+def test_format_mean_std():
+    agg = {"error_m_mean": 1.23456, "error_m_std": 0.5, "per_mean": 2.0, "per_std": None}
+    agg["n_steps_mean"] = None
+    assert format_mean_std(agg, "error_m", ".2f") == "1.23 (0.50)"
+    assert format_mean_std(agg, "per", ".1f") == "2.0"
+    assert format_mean_std(agg, "n_steps", ".1f") == "-"
+    assert format_mean_std(agg, "distance_m", ".1f", "n/a") == "n/a"

@@ -24,7 +24,7 @@ Scenarios (:meth:`BenchContext.scenarios`) are case files in
   converge are skipped (and counted);
 * ``filament``: the ``test`` scenarios with ``frames`` from the filament
   model (:func:`dgse.physics.filament.make_filament_case`), at most
-  ``FILAMENT_CAP`` filaments standing for the steady field at the start (a
+  ``RECOMMENDED_MAX_FILAMENTS`` filaments standing for the steady field at the start (a
   minute per scenario at most; poorly ventilated layouts would need millions).
 
 A scenario file that exists is reused, so an interrupted run continues
@@ -71,8 +71,6 @@ MANIFEST = "suite.json"
 TIMINGS = "_timings.json"
 #: Format tag of the manifest.
 MANIFEST_FORMAT = "dgse-bench-suite"
-#: ``FilamentSettings.max_filaments`` of the filament scenarios.
-FILAMENT_CAP = 20_000
 
 
 def jsonable(obj: Any) -> Any:
@@ -447,11 +445,11 @@ class BenchContext:
         return out
 
     def _filament_scenarios(self, n: int) -> list[Path]:
-        from dgse.physics.filament import FilamentSettings, make_filament_case
+        from dgse.physics.filament import RECOMMENDED_MAX_FILAMENTS, FilamentSettings, make_filament_case
 
         d = self.scenario_dir("filament")
         out = []
-        settings = FilamentSettings(duration=self.pick(240.0, 60.0), max_filaments=FILAMENT_CAP)
+        settings = FilamentSettings(duration=self.pick(240.0, 60.0), max_filaments=RECOMMENDED_MAX_FILAMENTS)
         for i, src in enumerate(self._test_scenarios(n)):
             path = d / src.name
             if not path.is_file():

@@ -66,6 +66,7 @@ import numpy as np
 
 from dgse.bench.core import BenchContext
 from dgse.bench.plots import plt
+from dgse.search.metrics import format_mean_std
 from dgse.sensing.sensors import MIN_SENSORS
 
 __all__ = ["ETA_OOD", "ETA_OOD_PAPER", "ETA_TUNED", "METHODS", "Method", "run"]
@@ -303,23 +304,16 @@ def _progress(ctx: BenchContext, what: str) -> Any:
 
 
 # -- formatting ---------------------------------------------------------------------------------
-def _ms(agg: Mapping[str, Any], key: str, spec: str) -> str:
-    m, s = agg.get(f"{key}_mean"), agg.get(f"{key}_std")
-    if m is None:
-        return "n/a"
-    return f"{m:{spec}} ({s:{spec}})" if s is not None else f"{m:{spec}}"
-
-
 def _row(agg: Mapping[str, Any]) -> dict[str, Any]:
     """A table row: SR in percent, mean (std) of the paper's metrics."""
     sr = agg.get("success_rate")
     return {
         "trials": agg.get("n_trials"),
         "SR [%]": None if sr is None else round(100 * sr, 1),
-        "error [m]": _ms(agg, "error_m", ".3f"),
-        "ST [s]": _ms(agg, "search_time_s", ".1f"),
-        "TD [m]": _ms(agg, "distance_m", ".2f"),
-        "step [s]": _ms(agg, "step_seconds", ".3f"),
+        "error [m]": format_mean_std(agg, "error_m", ".3f", "n/a"),
+        "ST [s]": format_mean_std(agg, "search_time_s", ".1f", "n/a"),
+        "TD [m]": format_mean_std(agg, "distance_m", ".2f", "n/a"),
+        "step [s]": format_mean_std(agg, "step_seconds", ".3f", "n/a"),
         "PER": _fmt(agg.get("per_mean"), ".2f"),
         "steps": _fmt(agg.get("n_steps_mean"), ".0f"),
     }

@@ -49,6 +49,7 @@ from rich.table import Table
 from dgse.cli.common import console, path_text, user_errors
 from dgse.errors import InputDataError
 from dgse.search.campaign import json_safe, load_cases, trial_seed
+from dgse.search.metrics import format_mean_std
 from dgse.world.case import Case
 
 if TYPE_CHECKING:
@@ -72,12 +73,6 @@ def _parse_options(items: Sequence[str] | None, flag: str) -> dict[str, Any]:
     return out
 
 
-def _ms(agg: dict[str, Any], key: str, fmt: str) -> str:
-    mean, std = agg.get(f"{key}_mean"), agg.get(f"{key}_std")
-    if mean is None:
-        return "-"
-    return f"{mean:{fmt}} ({std:{fmt}})" if std is not None else f"{mean:{fmt}}"
-
 
 def _table(rows: list[tuple[str, dict[str, Any]]], title: str) -> Table:
     t = Table(title=title, title_justify="left", box=box.SIMPLE_HEAD)
@@ -90,10 +85,10 @@ def _table(rows: list[tuple[str, dict[str, Any]]], title: str) -> Table:
             escape(name),
             str(agg["n_trials"]),
             "-" if sr is None else f"{100 * sr:.0f}",
-            _ms(agg, "error_m", ".3f"),
-            _ms(agg, "search_time_s", ".1f"),
-            _ms(agg, "distance_m", ".2f"),
-            _ms(agg, "step_seconds", ".3g"),
+            format_mean_std(agg, "error_m", ".3f"),
+            format_mean_std(agg, "search_time_s", ".1f"),
+            format_mean_std(agg, "distance_m", ".2f"),
+            format_mean_std(agg, "step_seconds", ".3g"),
             "-" if agg.get("per_mean") is None else f"{agg['per_mean']:.2f}",
             style="bold" if i == len(rows) - 1 and len(rows) > 1 else None,
             end_section=i == len(rows) - 2,

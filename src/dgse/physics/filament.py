@@ -105,6 +105,7 @@ from dgse.world.grid import DEFAULT_RESOLUTION
 
 __all__ = [
     "NOISE_MODELS",
+    "RECOMMENDED_MAX_FILAMENTS",
     "FilamentRun",
     "FilamentSettings",
     "face_velocities",
@@ -120,6 +121,8 @@ _jit_inline = numba.njit(cache=True, nogil=True, inline="always")
 
 #: ``"turbulent"``: diffusivity from the RANS ``nu_t``; ``"constant"``: GADEN's velocity noise.
 NOISE_MODELS = ("turbulent", "constant")
+#: ``max_filaments`` of ``dgse plume`` and the benchmarks: a minute per 100 x 100 case at most.
+RECOMMENDED_MAX_FILAMENTS = 20_000
 
 # move outcomes
 _OK, _BLOCKED, _EXITED = 0, 1, 2
@@ -1089,17 +1092,6 @@ def run_filaments(
     )
 
 
-def _steady_field(occ: np.ndarray, steady: np.ndarray) -> np.ndarray:
-    """The steady concentration (ppm) in the free cells, checked."""
-    c = np.asarray(steady, dtype=np.float64)
-    if c.shape != occ.shape:
-        raise InputDataError(f"steady concentration has shape {c.shape}, expected {occ.shape}")
-    c = np.where(occ == 0, c, 0.0)
-    if not np.isfinite(c).all() or (c < 0).any():
-        raise InputDataError("steady concentration must be finite and non-negative")
-    return c
-
-
 def _prefill(
     occ: np.ndarray,
     steady: np.ndarray | None,
@@ -1116,7 +1108,12 @@ def _prefill(
     empty = np.zeros(0)
     if steady is None or not settings.prefill:
         return empty, empty, empty, 1.0
-    c = _steady_field(occ, steady)
+    c = np.asarray(steady, dtype=np.float64)
+    if c.shape != occ.shape:
+        raise InputDataError(f"steady concentration has shape {c.shape}, expected {occ.shape}")
+    c = np.where(occ == 0, c, 0.0)
+    if not np.isfinite(c).all() or (c < 0).any():
+        raise InputDataError("steady concentration must be finite and non-negative")
     total = c.sum()  # in filaments: ppm per filament spread over one cell
     n_mass = total / ppm_per_filament
     n = round(n_mass)

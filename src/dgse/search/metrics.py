@@ -40,6 +40,7 @@ __all__ = [
     "SUCCESS_RADIUS_M",
     "aggregate",
     "episode_metrics",
+    "format_mean_std",
     "is_success",
     "path_efficiency_ratio",
 ]
@@ -129,3 +130,11 @@ def aggregate(
         mean, std, median = _stats([float(r[m]) for r in rows if r.get(m) is not None])
         out[f"{m}_mean"], out[f"{m}_std"], out[f"{m}_median"] = mean, std, median
     return out
+
+
+def format_mean_std(agg: Mapping[str, Any], key: str, spec: str, missing: str = "-") -> str:
+    """``"mean (std)"`` of metric ``key`` of an :func:`aggregate` (format ``spec``), else ``missing``."""
+    mean, std = agg.get(f"{key}_mean"), agg.get(f"{key}_std")
+    if mean is None:
+        return missing
+    return f"{mean:{spec}} ({std:{spec}})" if std is not None else f"{mean:{spec}}"
