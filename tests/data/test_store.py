@@ -194,6 +194,16 @@ def test_fixed_configurations_are_stored_and_stable(store_path):
         assert np.array_equal(redrawn.cells, ext.cells)  # draws depend on (seed, env) only
 
 
+def test_fixed_configurations_of_an_empty_split(store_path):
+    """A small dataset can leave a split empty (2 layouts: no validation layout)."""
+    with DatasetStore(store_path, "w") as s:
+        s.add_layout(synthetic_layout_cases(0), "train")
+        fx = s.fixed_configurations("val", seed=1)
+        assert len(fx) == 0 and fx.cells.shape == (0, 2)
+    with DatasetStore(store_path) as s:
+        assert s.has_fixed_configurations("val") and len(s.fixed_configurations("val")) == 0
+
+
 @pytest.mark.parametrize("kind", ["garbage", "truncated", "foreign", "directory", "missing"])
 def test_bad_store_files_raise_clear_errors(tmp_path, kind):
     path = tmp_path / "bad.h5"

@@ -900,7 +900,9 @@ class DatasetStore:
             data=fx.cells,
             compression="gzip",
             shuffle=True,
-            chunks=(min(max(fx.cells.shape[0], 1), 65536), 2),
+            # an empty split (no layouts) gets h5py's own chunking: newer h5py rejects
+            # a chunk larger than the data in any dimension
+            chunks=(min(fx.cells.shape[0], 65536), 2) if fx.cells.shape[0] else None,
         )
         fixed = self._f.require_group("fixed")
         if fx.split in fixed:
