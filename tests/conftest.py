@@ -1,8 +1,7 @@
-"""Shared fixtures: tiny hand-made layouts and the OpenFOAM reference cases."""
+"""Shared fixtures: tiny hand-made layouts and the committed OpenFOAM test cases."""
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import matplotlib
@@ -16,18 +15,19 @@ from dgse.world.layout import Layout, Opening
 REPO = Path(__file__).resolve().parents[1]
 
 
-def reference_dir() -> Path:
-    """``$DGSE_REFERENCE_CASES`` or ``../shared/reference-cases`` beside the repository."""
-    env = os.environ.get("DGSE_REFERENCE_CASES")
-    return Path(env) if env else (REPO.parent / "shared" / "reference-cases")
+#: OpenFOAM case files committed with the tests (``python3 scripts/make_test_data.py`` makes them).
+OPENFOAM_CASES = REPO / "tests" / "fixtures" / "openfoam"
 
 
 @pytest.fixture(scope="session")
-def reference_cases_dir() -> Path:
-    d = reference_dir()
-    if not any(d.glob("*.npz")):
-        pytest.fail(f"OpenFOAM reference cases not found in {d} (set DGSE_REFERENCE_CASES)")
-    return d
+def openfoam_cases_dir() -> Path:
+    """``tests/fixtures/openfoam``: one 5 x 5 m layout solved by OpenFOAM for two sources."""
+    if not any(OPENFOAM_CASES.glob("small_src*.npz")):
+        pytest.fail(
+            f"OpenFOAM test cases missing from {OPENFOAM_CASES} "
+            "(they are committed; remake them with `python3 scripts/make_test_data.py`)"
+        )
+    return OPENFOAM_CASES
 
 
 def two_rooms(width: int = 30, height: int = 20) -> Layout:

@@ -12,9 +12,19 @@ from dgse.world.case import Case
 from dgse.world.grid import Grid
 
 
-def _arrays(reference_cases_dir):
-    with np.load(reference_cases_dir / "s1_l002_src0.npz") as d:
+def _arrays(openfoam_cases_dir):
+    with np.load(openfoam_cases_dir / "small_src0.npz") as d:
         return {k: d[k] for k in d.files}
+
+
+def _wall_under_source(a):
+    """Make the source's cell solid (wind and gas 0 there, as in any solid cell)."""
+    i, j = Grid(a["occupancy"].shape, float(a["resolution"])).cell_of(*(float(v) for v in a["source"]))
+    for key in ("occupancy", "wind", "concentration"):
+        a[key] = a[key].copy()
+    a["occupancy"][i, j] = 1
+    a["wind"][:, i, j] = 0
+    a["concentration"][i, j] = 0
 
 
 def _write(tmp_path, arrays, name="bad.npz"):
@@ -23,9 +33,9 @@ def _write(tmp_path, arrays, name="bad.npz"):
     return p
 
 
-def test_reference_case_loads_and_round_trips(reference_cases_dir, tmp_path):
-    case = Case.load(reference_cases_dir / "s1_l002_src0.npz")
-    assert case.grid == Grid((72, 72), 0.1)
+def test_openfoam_case_loads_and_round_trips(openfoam_cases_dir, tmp_path):
+    case = Case.load(openfoam_cases_dir / "small_src0.npz")
+    assert case.grid == Grid((50, 50), 0.1)
     assert case.free[case.source_cell]
     back = Case.load(case.save(tmp_path / "copy.npz"))
     for key in ("occupancy", "wind", "concentration", "source"):
@@ -37,8 +47,8 @@ def test_reference_case_loads_and_round_trips(reference_cases_dir, tmp_path):
         assert json.loads(str(d["meta"])) == case.meta
 
 
-def test_frames_round_trip(reference_cases_dir, tmp_path):
-    a = _arrays(reference_cases_dir)
+def test_frames_round_trip(openfoam_cases_dir, tmp_path):
+    a = _arrays(openfoam_cases_dir)
     frames = np.stack([a["concentration"] * s for s in (0.5, 1.0, 1.5)]).astype(np.float32)
     meta = {**json.loads(str(a["meta"])), "frame_dt": 1.0}
     case = Case.from_arrays({**a, "frames": frames, "meta": np.array(json.dumps(meta))})
@@ -53,7 +63,7 @@ def test_frames_round_trip(reference_cases_dir, tmp_path):
         (lambda a: a.update(occupancy=a["occupancy"].astype(np.int64)), "occupancy has dtype int64"),
         (lambda a: a.update(wind=a["wind"][:, :10]), "wind has shape"),
         (lambda a: a.update(concentration=a["concentration"].astype(np.float64)), "expected float32"),
-        (lambda a: a.update(source=np.array([0.05, 2.65], np.float32)), "solid cell"),
+        (_wall_under_source, "solid cell"),
         (lambda a: a.update(source=np.array([50.0, 2.0], np.float32)), "outside the map"),
         (lambda a: a.update(meta=np.array("not json")), "meta is not a JSON object"),
         (lambda a: a.update(concentration=-a["concentration"]), "negative"),
@@ -65,13 +75,8 @@ def test_frames_round_trip(reference_cases_dir, tmp_path):
         (lambda a: a.update(frames=a["concentration"][None].astype(np.float32)), "no frame_dt"),
     ],
 )
-def test_bad_case_files_name_the_problem(reference_cases_dir, tmp_path, mutate, message):
-    a = _arrays(reference_cases_dir)
-    if "solid cell" in message:  # put a wall under the source instead of moving it
-        a["occupancy"] = a["occupancy"].copy()
-        a["occupancy"][26, 0] = 1
-        a["wind"][:, 26, 0] = 0
-        a["concentration"][26, 0] = 0
+def test_bad_case_files_name_the_problem(openfoam_cases_dir, tmp_path, mutate, message):
+    a = _arrays(openfoam_cases_dir)
     mutate(a)
     with pytest.raises(CaseFileError, match=message):
         Case.load(_write(tmp_path, a))
