@@ -119,7 +119,7 @@ def test_tuning_file_overrides_defaults(tmp_path):
     assert GGMRF(tuning=path).params.sigma_r == 3.0
     assert GGMRF(tuning=path, sigma_r=5.0).params.sigma_r == 5.0  # explicit beats the file
     assert GGMRF(tuning={"ggmrf": {"sigma_z": 0.2}}).params.sigma_z == 0.2
-    with pytest.raises(InputDataError, match="unknown ggmrf parameter"):
+    with pytest.raises(InputDataError, match="unknown ggmrf option"):
         GGMRF(tuning={"ggmrf": {"sigma_q": 1.0}})
     with pytest.raises(InputDataError, match="positive"):
         GGMRF(sigma_r=-1.0)

@@ -146,7 +146,7 @@ def test_registry():
     assert isinstance(p, UtilityPlanner) and p.eta == 0.75 and isinstance(p, Planner) and p.name == "utility"
     with pytest.raises(UnsupportedError, match=r"known planners: .*utility"):
         get_planner("nope")
-    with pytest.raises(InputDataError, match="does not take"):
+    with pytest.raises(InputDataError, match=r"unknown planner .utility. option\(s\) bogus; known: .*eta"):
         get_planner("utility", bogus=1)
     with pytest.raises(InputDataError, match="eta"):
         UtilityPlanner(eta=1.5)

@@ -156,6 +156,10 @@ def train_cmd(
     progress: Annotated[
         bool | None, typer.Option("--progress/--no-progress", help="Show a progress bar.")
     ] = None,
+    lightning_info: Annotated[
+        bool,
+        typer.Option("--lightning-info", help="Show Lightning's device banners, tips and notes."),
+    ] = False,
     set_: Annotated[
         list[str] | None,
         typer.Option(
@@ -198,6 +202,8 @@ def train_cmd(
     overrides.update({k: v for k, v in options.items() if v is not None})
     if fast_dev_run:
         overrides["fast_dev_run"] = True
+    if lightning_info:
+        overrides["lightning_messages"] = True
     config = load_config(config_file, overrides)
     if config.data is None:
         raise InputDataError("no dataset store: pass --data STORE (or set data in the --config file)")

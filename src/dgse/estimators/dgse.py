@@ -39,8 +39,9 @@ from dgse.data.rasterize import DEFAULT_CANVAS, DEFAULT_STRIDE, canvas_shape_for
 from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators.belief import Belief, normalize_source_probs
 from dgse.models.checkpoint import load_checkpoint
-from dgse.models.inference import Prediction, make_generator, predict
+from dgse.models.inference import Prediction, make_generator, predict, resolve_device
 from dgse.models.networks import DGSEModel
+from dgse.options import options_from
 from dgse.sensing.sensors import Observations
 
 __all__ = ["DGSEEstimator", "default_model_path", "make_dgse_o", "make_dgse_p", "make_dgse_s"]
@@ -107,7 +108,7 @@ class DGSEEstimator:
             raise InputDataError(f"K and T must be >= 1, got K={K}, T={T}")
         if not (model_resolution > 0 and math.isfinite(model_resolution)):
             raise InputDataError(f"model_resolution must be positive, got {model_resolution}")
-        self.device = torch.device(device)
+        self.device = resolve_device(device)
         self.dtype = _as_dtype(dtype)
         self.channels_last = bool(channels_last)
         self.model = model.to(self.device).eval()
@@ -134,7 +135,8 @@ class DGSEEstimator:
 
         ``kwargs`` go to :class:`DGSEEstimator`; ``device`` also places the weights.
         """
-        model, info = load_checkpoint(path, variant=variant, device=kwargs.get("device", "cpu"))
+        kwargs["device"] = resolve_device(kwargs.get("device", "cpu"))
+        model, info = load_checkpoint(path, variant=variant, device=kwargs["device"])
         est = cls(model, **kwargs)
         est.checkpoint = info.path
         return est
@@ -236,16 +238,19 @@ def _make(variant: str, model: str | os.PathLike[str] | DGSEModel, **kwargs: Any
     return DGSEEstimator.from_checkpoint(path, variant=variant, **kwargs)
 
 
+@options_from(DGSEEstimator)
 def make_dgse_o(model: str | os.PathLike[str] | DGSEModel = "default", **kwargs: Any) -> DGSEEstimator:
     """Factory of ``"dgse-o"``: ``model`` is a checkpoint path, a network or ``"default"``."""
     return _make("dgse-o", model, **kwargs)
 
 
+@options_from(DGSEEstimator)
 def make_dgse_p(model: str | os.PathLike[str] | DGSEModel = "default", **kwargs: Any) -> DGSEEstimator:
     """Factory of ``"dgse-p"``: ``model`` is a checkpoint path, a network or ``"default"``."""
     return _make("dgse-p", model, **kwargs)
 
 
+@options_from(DGSEEstimator)
 def make_dgse_s(model: str | os.PathLike[str] | DGSEModel = "default", **kwargs: Any) -> DGSEEstimator:
     """Factory of ``"dgse-s"``: ``model`` is a checkpoint path, a network or ``"default"``."""
     return _make("dgse-s", model, **kwargs)

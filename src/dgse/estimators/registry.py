@@ -121,12 +121,17 @@ def get_estimator(name: str, **kwargs: Any) -> Estimator:
     Raises:
         UnsupportedError: an unknown name (the message lists the known ones)
             or an estimator whose dependencies are missing here.
+        InputDataError: an option the estimator does not take, or a value of
+            the wrong type (:func:`dgse.options.check_options`).
     """
+    from dgse.options import check_options
+
     if name not in _REGISTRY:
         raise UnsupportedError(
             f"unknown estimator {name!r}; known estimators: {', '.join(estimator_names())}"
         )
-    return _resolve(name)(**kwargs)
+    factory = _resolve(name)
+    return factory(**check_options(f"estimator {name!r}", factory, kwargs))
 
 
 class StreamingEstimator:

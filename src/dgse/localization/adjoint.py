@@ -119,6 +119,7 @@ from scipy import stats
 from dgse.errors import InputDataError
 from dgse.estimators.belief import Belief
 from dgse.localization import check_inputs, log_moments_from_ppm, map_key
+from dgse.options import options_from
 from dgse.physics.builtin import flow_and_transport
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
 from dgse.physics.engines import FlowField
@@ -702,6 +703,7 @@ def _flow_info(fm: FlowModel) -> dict[str, Any]:
     return {"flow_converged": fm.info.get("converged"), "flow_solve_seconds": fm.info.get("seconds")}
 
 
+@options_from(AdjointEstimator, drop=("wind",), extra={"case_path": str})
 def make_adjoint(**kwargs: Any) -> AdjointEstimator:
     """Registry factory ``adjoint``: wind fitted to the readings; give ``layout=`` or ``case=``."""
     kwargs.pop("wind", None)
@@ -711,6 +713,7 @@ def make_adjoint(**kwargs: Any) -> AdjointEstimator:
     return AdjointEstimator(wind="estimated", **kwargs)
 
 
+@options_from(AdjointEstimator, drop=("wind",), extra={"case_path": str})
 def make_adjoint_oracle(**kwargs: Any) -> AdjointEstimator:
     """Registry factory ``adjoint-oracle``: the true flow; pass ``case=``, ``case_path=``, ``cases=``,
     ``layout=`` + ``inlet_velocity=``, or ``transport=`` (+ ``flow=``)."""

@@ -99,6 +99,7 @@ from scipy import ndimage
 from dgse.errors import InputDataError
 from dgse.estimators.belief import Belief
 from dgse.localization import check_inputs, probs_from_log
+from dgse.options import options_from
 from dgse.search.paths import Cell
 from dgse.search.planners import SearchHistory
 from dgse.sensing.sensors import Observations
@@ -784,6 +785,7 @@ class PMFSEstimator:
         return Belief(occ, res, probs, wind_mean=wind, info=info)
 
 
+@options_from(PMFSEstimator)
 def make_pmfs(**kwargs: Any) -> PMFSEstimator:
     """Registry factory ``pmfs``; ``params`` may be a dict of :class:`PMFSParams` fields."""
     return PMFSEstimator(**kwargs)

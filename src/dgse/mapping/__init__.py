@@ -93,6 +93,7 @@ import numpy as np
 
 from dgse.errors import InputDataError
 from dgse.estimators.belief import Belief, normalize_source_probs
+from dgse.options import check_options
 from dgse.sensing.sensors import Observations, check_sensor_cells
 
 __all__ = [
@@ -298,15 +299,12 @@ def resolve_params(
     ``tuning`` is a tuning file path, an already loaded ``{method: {...}}``
     mapping, or None.  Unknown parameter names raise :class:`InputDataError`.
     """
-    names = {f.name for f in dataclasses.fields(params_cls)}
     values: dict[str, Any] = {}
     if tuning is not None:
         table = load_tuning(tuning) if isinstance(tuning, str | os.PathLike) else dict(tuning)
         values.update(table.get(method, {}))
     values.update(overrides)
-    unknown = sorted(set(values) - names)
-    if unknown:
-        raise InputDataError(f"unknown {method} parameter(s) {unknown}; known: {sorted(names)}")
+    values = check_options(method, params_cls, values)
     try:
         return params_cls(**values)
     except (TypeError, ValueError) as e:

@@ -30,7 +30,7 @@ from typing import Any
 
 import torch
 
-from dgse.errors import InputDataError
+from dgse.errors import InputDataError, UnsupportedError
 from dgse.models.networks import DGSE_S, DGSEModel, masked_log_softmax
 
 __all__ = [
@@ -40,6 +40,7 @@ __all__ = [
     "make_generator",
     "moment_match",
     "predict",
+    "resolve_device",
     "run_sequential",
 ]
 
@@ -79,6 +80,42 @@ class SequentialParams:
     wind_logvar: torch.Tensor
     logc_mean: torch.Tensor
     logc_logvar: torch.Tensor
+
+
+def resolve_device(device: torch.device | str) -> torch.device:
+    """``device`` as a :class:`torch.device` that this PyTorch build can use.
+
+    Raises:
+        InputDataError: a name PyTorch does not know (``"gpu"``).
+        UnsupportedError: a device this build or machine does not have
+            (``"cuda"`` on a CPU build of PyTorch or a machine without a GPU).
+    """
+    if isinstance(device, torch.device):
+        dev = device
+    else:
+        try:
+            dev = torch.device(str(device).strip())
+        except (RuntimeError, ValueError, TypeError):
+            raise InputDataError(
+                f"unknown device {device!r}: use cpu, cuda, cuda:N or mps"
+            ) from None
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            build = "a CPU build of PyTorch" if torch.version.cuda is None else "no usable CUDA GPU"
+            raise UnsupportedError(
+                f"device {str(device)!r} asked for, but this installation has {build} "
+                f"(torch {torch.__version__}): use --device cpu, or install a CUDA build of PyTorch"
+            )
+        if dev.index is not None and dev.index >= torch.cuda.device_count():
+            raise UnsupportedError(
+                f"device {str(device)!r}: only {torch.cuda.device_count()} CUDA device(s) here"
+            )
+    elif dev.type == "mps":
+        if not torch.backends.mps.is_available():
+            raise UnsupportedError(f"device {str(device)!r}: MPS is not available here: use --device cpu")
+    elif dev.type != "cpu":
+        raise UnsupportedError(f"device {str(device)!r} is not supported: use cpu, cuda, cuda:N or mps")
+    return dev
 
 
 def make_generator(

@@ -59,7 +59,6 @@ what the paper leaves open:
 from __future__ import annotations
 
 import importlib
-import inspect
 import math
 import re
 from collections.abc import Callable
@@ -70,6 +69,7 @@ import numpy as np
 
 from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators.belief import Belief
+from dgse.options import check_options
 from dgse.search.paths import Cell, FreeSpaceGraph
 from dgse.sensing.sensors import Observations
 
@@ -318,10 +318,4 @@ def get_planner(name: str, **kwargs: Any) -> Planner:
             _REGISTRY[name] = factory
     else:
         factory = entry
-    try:
-        inspect.signature(factory).bind(**kwargs)
-    except TypeError as e:
-        raise InputDataError(f"planner {name!r} does not take these options: {e}") from e
-    except ValueError:  # no signature to check (some builtins): let the call decide
-        pass
-    return factory(**kwargs)
+    return factory(**check_options(f"planner {name!r}", factory, kwargs))

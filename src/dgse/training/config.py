@@ -196,6 +196,8 @@ class TrainConfig:
         log_every_n_steps: step-level logging interval.
         gradient_clip_val: clip the gradient norm to this (None: no clipping, the paper's).
         progress_bar: show a progress bar.
+        lightning_messages: show Lightning's informational messages (device
+            banners, tips, limit notes); off by default.
         fast_dev_run: one epoch of 2 training and 1 validation batch that still
             writes logs and checkpoints (unlike Lightning's own ``fast_dev_run``).
         cell_size: cell side in m for the localization error (None: the data's resolution).
@@ -231,6 +233,7 @@ class TrainConfig:
     log_every_n_steps: int = 50
     gradient_clip_val: float | None = None
     progress_bar: bool = True
+    lightning_messages: bool = False
     fast_dev_run: bool = False
     cell_size: float | None = None
 
@@ -284,7 +287,7 @@ class TrainConfig:
             set_(self, "loss_weights", _loss_weights(self.loss_weights))
         elif not isinstance(self.loss_weights, LossWeights):
             raise InputDataError(f"loss_weights must be a mapping, got {self.loss_weights!r}")
-        for key in ("augment", "progress_bar", "fast_dev_run"):
+        for key in ("augment", "progress_bar", "lightning_messages", "fast_dev_run"):
             _check_bool(key, getattr(self, key))
         parse_duration(self.max_time)
         if self.precision not in PRECISIONS:

@@ -65,6 +65,7 @@ from __future__ import annotations
 
 import csv
 import json
+import logging
 import math
 import os
 import signal
@@ -73,7 +74,8 @@ import tempfile
 import threading
 import time
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from importlib.metadata import PackageNotFoundError
@@ -86,7 +88,7 @@ import lightning as L
 import torch
 from lightning.fabric.utilities.exceptions import MisconfigurationException
 from lightning.pytorch.loggers import CSVLogger
-from lightning.pytorch.utilities import rank_zero_info
+from lightning.pytorch.utilities.rank_zero import rank_zero_only
 from safetensors import safe_open
 from safetensors.torch import save_file
 
@@ -459,7 +461,7 @@ class StopControl(L.Callback):
             self.reason = decision
             trainer.should_stop = True
             what = "time budget reached" if decision == "max_time" else "interrupted"
-            rank_zero_info(f"{what}: stopping after epoch {trainer.current_epoch} batch {batch_idx}")
+            _note(f"{what}: stopping after epoch {trainer.current_epoch} batch {batch_idx}")
 
     def teardown(self, trainer: L.Trainer, pl_module: L.LightningModule, stage: str) -> None:
         self.uninstall()
@@ -561,7 +563,7 @@ class TrainStateCheckpoint(L.Callback):
         _set_progress(
             trainer, st.next_epoch, st.global_step, int(st.meta.get("batches_that_stepped", st.global_step))
         )
-        rank_zero_info(f"resumed from {st.path}: epoch {st.next_epoch}, step {st.global_step}")
+        _note(f"resumed from {st.path}: epoch {st.next_epoch}, step {st.global_step}")
 
     def on_train_epoch_start(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
         self._epoch_t0 = time.monotonic()
@@ -769,6 +771,30 @@ def prepare_out_dir(config: TrainConfig, resume: bool) -> TrainState | None:
     return None
 
 
+#: loggers of Lightning's informational messages (device banners, tips, limit notes)
+_LIGHTNING_INFO_LOGGERS = ("lightning.pytorch.utilities.rank_zero", "lightning.fabric.utilities.rank_zero")
+
+
+def _note(message: str) -> None:
+    """A line of the run's own news on standard error, from the rank-0 process only."""
+    if rank_zero_only.rank == 0:
+        print(message, file=sys.stderr, flush=True)
+
+
+@contextmanager
+def quiet_lightning(quiet: bool = True) -> Iterator[None]:
+    """While active (if ``quiet``), Lightning's informational messages are off; warnings stay."""
+    loggers = [logging.getLogger(n) for n in _LIGHTNING_INFO_LOGGERS] if quiet else []
+    levels = [lg.level for lg in loggers]
+    for lg in loggers:
+        lg.setLevel(logging.WARNING)
+    try:
+        yield
+    finally:
+        for lg, level in zip(loggers, levels, strict=True):
+            lg.setLevel(level)
+
+
 def train(
     config: TrainConfig,
     *,
@@ -876,21 +902,24 @@ def train(
         "default_root_dir": str(out),
     }
     kwargs.update(trainer_kwargs or {})
-    try:
-        trainer = L.Trainer(**kwargs)
-    except (MisconfigurationException, ValueError, RuntimeError) as e:
-        raise InputDataError(f"cannot set up training: {e}") from None
-    if config.precision == "16-mixed" and trainer.strategy.root_device.type == "cpu":
-        raise InputDataError("precision 16-mixed needs a GPU; use bf16-mixed on the CPU")
-    if trainer.is_global_zero:
-        out.mkdir(parents=True, exist_ok=True)
-        logger.log_hyperparams(config.to_dict())
-    try:
-        with warnings.catch_warnings():
-            warnings.filterwarnings("ignore", message=".*does not have many workers.*")
-            trainer.fit(module, datamodule=dm)
-    finally:
-        stop.uninstall()
+    with quiet_lightning(not config.lightning_messages):
+        try:
+            trainer = L.Trainer(**kwargs)
+        except (MisconfigurationException, ValueError, RuntimeError) as e:
+            raise InputDataError(f"cannot set up training: {e}") from None
+        if config.precision == "16-mixed" and trainer.strategy.root_device.type == "cpu":
+            raise InputDataError("precision 16-mixed needs a GPU; use bf16-mixed on the CPU")
+        if trainer.is_global_zero:
+            out.mkdir(parents=True, exist_ok=True)
+            logger.log_hyperparams(config.to_dict())
+        try:
+            with warnings.catch_warnings():
+                warnings.filterwarnings("ignore", message=".*does not have many workers.*")
+                # Lightning's own use of a deprecated PyTorch pytree API: not ours to act on
+                warnings.filterwarnings("ignore", message=".*LeafSpec.*is deprecated.*")
+                trainer.fit(module, datamodule=dm)
+        finally:
+            stop.uninstall()
     if config.fast_dev_run:
         reason = "fast_dev_run"
     elif stop.reason is not None:
