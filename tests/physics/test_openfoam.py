@@ -112,6 +112,9 @@ def test_synthetic_layout(tmp_path):
     assert sol.flow.wind.shape == (2, H, W)
     assert sol.flow.info["converged"] and sol.info["converged"]
     assert sol.flow.info["iterations"] > 10
+    # the facts every engine reports under the same keys (recorded in case files)
+    assert sol.info["flow_iterations"] == sol.flow.info["iterations"] and sol.info["flow_converged"] is True
+    assert set(sol.info["wall_clock_s"]) >= {"flow", "gas", "gas_per_source", "layout_total"}
     assert np.all(sol.flow.wind[:, solid] == 0) and np.all(sol.concentrations[0][solid] == 0)
     for f in (sol.flow.k, sol.flow.epsilon, sol.flow.nut):
         assert f.shape == (H, W) and np.all(f[~solid] > 0)

@@ -15,7 +15,7 @@ from typing import Annotated
 import typer
 from rich.markup import escape
 
-from dgse.cli.common import console, path_text, user_errors
+from dgse.cli.common import check_output_dir, check_output_file, console, path_text, user_errors
 from dgse.errors import InputDataError
 
 __all__ = ["bench_cmd", "register", "report_cmd"]
@@ -52,6 +52,7 @@ def bench_cmd(
         raise InputDataError(
             f"unknown suite(s) {', '.join(unknown)}; the suites are: {', '.join(SUITES)}, all"
         )
+    check_output_dir(out)
     if threads is not None:
         if threads < 1:
             raise InputDataError(f"--threads must be at least 1, got {threads}")
@@ -79,6 +80,7 @@ def report_cmd(
     """Write one self-contained HTML page (figures embedded) from the results in DIR."""
     from dgse.bench.report import write_report
 
+    check_output_file(output, "report")
     console.print(f"wrote report [cyan]{path_text(write_report(directory, output))}[/]")
 
 

@@ -19,7 +19,15 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from dgse.cli.common import console, new_app, path_text, print_error, user_errors
+from dgse.cli.common import (
+    check_output_dir,
+    check_output_file,
+    console,
+    new_app,
+    path_text,
+    print_error,
+    user_errors,
+)
 from dgse.errors import InputDataError
 
 __all__ = [
@@ -76,6 +84,7 @@ def generate_cmd(
     """
     from dgse.data.generation import generate
 
+    check_output_file(out, "dataset store")
     kwargs: dict[str, Any] = {}
     if size is not None:
         kwargs = {"width_range": tuple(size), "height_range": tuple(size)}
@@ -120,6 +129,7 @@ def export_cmd(
     """Write every case of a store as a case file <layout>_src<k>.npz (plus manifest.json)."""
     from dgse.data.store import DatasetStore
 
+    check_output_dir(out)
     with DatasetStore(store, "r") as s:
         files = s.export(out, split=split)
     console.print(f"wrote {len(files)} case files into [cyan]{path_text(out)}[/]")
@@ -139,6 +149,7 @@ def import_cmd(
     """Add case files to a dataset store (cases sharing a layout become one layout)."""
     from dgse.data.store import DatasetStore
 
+    check_output_file(out, "dataset store")
     with DatasetStore(out, "a") as s:
         added = s.import_cases(cases, split=split)
         n_cases = sum(s.n_sources(i) for i in added)
@@ -166,6 +177,8 @@ def stats_cmd(
     """Statistics of a dataset: sizes, inlet speeds, release rates, concentrations, splits."""
     from dgse.data.stats import dataset_stats, plot_stats
 
+    check_output_file(plot, "figure")
+    check_output_file(json_out, "JSON file")
     st = dataset_stats(store)
     sp = st["splits"]
     console.print(
@@ -230,6 +243,7 @@ def import_gaden_cmd(
     """Make a case file (with frames) from a GADEN scenario's result files."""
     from dgse.data.gaden import load_gaden
 
+    check_output_file(out, "case file")
     case = load_gaden(
         files, obstacles, z_index=z_index, frame_dt=frame_dt, release_rate=rate, inlet_velocity=inlet_velocity
     )

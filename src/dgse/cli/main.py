@@ -20,7 +20,9 @@ Commands (``dgse COMMAND --help`` for each):
 
 Every error a user can cause (:class:`~dgse.errors.DGSEError`, or a file that
 cannot be written) is printed as one red line ``error: <message>`` and the
-exit status is 2; there is no traceback.
+exit status is 2; there is no traceback.  Ctrl-C ends a command with status
+130; anything unexpected prints one line with the path of a log file holding
+the traceback (:func:`dgse.cli.common.write_crash_log`) and exits with 1.
 """
 
 from __future__ import annotations
@@ -40,12 +42,17 @@ from rich.table import Table
 from rich.text import Text
 
 from dgse.cli.common import (
+    EXIT_BUG,
+    EXIT_INTERRUPTED,
     EXIT_USER_ERROR,
+    check_output_dir,
+    check_output_file,
     console,
     new_app,
     os_error_message,
     path_text,
     print_error,
+    report_bug,
 )
 from dgse.errors import DGSEError, InputDataError
 from dgse.world.case import Case
@@ -119,16 +126,26 @@ def _layout_summary(layout: Layout) -> str:
 
 def _save_figure(fig, path: Path, dpi: int) -> Path:
     """Save a figure; the format follows the suffix (png, pdf, svg, ...)."""
+    _check_figure_out(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi)
+    return path
+
+
+def _check_figure_out(path: Path | None) -> None:
+    """Check before any work that a figure can be written at ``path`` (format and folder)."""
+    if path is None:
+        return
+    from matplotlib.figure import Figure
+
     fmt = path.suffix.lstrip(".").lower()
-    supported = fig.canvas.get_supported_filetypes()
+    supported = Figure().canvas.get_supported_filetypes()
     if fmt not in supported:
         raise InputDataError(
             f"cannot write a figure as {path.name!r}: use one of "
             + ", ".join(f".{k}" for k in sorted(supported))
         )
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi)
-    return path
+    check_output_file(path, "figure")
 
 
 def _check_positive(value: float, what: str) -> float:
@@ -208,6 +225,8 @@ def layout_cmd(
     from dgse.world.generate import random_layout, random_ood_layout
     from dgse.world.layout_io import save_layout
 
+    _check_figure_out(plot)
+    check_output_file(out, "layout file")
     seed = _new_seed() if seed is None else seed
     layout = (random_ood_layout if ood else random_layout)(seed)
     path = save_layout(layout, out if out is not None else Path(f"{layout.name}.npz"))
@@ -265,6 +284,8 @@ def import_floorplan_cmd(
     from dgse.world.layout_io import save_layout
 
     _check_positive(resolution, "--resolution")
+    check_output_file(out, "layout file")
+    _check_figure_out(plot)
     if floorplan.suffix.lower() in (".yaml", ".yml"):
         if pixel_size is not None or width_m is not None:
             raise InputDataError(
@@ -332,6 +353,8 @@ def solve_cmd(
     from dgse.physics.scenario import resolve_case, solve_cases
     from dgse.world.layout_io import load_layout, npz_kind
 
+    check_output_file(out, "case file")
+    _check_figure_out(plot)
     eng = _engine(engine)
     kind = npz_kind(input_file)
     given = {
@@ -395,6 +418,7 @@ def show_cmd(
 
     if dpi <= 0:
         raise InputDataError(f"--dpi must be positive, got {dpi}")
+    _check_figure_out(out)
     if npz_kind(input_file) == "case":
         fig = plot_case(Case.load(input_file), arrows=arrows)
     else:
@@ -441,6 +465,7 @@ def scenario_cmd(
 
     if sources < 1:
         raise InputDataError(f"--sources must be at least 1, got {sources}")
+    check_output_dir(out)
     eng = _engine(engine)
     seed = _new_seed() if seed is None else seed
     t0 = time.perf_counter()
@@ -550,10 +575,13 @@ _register_bench(app)
 def main(args: Sequence[str] | None = None) -> int:
     """Run the CLI with ``args`` (default ``sys.argv[1:]``); returns the exit status.
 
-    User-caused errors print ``error: <message>`` in red and return 2.
+    User-caused errors print ``error: <message>`` in red and return 2; Ctrl-C
+    returns 130; an unexpected error prints one line naming its crash log and
+    returns 1.
     """
+    argv = list(args) if args is not None else sys.argv[1:]
     try:
-        app(args=list(args) if args is not None else None, prog_name="dgse")
+        app(args=argv, prog_name="dgse", standalone_mode=True)
     except SystemExit as e:
         code = e.code
         return code if isinstance(code, int) else (0 if code is None else 1)
@@ -563,6 +591,12 @@ def main(args: Sequence[str] | None = None) -> int:
     except OSError as e:  # a file that cannot be written (permission, disk full, ...)
         print_error(os_error_message(e))
         return EXIT_USER_ERROR
+    except KeyboardInterrupt:
+        print_error("interrupted")
+        return EXIT_INTERRUPTED
+    except Exception as e:  # a bug: one line here, the traceback in a log file
+        report_bug(e, argv)
+        return EXIT_BUG
     return 0
 
 

@@ -20,7 +20,7 @@ from typing import Annotated
 
 import typer
 
-from dgse.cli.common import console, path_text, user_errors
+from dgse.cli.common import check_output_file, console, path_text, user_errors
 from dgse.errors import InputDataError
 
 __all__ = ["plume_cmd", "register"]
@@ -69,6 +69,7 @@ def plume_cmd(
 
     if out.resolve() == case_file.resolve():
         raise InputDataError(f"--out {out} would overwrite the input case; choose another file")
+    check_output_file(out, "case file")
     settings = FilamentSettings(
         filaments_per_second=filaments,
         dt=dt,

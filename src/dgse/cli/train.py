@@ -14,51 +14,18 @@ status 2.
 
 from __future__ import annotations
 
-import functools
-from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any, TypeVar
+from typing import Annotated, Any
 
 import typer
 import yaml
-from rich.console import Console
 from rich.markup import escape
-from rich.text import Text
 
-from dgse.errors import DGSEError, InputDataError
+from dgse.cli.common import check_output_dir, check_output_file, console
+from dgse.cli.common import user_errors as _user_errors
+from dgse.errors import InputDataError
 
 __all__ = ["parse_devices", "parse_set", "register", "train_cmd"]
-
-EXIT_USER_ERROR = 2
-
-console = Console(highlight=False)
-err_console = Console(stderr=True, highlight=False)
-
-F = TypeVar("F", bound=Callable[..., Any])
-
-
-def _print_error(message: str) -> None:
-    err_console.print(
-        Text("error: ", style="bold red") + Text(message.replace("\n", " "), style="red"),
-        soft_wrap=True,
-    )
-
-
-def _user_errors(fn: F) -> F:
-    """Print a user-caused error as one red line and exit with status 2."""
-
-    @functools.wraps(fn)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        try:
-            return fn(*args, **kwargs)
-        except DGSEError as e:
-            _print_error(str(e))
-            raise typer.Exit(EXIT_USER_ERROR) from None
-        except OSError as e:
-            _print_error(f"{e.filename}: {e.strerror}" if e.filename and e.strerror else str(e))
-            raise typer.Exit(EXIT_USER_ERROR) from None
-
-    return wrapper  # type: ignore[return-value]
 
 
 def _p(path: Path | str) -> str:
@@ -217,6 +184,8 @@ def train_cmd(
     # the checks train() makes first, before anything is printed
     if not Path(config.data).is_file():
         raise InputDataError(f"dataset store {config.data} not found")
+    check_output_dir(out_dir, "run folder")
+    check_output_file(Path(config.export) if config.export else None, "exported model")
     state = prepare_out_dir(config, resume)
     talk = getattr(rank_zero_only, "rank", 0) == 0  # set by Lightning from the environment
     if talk:

@@ -54,7 +54,11 @@ class Solution:
 
     ``concentrations[n]`` is the ``(H, W)`` steady field (ppm) of ``sources[n]``;
     ``outlet_flux_ratio[n]`` is the scalar flux out of the outlets over the
-    release rate (1 at steady state); ``info`` carries timings and solver facts.
+    release rate (1 at steady state); ``info`` carries timings and solver facts,
+    at least ``engine``, ``flow_iterations``, ``flow_converged`` and
+    ``wall_clock_s`` (``flow``, ``gas``, ``gas_per_source``, ``layout_total``
+    seconds), which :func:`dgse.physics.scenario.solution_to_cases` records in
+    every case file.
     """
 
     flow: FlowField

@@ -933,7 +933,19 @@ class OpenFOAMEngine:
             self._deadline = None
             if not keep:
                 shutil.rmtree(root, ignore_errors=True)
-        sol.info["seconds"]["total"] = time.perf_counter() - t_start
+        secs = sol.info["seconds"]
+        secs["total"] = time.perf_counter() - t_start
+        gas = [float(s) for s in secs.get("gas", [])]
+        # the facts every engine reports under the same keys (what case files record)
+        sol.info["flow_iterations"] = sol.info["iterations"]["flow"]
+        sol.info["flow_converged"] = sol.info["converged"]
+        sol.info["wall_clock_s"] = {
+            "mesh": secs.get("mesh"),
+            "flow": secs.get("flow"),
+            "gas": sum(gas),
+            "gas_per_source": sum(gas) / max(len(gas), 1),
+            "layout_total": secs["total"],
+        }
         if keep:
             sol.info["case_dir"] = str(root / "case")
         return sol

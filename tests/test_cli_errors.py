@@ -1,0 +1,92 @@
+"""Bad input never shows a traceback: one ``error:`` line, a non-zero exit, checked before the work.
+
+And a bug (an unexpected exception) prints one line naming a log file that
+holds the traceback.
+"""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from dgse.cli.main import main
+from dgse.physics import engines as engines_mod
+from dgse.physics.scenario import solve_cases
+from tests.conftest import two_rooms
+
+
+@pytest.fixture(scope="module")
+def case_file(tmp_path_factory):
+    d = tmp_path_factory.mktemp("cli-errors")
+    case = solve_cases(two_rooms(), 1.0, [((2.05, 0.55), 0.8)])[0]
+    return case.save(d / "two_rooms_src0.npz")
+
+
+def _run(capsys, *args) -> tuple[int, str, str]:
+    code = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _assert_one_line_error(code: int, out: str, err: str, *fragments: str) -> None:
+    assert code == 2, (out, err)
+    assert "Traceback" not in out + err
+    line = err.strip()
+    assert line.startswith("error: ") and "\n" not in line, err
+    for f in fragments:
+        assert f in line, (f, line)
+
+
+@pytest.mark.parametrize(
+    ("args", "fragments"),
+    [
+        (["--device", "cuda"], ["cuda", "use --device cpu"]),
+        (["--device", "gpu"], ["unknown device 'gpu'", "cpu, cuda"]),
+        (["-p", "foo=1"], ["unknown estimator 'dgse-s' option(s) foo", "known: K, T"]),
+        (["-p", "K=abc"], ["option K='abc' must be an integer"]),
+        (["--method", "kdmv", "-p", "sigma=abc"], ["kdmv: option sigma='abc' must be a number"]),
+        (["--method", "kdmv", "-p", "foo=1"], ["unknown kdmv option(s) foo"]),
+    ],
+)
+def test_estimate_bad_options(capsys, tmp_path, case_file, args, fragments):
+    code, out, err = _run(capsys, "estimate", case_file, "-n", "5", "-o", tmp_path / "b.npz", *args)
+    _assert_one_line_error(code, out, err, *fragments)
+    assert not (tmp_path / "b.npz").exists()
+
+
+def test_outputs_are_checked_before_the_work(capsys, tmp_path, case_file):
+    a_file = tmp_path / "plain.txt"
+    a_file.write_text("x")
+    # a folder where a file goes; a file where a folder goes; a file in the way of a folder
+    t0 = time.perf_counter()
+    _assert_one_line_error(*_run(capsys, "solve", case_file, "-o", tmp_path), "is a folder")
+    _assert_one_line_error(
+        *_run(capsys, "scenario", "--seed", "1", "--out", a_file), "is a file, not a folder"
+    )
+    _assert_one_line_error(
+        *_run(capsys, "generate", "--layouts", "2", "--out", a_file / "x.h5"), "is a file, not a folder"
+    )
+    _assert_one_line_error(
+        *_run(capsys, "estimate", case_file, "-n", "5", "-o", tmp_path / "e.npz", "--plot", "fig.xyz"),
+        "cannot write a figure as 'fig.xyz'",
+    )
+    _assert_one_line_error(*_run(capsys, "plume", case_file, "-o", tmp_path), "is a folder")
+    assert time.perf_counter() - t0 < 30  # no solve, search or simulation ran first
+
+
+def test_a_bug_prints_one_line_and_logs_the_traceback(capsys, monkeypatch, tmp_path):
+    def broken() -> list[str]:
+        raise RuntimeError("boom")
+
+    monkeypatch.setenv("DGSE_LOG_DIR", str(tmp_path / "logs"))
+    monkeypatch.setattr(engines_mod, "engine_names", broken)
+    code, out, err = _run(capsys, "engines")
+    assert code == 1
+    assert "Traceback" not in out + err
+    line = err.strip()
+    assert "\n" not in line and "RuntimeError: boom" in line and "bug in dgse" in line
+    logs = list((tmp_path / "logs").glob("crash-*.log"))
+    assert len(logs) == 1 and str(logs[0]) in line
+    text = logs[0].read_text()
+    assert "Traceback" in text and "RuntimeError: boom" in text and "command: dgse engines" in text
