@@ -7,12 +7,14 @@ import json
 import pytest
 
 from dgse.errors import InputDataError
-from dgse.search.campaign import estimator_options, load_cases, run_trials, trial_seed
+from dgse.search.campaign import estimator_options, journal_path, load_cases, run_trials, trial_seed
+from dgse.search.journal import count_records
 from dgse.search.planners import UtilityPlanner
 from tests.search import PeakEstimator, corridor_case
 
 
 def _cases(tmp_path):
+    tmp_path.mkdir(parents=True, exist_ok=True)
     a, b = corridor_case(), corridor_case(source_cell=(5, 20))
     a.save(tmp_path / "a.npz")
     b.save(tmp_path / "b.npz")
@@ -81,3 +83,108 @@ def test_estimator_options_defaults():
     assert estimator_options("pmfs") == {}
     assert estimator_options("pmfs", model="x") == {"model": "x"}
     assert trial_seed(1, "a", 0).entropy == trial_seed(1, "a", 0).entropy
+
+
+# -- keeping finished episodes and resuming ------------------------------------------------------
+#: Metrics that are measured wall times (they differ from run to run).
+TIMINGS = {"step_seconds", "preprocessing_s", "inference_s", "planning_s"}
+
+
+def _trials(data):
+    """Every trial's summary without its measured computation times, in campaign order."""
+    return [
+        {**{k: v for k, v in t.items() if k != "metrics"}, "metrics": _untimed(t["metrics"])}
+        for c in data["per_case"]
+        for t in c["trials"]
+    ]
+
+
+def _untimed(metrics):
+    return {k: v for k, v in metrics.items() if not any(k.startswith(m) for m in TIMINGS)}
+
+
+def _campaign(d, **kw):
+    args = {"trials": 2, "seed": 5, "time_limit": 90.0, "min_start_distance": 1.0, **kw}
+    return run_trials(d, PeakEstimator(adaptive=True), UtilityPlanner(eta=0.4), **args)
+
+
+def test_interrupted_campaign_keeps_finished_episodes_and_resumes(tmp_path):
+    d = _cases(tmp_path / "cases")
+    journal = tmp_path / "out" / "search.journal.jsonl"
+    assert journal_path(tmp_path / "out" / "search.json") == journal
+    whole = _campaign(d)
+
+    def stop_after(n):
+        calls = []
+
+        def on_episode(path, case, r, result):
+            calls.append((path.stem, r))
+            if len(calls) == n:
+                raise KeyboardInterrupt
+
+        return on_episode, calls
+
+    on_episode, calls = stop_after(3)
+    with pytest.raises(KeyboardInterrupt):
+        _campaign(d, journal=journal, on_episode=on_episode)
+    assert count_records(journal) == 3
+    # Ctrl-C within the 4th episode (from the per-step callback): still 3 kept
+    steps = []
+
+    def interrupt_in_episode(path, r, rec):
+        steps.append((path.stem, r, rec.step, rec.time_s))
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        _campaign(d, journal=journal, on_step=interrupt_in_episode)
+    assert steps == [("b", 1, 1, steps[0][3])] and count_records(journal) == 3
+    # the rerun runs only the missing episode and returns what the uninterrupted run returned
+    on_episode, calls = stop_after(-1)
+    ticks = []
+    again = _campaign(
+        d, journal=journal, on_episode=on_episode, progress=lambda desc, done, total: ticks.append(done)
+    )
+    assert calls == [("b", 1)] and ticks == [3, 4] and count_records(journal) == 4
+    assert _trials(again) == _trials(whole)
+    assert again["settings"] == whole["settings"]
+    assert _untimed(again["aggregate"]) == _untimed(whole["aggregate"])
+    # more trials: the kept ones are reused, only the new ones run
+    on_episode, calls = stop_after(-1)
+    more = _campaign(d, journal=journal, trials=3, on_episode=on_episode)
+    assert calls == [("a", 2), ("b", 2)] and more["aggregate"]["n_trials"] == 6
+    assert [t for t in _trials(more) if t["trial"] < 2] == _trials(whole)
+
+
+def test_journal_of_other_settings_is_refused(tmp_path):
+    d = _cases(tmp_path / "cases")
+    journal = tmp_path / "search.journal.jsonl"
+    _campaign(d, journal=journal, trials=1)
+    with pytest.raises(InputDataError, match=r"seed was 5, now 6.*--restart") as e:
+        _campaign(d, journal=journal, trials=1, seed=6)
+    assert str(journal) in str(e.value)
+    with pytest.raises(InputDataError, match=r"time_limit_s was 90\.0, now 60\.0"):
+        _campaign(d, journal=journal, trials=1, time_limit=60.0)
+    with pytest.raises(InputDataError, match="steps"):
+        _campaign(d, journal=journal, trials=1, steps=True)
+    assert count_records(journal) == 2  # nothing lost by the refusals
+    # restart: the old episodes are discarded
+    calls = []
+    _campaign(d, journal=journal, trials=1, seed=6, restart=True, on_episode=lambda *a: calls.append(a))
+    assert len(calls) == 2 and count_records(journal) == 2
+    # a case file that changed since its episodes were kept
+    corridor_case(source_cell=(4, 20)).save(d / "b.npz")
+    with pytest.raises(InputDataError, match=r"b\.npz differs"):
+        _campaign(d, journal=journal, trials=1, seed=6)
+
+
+def test_torn_last_line_is_dropped_and_redone(tmp_path):
+    d = _cases(tmp_path / "cases")
+    journal = tmp_path / "search.journal.jsonl"
+    whole = _campaign(d, journal=journal, trials=1)
+    lines = journal.read_text().splitlines(keepends=True)
+    journal.write_text("".join(lines[:-1]) + lines[-1][: len(lines[-1]) // 2])  # killed while writing
+    assert count_records(journal) == 1
+    calls = []
+    again = _campaign(d, journal=journal, trials=1, on_episode=lambda p, c, r, res: calls.append(p.stem))
+    assert calls == ["b"] and _trials(again) == _trials(whole)
+    assert journal.read_text().endswith("\n") and count_records(journal) == 2

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -97,6 +98,28 @@ def test_seeding_compute_time_and_downsampled_records():
     k = int(np.searchsorted(c.trajectory_times, t_last, side="right"))
     travel = graph_for(case.occupancy, 0.1).path_length(c.trajectory_cells[:k]) / 0.5
     assert t_last == pytest.approx(c.n_steps * 3.0 + travel + sum(s.compute_s for s in c.steps[:-1]))
+
+
+def test_on_step_reports_every_step_as_it_happens():
+    case = corridor_case(gas=False)
+    seen = []
+    r = run_episode(case, UniformEstimator(), UtilityPlanner(), rng=2, time_limit=40.0, on_step=seen.append)
+    assert seen == r.steps  # the same records, in order, one per step
+    clock = [s.time_s for s in seen]
+    assert [s.step for s in seen] == list(range(1, r.n_steps + 1))
+    assert all(b > a for a, b in itertools.pairwise(clock)) and clock[-1] <= 40.0
+    assert all(0.0 <= s.normalized_entropy <= 1.0 and math.isfinite(s.error_m) for s in seen)
+    # an exception from the callback (Ctrl-C) ends the episode at once
+    calls = []
+
+    def stop_at_third(rec):
+        calls.append(rec.step)
+        if rec.step == 3:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_episode(case, UniformEstimator(), UtilityPlanner(), rng=2, time_limit=40.0, on_step=stop_at_third)
+    assert calls == [1, 2, 3]
 
 
 def test_planner_stop_signal():

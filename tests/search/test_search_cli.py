@@ -15,7 +15,7 @@ from dgse.models.checkpoint import save_model
 from dgse.models.networks import create_model
 from dgse.world.layout_io import save_layout
 from tests.conftest import two_rooms
-from tests.search import solved_two_rooms
+from tests.search import PeakEstimator, corridor_case, solved_two_rooms
 
 torch.set_num_threads(1)
 
@@ -49,7 +49,7 @@ def _run(capsys, *args) -> tuple[int, str, str]:
 def test_search_writes_json_and_gif(setup, capsys):
     d, cases, model = setup
     out_json, gifs = d / "out" / "metrics.json", d / "gifs"
-    fast = ["-O", "K=2", "-O", "T=1", "-O", "canvas_minimum=32"]
+    fast = ["-p", "K=2", "-p", "T=1", "-p", "canvas_minimum=32"]
     code, out, err = _run(
         capsys, cases, "--method", "dgse-s", "--model", model, "--trials", 2, "--seed", 3,
         "--time-limit", 20, "--min-start-distance", 1.0, "--json", out_json, "--animate", gifs,
@@ -109,3 +109,137 @@ def test_user_errors_are_one_red_line(setup, capsys, args, fragment):
     line = err.strip()
     assert line.startswith("error: ") and "\n" not in line and fragment in line, err
     assert "Traceback" not in out + err
+
+
+# -- -p/--param, keeping episodes, Ctrl-C, resuming ------------------------------------------------
+@pytest.fixture
+def peak(tmp_path, monkeypatch):
+    """Two corridor case files; ``--method peak`` builds a PeakEstimator (its arguments recorded)."""
+    import dgse.estimators.registry as registry
+
+    built: list[dict] = []
+    real = registry.get_estimator
+
+    def get_estimator(name, **kwargs):
+        if name != "peak":
+            return real(name, **kwargs)
+        built.append(kwargs)
+        return PeakEstimator(**kwargs)
+
+    monkeypatch.setattr(registry, "get_estimator", get_estimator)
+    cases = tmp_path / "cases"
+    cases.mkdir()
+    corridor_case().save(cases / "a.npz")
+    corridor_case(source_cell=(5, 20)).save(cases / "b.npz")
+    return cases, built
+
+
+PEAK = ["-m", "peak", "-p", "adaptive=true", "--eta", "0.4", "--trials", "2", "--time-limit", "90",
+        "--min-start-distance", "1"]  # fmt: skip
+
+
+def _untimed_trials(path):
+    data = json.loads(path.read_text())
+    timings = ("step_seconds", "preprocessing_s", "inference_s", "planning_s")
+    return [
+        {**t, "metrics": {k: v for k, v in t["metrics"].items() if not k.startswith(timings)}}
+        for c in data["per_case"]
+        for t in c["trials"]
+    ]
+
+
+def test_param_reaches_the_estimator_and_planner_has_no_short_form(peak, tmp_path, capsys):
+    cases, built = peak
+    out = tmp_path / "p.json"
+    code, _, err = _run(capsys, cases, *PEAK, "-p", "sigma=0.1", "--json", out, "--no-progress")
+    assert code == 0, err
+    assert built == [{"adaptive": True, "sigma": 0.1}]
+    assert json.loads(out.read_text())["settings"]["estimator_options"] == {"adaptive": True, "sigma": 0.1}
+    # -O/--option: the old spelling still works (hidden from --help)
+    other = tmp_path / "o.json"
+    code, _, err = _run(capsys, cases, *PEAK, "-O", "sigma=0.2", "--json", other, "--no-progress")
+    assert code == 0, err
+    assert built[-1] == {"adaptive": True, "sigma": 0.2}
+    # -p is not the planner any more: a planner name is not KEY=VALUE
+    code, _, err = _run(capsys, cases, "-p", "utility", "--no-progress")
+    assert code == 2 and "--param takes KEY=VALUE" in err
+    code, help_text, _ = _run(capsys, "--help")
+    assert "--param" in help_text and "--option" not in help_text and "dgse-out/search-" in help_text
+
+
+def test_ctrl_c_keeps_finished_episodes_and_the_printed_command_resumes(peak, tmp_path, capsys, monkeypatch):
+    import shlex
+
+    import dgse.search.episode as episode
+
+    cases, _ = peak
+    whole = tmp_path / "whole.json"
+    assert _run(capsys, cases, *PEAK, "--json", whole, "--no-progress")[0] == 0
+    real, calls = episode.run_episode, []
+
+    def interrupted(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt  # Ctrl-C during the third episode
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(episode, "run_episode", interrupted)
+    out = tmp_path / "res" / "m.json"
+    code, text, err = _run(capsys, cases, *PEAK, "--json", out, "--no-progress")
+    assert code == 130 and "Traceback" not in text + err, (text, err)
+    line = err.strip()
+    assert "\n" not in line and line.startswith("interrupted: 2 finished episodes kept in "), err
+    assert str(tmp_path / "res" / "m.journal.jsonl") in line and not out.exists()
+    command = line.split("resume with: ", 1)[1]
+    monkeypatch.setattr(episode, "run_episode", real)
+    words = shlex.split(command)
+    assert words[:2] == ["dgse", "search"] and "--restart" not in words
+    code, text, err = _run(capsys, *words[2:])
+    assert code == 0, err
+    assert "2 finished episodes of an earlier run in" in text and "4 episodes in" in text
+    assert "(2 kept from an earlier run)" in text
+    assert _untimed_trials(out) == _untimed_trials(whole)
+    # other settings into the same file: refused with what differs and how to start afresh
+    code, _, err = _run(capsys, cases, *PEAK, "--seed", "1", "--json", out, "--no-progress")
+    assert code == 2 and "seed was 0, now 1" in err and "--restart" in err and "Traceback" not in err
+    code, text, err = _run(capsys, cases, *PEAK, "--seed", "1", "--json", out, "--no-progress", "--restart")
+    assert code == 0, err
+    assert "kept from an earlier run" not in text
+    assert json.loads(out.read_text())["settings"]["seed"] == 1
+
+
+def test_default_output_and_progress(peak, tmp_path, capsys, monkeypatch):
+    cases, _ = peak
+    monkeypatch.chdir(tmp_path)
+    code, text, err = _run(capsys, cases / "a.npz", *PEAK, "--trials", "1", "--progress")
+    assert code == 0, err
+    assert (tmp_path / "dgse-out" / "search-peak-utility.json").is_file()
+    assert (tmp_path / "dgse-out" / "search-peak-utility.journal.jsonl").is_file()
+    assert "search-peak-utility.json" in text.replace("\n", "")
+
+
+def test_sigterm_is_an_interrupt():
+    import os
+    import signal
+
+    from dgse.cli.search import sigterm_as_interrupt
+
+    before = signal.getsignal(signal.SIGTERM)
+    with pytest.raises(KeyboardInterrupt), sigterm_as_interrupt():
+        os.kill(os.getpid(), signal.SIGTERM)
+        for _ in range(1000):  # the handler runs between bytecodes
+            pass
+    assert signal.getsignal(signal.SIGTERM) == before
+
+
+def test_step_text_and_default_names():
+    from dgse.cli.demo import step_text
+    from dgse.cli.search import _step_text, default_output
+    from dgse.search.episode import StepRecord
+
+    rec = StepRecord(4, (1, 2), 123.4, 5.0, (0.1, 0.0), 3.0, 0.71, (1.0, 2.0), 0.456)
+    assert _step_text("a", 0, 5, rec, 2000.0) == "a trial 1/5: step 4, 123/2000 s, H 0.71, error 0.46 m"
+    assert step_text(rec, 2000.0, 0.78) == (
+        "searching: step 4, 123 of 2000 s simulated, entropy 0.71 of log N (stops at 0.78), error 0.46 m"
+    )
+    assert str(default_output("search", "my/model x", "utility")) == "dgse-out/search-my_model_x-utility.json"

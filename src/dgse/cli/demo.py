@@ -4,7 +4,8 @@
    its flow and one gas release with the built-in solver;
 2. run one active search (paper Algorithm 1) with the shipped DGSE-S model
    and the utility planner (entropy test from the 5th reading on, the fewest
-   the network was trained with), the robot starting at least 2 m from the source;
+   the network was trained with), the robot starting at least 2 m from the source,
+   showing the step, the simulated clock, the entropy and the error as it goes;
 3. print the outcome and write the case figure, the final belief, the last
    search step and the animation of the search into the output folder.
 """
@@ -14,14 +15,25 @@ from __future__ import annotations
 import secrets
 import time
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.table import Table
 
 from dgse.cli.common import console, path_text, user_errors
 
-__all__ = ["demo_cmd", "register"]
+if TYPE_CHECKING:
+    from dgse.search.episode import StepRecord
+
+__all__ = ["demo_cmd", "register", "step_text"]
+
+
+def step_text(rec: StepRecord, time_limit: float, eta: float) -> str:
+    """The search status line after step ``rec``: step, simulated clock, entropy, error."""
+    return (
+        f"searching: step {rec.step}, {rec.time_s:.0f} of {time_limit:g} s simulated, "
+        f"entropy {rec.normalized_entropy:.2f} of log N (stops at {eta:g}), error {rec.error_m:.2f} m"
+    )
 
 
 @user_errors
@@ -70,7 +82,7 @@ def demo_cmd(
         f"source at ({case.source[0]:.2f}, {case.source[1]:.2f}) m releasing {case.release_rate:.2f} g/s "
         f"[dim](solved in {t_solve:.1f} s)[/]"
     )
-    with console.status("searching: sense, estimate (DGSE-S, K = T = 5), plan, move"):
+    with console.status("searching: sense, estimate (DGSE-S, K = T = 5), plan, move") as status:
         result = run_episode(
             case,
             estimator,
@@ -78,6 +90,7 @@ def demo_cmd(
             rng=seed,
             time_limit=time_limit,
             min_start_distance=2.0,
+            on_step=lambda rec: status.update(step_text(rec, time_limit, eta)),
         )
     m = episode_metrics(result)
     table = Table(title="active search", title_justify="left", show_header=False)

@@ -331,6 +331,7 @@ def _aggregate_table(result: dict[str, Any]) -> Table:
 
 @user_errors
 def evaluate_cmd(
+    ctx: typer.Context,
     args: Annotated[
         list[str],
         typer.Argument(
@@ -353,7 +354,19 @@ def evaluate_cmd(
         int, typer.Option("--trials", "-r", help="Random sensor configurations per case and count.")
     ] = 20,
     seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of the observations (>= 0).")] = 0,
-    json_out: Annotated[Path | None, typer.Option("--json", help="Write the full result as JSON.")] = None,
+    json_out: Annotated[
+        Path | None,
+        typer.Option(
+            "--json",
+            help="The full result as JSON (default: dgse-out/evaluate-<method>.json).  Finished "
+            "estimates are kept as they finish in <name>.journal.jsonl beside it; the same command "
+            "again resumes an interrupted run.",
+        ),
+    ] = None,
+    restart: Annotated[
+        bool,
+        typer.Option("--restart", help="Discard the estimates kept from an earlier run into the same file."),
+    ] = False,
     split: Annotated[str, typer.Option("--split", help="Split of a dataset store.")] = "test",
     model: Annotated[str | None, typer.Option("--model", help=_MODEL_HELP)] = None,
     k: Annotated[int | None, typer.Option("-K", help="DGSE-S wind samples (default 5).")] = None,
@@ -371,27 +384,51 @@ def evaluate_cmd(
     with Table I noise, seeded by (seed, case, count, trial) so that every
     method sees the same observations; source-localization error, cross-entropy,
     wind and concentration RMSE/NLL; time per estimate.
+
+    Every finished estimate is kept at once (in the journal beside the JSON
+    file); after Ctrl-C or a kill, the same command resumes where it stopped.
     """
+    from dgse.cli.common import EXIT_INTERRUPTED, check_output_file
+    from dgse.cli.search import (
+        default_output,
+        kept_note,
+        report_interrupt,
+        resume_command,
+        sigterm_as_interrupt,
+    )
     from dgse.evaluation.evaluate import evaluate, write_json
+    from dgse.search.campaign import journal_path
+    from dgse.search.journal import count_records
 
     cases, counts = _split_positionals(args, observations or [])
     kwargs = _estimator_kwargs(method, model, k, t, device, dtype, params)
     _set_threads(threads)
-    result = evaluate(
-        cases,
-        method,
-        counts,
-        trials=trials,
-        seed=seed,
-        estimator_kwargs=kwargs,
-        progress=progress,
-        split=split,
-        limit=limit,
-    )
+    out = json_out if json_out is not None else default_output("evaluate", method)
+    journal = journal_path(out)
+    check_output_file(out, "JSON file")
+    check_output_file(journal, "journal")
+    console.print(kept_note(journal, "estimate", restart))
+    try:
+        with sigterm_as_interrupt():
+            result = evaluate(
+                cases,
+                method,
+                counts,
+                trials=trials,
+                seed=seed,
+                estimator_kwargs=kwargs,
+                progress=progress,
+                split=split,
+                limit=limit,
+                journal=journal,
+                restart=restart,
+            )
+    except KeyboardInterrupt:
+        report_interrupt(count_records(journal), "estimate", journal, resume_command(ctx))
+        raise typer.Exit(EXIT_INTERRUPTED) from None
     console.print(_aggregate_table(result))
     console.print(f"{len(result['per_case'])} estimates in {result['seconds_total']:.1f} s")
-    if json_out is not None:
-        console.print(f"wrote [cyan]{path_text(write_json(result, json_out))}[/]")
+    console.print(f"wrote [cyan]{path_text(write_json(result, out))}[/]")
 
 
 # -- export-onnx --------------------------------------------------------------------------------

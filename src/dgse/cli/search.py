@@ -1,6 +1,6 @@
 """The ``dgse search`` command: active gas source search trials with a simulated robot.
 
-``dgse search CASES_DIR_OR_CASE --method dgse-s --trials 20 --seed 0 --json out.json``
+``dgse search CASES_DIR_OR_CASE --method dgse-s --trials 20 --seed 0 [--json out.json]``
 runs ``--trials`` episodes (:func:`dgse.search.episode.run_episode`) per case
 with the estimator ``--method`` (any registered name, built by
 :func:`~dgse.estimators.registry.get_estimator`) and the planner ``--planner``
@@ -26,17 +26,41 @@ source posterior over the steps (:mod:`dgse.search.animate`).
 
 For DGSE methods (``dgse-*``) the estimator gets ``model=`` (``--model``,
 default ``"default"``: the shipped weights) and ``seed=`` (``--seed``);
-other methods get ``model=`` only when ``--model`` is given.  ``-O KEY=VALUE``
-passes further estimator options (values parsed as JSON when possible, e.g.
-``-O K=5``), ``-P KEY=VALUE`` planner options.
+other methods get ``model=`` only when ``--model`` is given.
+``-p/--param KEY=VALUE`` passes further estimator arguments (values parsed as
+JSON when possible, e.g. ``-p K=5``; the same option as in ``dgse estimate``
+and ``dgse evaluate``; ``-O/--option`` is a hidden alias kept for old
+command lines), ``-P/--planner-option KEY=VALUE`` planner options.
+
+Signs of life and keeping what was done: the progress bar shows the running
+episode's step, simulated clock (of the time limit), normalized entropy and
+current error.  Every finished episode is kept at once in the journal beside
+the JSON file (``out.json`` -> ``out.journal.jsonl``,
+:func:`dgse.search.campaign.journal_path`); without ``--json`` the JSON file
+is ``dgse-out/search-<method>-<planner>.json`` (printed).  Ctrl-C (or
+SIGTERM) stops the run with one line: how many episodes are kept, where, and
+the command that resumes the run (exit status 130).  Running the same command
+again skips the kept episodes and gives the same JSON as an uninterrupted run
+(up to the measured computation times); a run with other settings into the
+same file is refused (the error names the difference): give another
+``--json`` or ``--restart`` to discard the journal.
+
+The helpers :func:`default_output`, :func:`kept_note`, :func:`resume_command`,
+:func:`sigterm_as_interrupt` and :func:`report_interrupt` are shared with
+``dgse evaluate`` (:mod:`dgse.cli.models`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
+import re
+import shlex
+import signal
+import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -46,16 +70,39 @@ from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from dgse.cli.common import console, path_text, user_errors
+from dgse.cli.common import (
+    EXIT_INTERRUPTED,
+    check_output_dir,
+    check_output_file,
+    console,
+    err_console,
+    path_text,
+    user_errors,
+)
 from dgse.errors import InputDataError
-from dgse.search.campaign import json_safe, load_cases, trial_seed
+from dgse.search.campaign import journal_path, json_safe, load_cases, trial_seed
+from dgse.search.journal import count_records
 from dgse.search.metrics import format_mean_std
 from dgse.world.case import Case
 
 if TYPE_CHECKING:
-    from dgse.search.episode import EpisodeResult
+    from dgse.search.episode import EpisodeResult, StepRecord
 
-__all__ = ["load_cases", "register", "search_cmd", "trial_seed"]
+__all__ = [
+    "OUTPUT_DIR",
+    "default_output",
+    "kept_note",
+    "load_cases",
+    "register",
+    "report_interrupt",
+    "resume_command",
+    "search_cmd",
+    "sigterm_as_interrupt",
+    "trial_seed",
+]
+
+#: Folder of the results of a command run without an output path.
+OUTPUT_DIR = Path("dgse-out")
 
 
 # -- helpers -----------------------------------------------------------------------------
@@ -72,6 +119,82 @@ def _parse_options(items: Sequence[str] | None, flag: str) -> dict[str, Any]:
             out[key] = value
     return out
 
+
+# -- long runs: default output, interruption, the command that resumes -------------------
+def default_output(command: str, *names: str) -> Path:
+    """``dgse-out/<command>-<name>-....json``, the names made safe for a file name."""
+    parts = [re.sub(r"[^A-Za-z0-9._+-]+", "_", n).strip("._") or "x" for n in (command, *names)]
+    return OUTPUT_DIR / ("-".join(parts) + ".json")
+
+
+@contextlib.contextmanager
+def sigterm_as_interrupt() -> Iterator[None]:
+    """Within the block, SIGTERM (``kill``) raises ``KeyboardInterrupt`` as Ctrl-C does."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _option_words(param: Any, value: Any) -> list[str]:
+    if param.is_flag and param.secondary_opts:
+        return [(param.opts if value else param.secondary_opts)[0]]
+    name = next((o for o in param.opts if o.startswith("--")), param.opts[0])
+    if param.is_flag:
+        return [name] if value else []
+    values = value if param.multiple else [value]
+    return [w for v in values for w in (name, str(v))]
+
+
+def resume_command(ctx: typer.Context, drop: Sequence[str] = ("restart",)) -> str:
+    """The running command's line as a shell takes it: ``dgse <command>``, its arguments and
+    every option that differs from its default (the options named in ``drop`` left out)."""
+    words = ["dgse", *ctx.command_path.split()[1:]]
+    options: list[str] = []
+    for param in ctx.command.params:
+        if param.name is None or param.name in drop or param.name not in ctx.params:
+            continue
+        value = ctx.params[param.name]
+        if param.param_type_name == "argument":
+            words += [str(v) for v in (value if isinstance(value, list | tuple) else [value])]
+        elif param.param_type_name == "option" and value is not None and value != param.default:
+            if getattr(param, "multiple", False) and not value:
+                continue
+            options += _option_words(param, value)
+    return shlex.join(words + options)
+
+
+def report_interrupt(kept: int, unit: str, where: Path, command: str) -> None:
+    """One line on standard error after Ctrl-C: what was kept, where, how to resume."""
+    plural = unit if kept == 1 else unit + "s"
+    err_console.print(
+        f"[yellow]interrupted: {kept} finished {plural} kept in {path_text(where)}; "
+        f"resume with: {escape(command)}[/]",
+        soft_wrap=True,
+    )
+
+
+def kept_note(journal: Path, unit: str, restart: bool) -> str:
+    """The line that says where finished pieces are kept (and how many an earlier run left)."""
+    n = 0 if restart else count_records(journal)
+    if n:
+        return f"{n} finished {unit}{'s' * (n != 1)} of an earlier run in [cyan]{path_text(journal)}[/]"
+    return f"finished {unit}s are kept in [cyan]{path_text(journal)}[/] as they finish"
+
+
+def _step_text(stem: str, trial: int, trials: int, rec: StepRecord, time_limit: float) -> str:
+    return (
+        f"{stem} trial {trial + 1}/{trials}: step {rec.step}, {rec.time_s:.0f}/{time_limit:g} s, "
+        f"H {rec.normalized_entropy:.2f}, error {rec.error_m:.2f} m"
+    )
 
 
 def _table(rows: list[tuple[str, dict[str, Any]]], title: str) -> Table:
@@ -105,8 +228,12 @@ def _write_json(path: Path, data: dict[str, Any]) -> Path:
 
 
 # -- command -----------------------------------------------------------------------------
+_PARAM_HELP = "Estimator argument KEY=VALUE (VALUE as JSON, else a string); repeatable."
+
+
 @user_errors
 def search_cmd(
+    ctx: typer.Context,
     cases_path: Annotated[
         Path,
         typer.Argument(metavar="CASES_DIR_OR_CASE", help="A case file or a directory of case files."),
@@ -116,7 +243,7 @@ def search_cmd(
         str | None,
         typer.Option("--model", help="Network checkpoint, or 'default' (DGSE methods' default)."),
     ] = None,
-    planner: Annotated[str, typer.Option("--planner", "-p", help="Planner (registered name).")] = "utility",
+    planner: Annotated[str, typer.Option("--planner", help="Planner (registered name).")] = "utility",
     trials: Annotated[int, typer.Option("--trials", "-r", help="Episodes per case.")] = 20,
     seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of the start cells and noise.")] = 0,
     eta: Annotated[
@@ -144,7 +271,20 @@ def search_cmd(
             "--compute-time/--no-compute-time", help="Add the measured computation time to the clock."
         ),
     ] = False,
-    json_out: Annotated[Path | None, typer.Option("--json", "-o", help="Write the metrics as JSON.")] = None,
+    json_out: Annotated[
+        Path | None,
+        typer.Option(
+            "--json",
+            "-o",
+            help="The metrics as JSON (default: dgse-out/search-<method>-<planner>.json).  Finished "
+            "episodes are kept as they finish in <name>.journal.jsonl beside it; the same command "
+            "again resumes an interrupted run.",
+        ),
+    ] = None,
+    restart: Annotated[
+        bool,
+        typer.Option("--restart", help="Discard the episodes kept from an earlier run into the same file."),
+    ] = False,
     animate: Annotated[
         Path | None,
         typer.Option("--animate", help="Write a GIF of trial 0 of every case into this directory."),
@@ -152,9 +292,13 @@ def search_cmd(
     steps: Annotated[
         bool, typer.Option("--steps/--no-steps", help="Include every step of every trial in the JSON.")
     ] = False,
+    param: Annotated[
+        list[str] | None,
+        typer.Option("--param", "-p", metavar="KEY=VALUE", help=_PARAM_HELP),
+    ] = None,
     option: Annotated[
         list[str] | None,
-        typer.Option("--option", "-O", metavar="KEY=VALUE", help="Estimator option (repeatable)."),
+        typer.Option("--option", "-O", metavar="KEY=VALUE", hidden=True, help="Old name of --param."),
     ] = None,
     planner_option: Annotated[
         list[str] | None,
@@ -165,7 +309,11 @@ def search_cmd(
     ] = None,
     progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")] = True,
 ) -> None:
-    """Run active source search trials and report success rate, error, ST, TD, step time, PER."""
+    """Run active source search trials and report success rate, error, ST, TD, step time, PER.
+
+    Every finished episode is kept at once (in the journal beside the JSON
+    file); after Ctrl-C or a kill, the same command resumes where it stopped.
+    """
     from dgse.estimators.registry import get_estimator
     from dgse.search.campaign import estimator_options, run_trials
     from dgse.search.planners import get_planner
@@ -185,20 +333,31 @@ def search_cmd(
         torch.set_num_threads(threads)
 
     cases = load_cases(cases_path)
-    est_kwargs = estimator_options(method, model=model, seed=seed, options=_parse_options(option, "--option"))
+    options = _parse_options([*(option or []), *(param or [])], "--param")
+    est_kwargs = estimator_options(method, model=model, seed=seed, options=options)
     plan_kwargs = _parse_options(planner_option, "--planner-option")
     if eta is not None:
         plan_kwargs["eta"] = eta
     estimator = get_estimator(method, **est_kwargs)
     plan = get_planner(planner, **plan_kwargs)
+    out = json_out if json_out is not None else default_output("search", method, planner)
+    journal = journal_path(out)
+    check_output_file(out, "JSON file")
+    check_output_file(journal, "journal")
+    check_output_dir(animate, "animation folder")
+    total = len(cases) * trials
 
     console.print(
         f"searching {len(cases)} case{'s' * (len(cases) != 1)} x {trials} trials with "
         f"[bold]{escape(method)}[/] + [bold]{escape(planner)}[/] (seed {seed}, time limit {time_limit:g} s)"
     )
+    console.print(kept_note(journal, "episode", restart))
     gifs: list[Path] = []
+    fresh = 0
 
-    def write_gif(path: Path, case: Case, trial: int, result: EpisodeResult) -> None:
+    def finished(path: Path, case: Case, trial: int, result: EpisodeResult) -> None:
+        nonlocal fresh
+        fresh += 1
         if animate is not None and trial == 0:
             from dgse.search.animate import animate_episode
 
@@ -214,39 +373,56 @@ def search_cmd(
         disable=not progress,
         transient=True,
     )
-    with bar:
-        task = bar.add_task("episodes", total=len(cases) * trials)
+    state = {"done": 0}
+    try:
+        with sigterm_as_interrupt(), bar:
+            task = bar.add_task("episodes", total=total)
 
-        def tick(description: str, done: int, total: int) -> None:
-            bar.update(task, description=escape(description), completed=done)
+            def tick(description: str, done: int, total: int) -> None:
+                state["done"] = done
+                bar.update(task, description=escape(description), completed=done)
 
-        data = run_trials(
-            cases,
-            estimator,
-            plan,
-            trials,
-            seed,
-            estimator_options=est_kwargs,
-            planner_options=plan_kwargs,
-            method=method,
-            planner_name=planner,
-            speed=speed,
-            dwell=dwell,
-            time_limit=time_limit,
-            use_frames=frames,
-            min_start_distance=min_start_distance,
-            include_compute_time=compute_time,
-            steps=steps,
-            record_first=animate is not None,
-            progress=tick,
-            on_episode=write_gif,
-        )
+            def step(path: Path, trial: int, rec: StepRecord) -> None:
+                within = min(rec.time_s / time_limit, 0.99)  # the bar creeps along the episode's clock
+                text = _step_text(path.stem, trial, trials, rec, time_limit)
+                bar.update(task, description=escape(text), completed=state["done"] + within)
+
+            data = run_trials(
+                cases,
+                estimator,
+                plan,
+                trials,
+                seed,
+                estimator_options=est_kwargs,
+                planner_options=plan_kwargs,
+                method=method,
+                planner_name=planner,
+                speed=speed,
+                dwell=dwell,
+                time_limit=time_limit,
+                use_frames=frames,
+                min_start_distance=min_start_distance,
+                include_compute_time=compute_time,
+                steps=steps,
+                record_first=animate is not None,
+                progress=tick,
+                on_episode=finished,
+                on_step=step if progress else None,
+                journal=journal,
+                restart=restart,
+            )
+    except KeyboardInterrupt:
+        report_interrupt(count_records(journal), "episode", journal, resume_command(ctx))
+        raise typer.Exit(EXIT_INTERRUPTED) from None
     table_rows = [(Path(c["file"]).stem, c["metrics"]) for c in data["per_case"]]
     table_rows.append(("all", data["aggregate"]))
     console.print(_table(table_rows, f"active search: {escape(method)} + {escape(planner)}"))
-    console.print(f"{data['aggregate']['n_trials']} episodes in {time.perf_counter() - t_start:.1f} s")
-    if json_out is not None:
-        console.print(f"wrote metrics [cyan]{path_text(_write_json(json_out, data))}[/]")
+    resumed = total - fresh
+    console.print(
+        f"{data['aggregate']['n_trials']} episodes in {time.perf_counter() - t_start:.1f} s"
+        + (f" ({resumed} kept from an earlier run)" if resumed else "")
+    )
+    console.print(f"wrote metrics [cyan]{path_text(_write_json(out, data))}[/]")
     for g in gifs:
         console.print(f"wrote animation [cyan]{path_text(g)}[/]")
 

@@ -67,6 +67,18 @@ number of estimates that had the metric (NaN/None values are left out of
 the statistics, which are None when the count is 0).  ``by_case`` is what the
 paper's per-environment figures (Fig. 8, Fig. gsl_only: 20 trials per
 environment) plot.
+
+Keeping and resuming (``journal=``): every finished estimate is appended at
+once to a JSON-lines journal (:class:`dgse.search.journal.Journal`, kind
+``"evaluate"``) with the fingerprint of its case; a rerun with the same
+journal skips the ``(case id, n_obs, trial)`` it finds there and returns what
+an uninterrupted run returns (up to ``seconds``, ``seconds_total`` and
+``created``), since the observations and estimator seeds depend on those
+only.  The journal's identity is the method, the estimator (its description
+and ``estimator_kwargs``), the seed and the noise model: a journal written
+with others is refused with an :class:`~dgse.errors.InputDataError` naming the
+difference (``restart=True`` discards it); other counts, trials, cases or
+limits reuse what fits.  A case whose contents changed since is refused too.
 """
 
 from __future__ import annotations
@@ -83,7 +95,7 @@ from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError
 from importlib.metadata import version as _pkg_version
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -94,6 +106,9 @@ from dgse.evaluation.metrics import METRIC_KEYS, EstimateMetrics, evaluate_belie
 from dgse.sensing.noise import NoiseModel, NoiseParams
 from dgse.sensing.sensors import Observations, random_observations
 from dgse.world.case import Case
+
+if TYPE_CHECKING:
+    from dgse.search.journal import Journal
 
 __all__ = [
     "FORMAT_NAME",
@@ -135,7 +150,7 @@ METRIC_DESCRIPTIONS: dict[str, str] = {
     "seconds": "wall time of estimator.estimate (s)",
 }
 
-#: ``callback(done, total, record)`` after every estimate.
+#: ``callback(done, total, record)`` after every estimate (``done`` counts resumed estimates too).
 ProgressCallback = Callable[[int, int, dict[str, Any]], None]
 
 
@@ -400,11 +415,18 @@ def _estimator_info(est: Any) -> dict[str, Any]:
     return info
 
 
-def _make_progress(progress: bool | ProgressCallback, total: int) -> tuple[ProgressCallback | None, Any]:
+#: ``before(case_id, n_obs, trial, trials)``: the built-in bar's note of the estimate about to run.
+_Before = Callable[[str, int, int, int], None]
+
+
+def _make_progress(
+    progress: bool | ProgressCallback, total: int, start: int = 0
+) -> tuple[ProgressCallback | None, _Before | None, Any]:
+    """``(after, before, context)``: the callbacks and the context manager that shows the bar."""
     if callable(progress):
-        return progress, contextlib.nullcontext()
+        return progress, None, contextlib.nullcontext()
     if not progress:
-        return None, contextlib.nullcontext()
+        return None, None, contextlib.nullcontext()
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -422,12 +444,16 @@ def _make_progress(progress: bool | ProgressCallback, total: int) -> tuple[Progr
         TimeRemainingColumn(),
         transient=True,
     )
-    task = bar.add_task("evaluating", total=total)
+    first = "evaluating" if not start else f"evaluating ({start} kept from an earlier run)"
+    task = bar.add_task(first, total=total, completed=start)
+
+    def before(case_id: str, n_obs: int, trial: int, trials: int) -> None:
+        bar.update(task, description=f"{case_id} n={n_obs} trial {trial + 1}/{trials}")
 
     def update(done: int, total: int, record: dict[str, Any]) -> None:
-        bar.update(task, completed=done, description=f"{record['case']} n={record['n_obs']}")
+        bar.update(task, completed=done)
 
-    return update, bar
+    return update, before, bar
 
 
 def evaluate(
@@ -442,6 +468,8 @@ def evaluate(
     split: str | None = "test",
     noise_model: NoiseModel | None = None,
     limit: int | None = None,
+    journal: str | os.PathLike[str] | None = None,
+    restart: bool = False,
 ) -> dict[str, Any]:
     """Evaluate one estimator on a set of cases (see the module docstring for protocol and result).
 
@@ -461,13 +489,17 @@ def evaluate(
         split: the split of a dataset store (default ``"test"``; None: all).
         noise_model: sensor noise (Table I ranges by default).
         limit: evaluate only the first ``limit`` cases.
+        journal: keep every finished estimate in this JSON-lines file and skip
+            those already there (module docstring); None keeps nothing.
+        restart: discard an existing journal instead of resuming it.
 
     Returns:
         The result dict (JSON-ready; :func:`write_json` writes it).
 
     Raises:
         InputDataError: bad counts/trials/seed, missing or unreadable cases, more
-            observations than a case has free cells.
+            observations than a case has free cells, a journal written with other
+            settings or for a case that has changed since.
         UnsupportedError: an unknown method name (the message lists the known ones).
     """
     counts = _check_counts(observation_counts)
@@ -488,27 +520,41 @@ def evaluate(
         method_name = str(getattr(method, "name", type(method).__name__))
     reseed = hasattr(est, "seed") and "seed" not in kwargs
     original_seed = getattr(est, "seed", None)
+    noise = "Table I" if noise_model is None else _jsonable(vars(noise_model.ranges))
+    identity = {
+        "method": method_name,
+        "estimator": _estimator_info(est),
+        "estimator_kwargs": _jsonable(kwargs),
+        "seed": int(seed),
+        "noise": noise,
+    }
     t_start = time.perf_counter()
     records: list[dict[str, Any]] = []
+    book: Journal | None = None
     try:
         with open_cases(cases_or_store, split, limit) as (refs, info):
+            kept: dict[tuple[Any, Any, Any], dict[str, Any]] = {}
+            if journal is not None:
+                from dgse.search.journal import Journal
+
+                book = Journal(journal, "evaluate", identity, restart=restart, unit="estimate")
+                for entry in book.records:
+                    rec = entry.get("record")
+                    if isinstance(rec, dict):
+                        kept[(rec.get("case"), rec.get("n_obs"), rec.get("trial"))] = entry
             total = len(refs) * len(counts) * trials
-            callback, bar = _make_progress(progress, total)
+            start = sum((r.id, n, t) in kept for r in refs for n in counts for t in range(trials))
+            callback, before, bar = _make_progress(progress, total, start)
             with bar:
                 for ref in refs:
-                    case = ref.load()
-                    if hasattr(est, "set_case"):  # see dgse.estimators.registry.Estimator
-                        est.set_case(case)
-                    for n in counts:
-                        _check_count(case, ref.id, n)
-                    for n in counts:
-                        for trial in range(trials):
-                            rec = _one_estimate(est, case, ref.id, n, trial, seed, noise_model, reseed)
-                            records.append(rec)
-                            if callback is not None:
-                                callback(len(records), total, rec)
+                    records += _evaluate_case(
+                        est, ref, counts, trials, seed, noise_model, reseed, book, kept, before, callback,
+                        done=len(records), total=total,
+                    )  # fmt: skip
             case_ids = [r.id for r in refs]
     finally:
+        if book is not None:
+            book.close()
         if reseed:
             est.seed = original_seed  # an estimator object is handed back as it came
     by_case = {cid: _group_by_count([r for r in records if r["case"] == cid], counts) for cid in case_ids}
@@ -531,7 +577,7 @@ def evaluate(
             "seeding": "numpy SeedSequence([seed, sha256(case id)[:16], n_obs, trial])",
             "timing": "perf_counter around estimator.estimate",
             "cells": "field metrics over the free cells of each case",
-            "noise": "Table I" if noise_model is None else _jsonable(vars(noise_model.ranges)),
+            "noise": noise,
         },
         "metrics": METRIC_DESCRIPTIONS,
         "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
@@ -541,6 +587,54 @@ def evaluate(
         "aggregate": _group_by_count(records, counts),
         "by_case": by_case,
     }
+
+
+def _evaluate_case(
+    est: Any,
+    ref: CaseRef,
+    counts: Sequence[int],
+    trials: int,
+    seed: int,
+    noise_model: NoiseModel | None,
+    reseed: bool,
+    book: Journal | None,
+    kept: Mapping[tuple[Any, Any, Any], Mapping[str, Any]],
+    before: _Before | None,
+    callback: ProgressCallback | None,
+    *,
+    done: int,
+    total: int,
+) -> list[dict[str, Any]]:
+    """The records of one case in loop order: kept ones from the journal, the others estimated."""
+    from dgse.search.journal import case_fingerprint
+
+    case = ref.load()
+    fingerprint = None if book is None else case_fingerprint(case)
+    if hasattr(est, "set_case"):  # see dgse.estimators.registry.Estimator
+        est.set_case(case)
+    for n in counts:
+        _check_count(case, ref.id, n)
+    out: list[dict[str, Any]] = []
+    for n in counts:
+        for trial in range(trials):
+            old = kept.get((ref.id, n, trial))
+            if old is not None and book is not None:
+                if old.get("case_fingerprint") != fingerprint:
+                    raise InputDataError(
+                        f"case {ref.id!r} differs from the one whose estimates {book.path} keeps "
+                        "(re-solved?): start afresh with --restart (restart=True), or give another path"
+                    )
+                out.append(dict(old["record"]))
+                continue
+            if before is not None:
+                before(ref.id, n, trial, trials)
+            rec = _jsonable(_one_estimate(est, case, ref.id, n, trial, seed, noise_model, reseed))
+            if book is not None:
+                book.append({"case_fingerprint": fingerprint, "record": rec})
+            out.append(rec)
+            if callback is not None:
+                callback(done + len(out), total, rec)
+    return out
 
 
 def estimator_seed(seed: int, case_id: str, n_obs: int, trial: int) -> int:

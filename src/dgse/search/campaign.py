@@ -20,10 +20,26 @@ other cases: every method meets the same starts.
 
 For DGSE methods (``dgse-*``) the estimator gets ``model="default"`` (the
 shipped weights) and ``seed=`` unless given (:func:`estimator_options`).
+
+Keeping and resuming (``journal=``): every finished episode is appended to a
+JSON-lines journal (:class:`~dgse.search.journal.Journal`, kind ``"search"``)
+as soon as it finishes, with its case file's stem, trial index, the case's
+fingerprint and its row of ``per_case[...]["trials"]``.  A rerun with the
+same journal skips the (stem, trial) pairs it finds there, and (as the trial
+seeds depend only on the seed, the stem and the trial) returns what an
+uninterrupted run returns, up to the measured computation times.  The
+journal's identity is ``settings`` without ``trials`` plus ``steps``: a
+journal written with another method, planner, options, seed, time limit, ...
+is refused with an :class:`~dgse.errors.InputDataError` that names the
+difference (``restart=True`` discards it); more or fewer trials, or other
+cases, reuse what fits.  A case file whose contents changed since its episodes
+were kept is refused too.  :func:`journal_path` is where ``dgse search``
+keeps the journal of its JSON file.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import zlib
@@ -35,14 +51,17 @@ import numpy as np
 
 from dgse.errors import InputDataError
 from dgse.estimators.registry import Estimator
-from dgse.search.episode import DEFAULT_TIME_LIMIT, EpisodeResult
+from dgse.search.episode import DEFAULT_TIME_LIMIT, EpisodeResult, StepRecord
 from dgse.search.planners import Planner
 from dgse.search.robot import DEFAULT_DWELL, DEFAULT_SPEED
 from dgse.world.case import Case
 
 __all__ = [
+    "EpisodeCallback",
     "Progress",
+    "TrialStepCallback",
     "estimator_options",
+    "journal_path",
     "json_safe",
     "load_cases",
     "run_trials",
@@ -51,8 +70,17 @@ __all__ = [
 
 #: ``progress(description, done, total)``: called before every episode and once when all are done.
 Progress = Callable[[str, int, int], None]
-#: ``on_episode(path, case, trial, result)``: called after every episode.
+#: ``on_episode(path, case, trial, result)``: called after every episode (after it is kept).
 EpisodeCallback = Callable[[Path, Case, int, EpisodeResult], None]
+#: ``on_step(path, trial, record)``: called after every step of every episode run.
+TrialStepCallback = Callable[[Path, int, StepRecord], None]
+
+
+def journal_path(json_path: str | os.PathLike[str]) -> Path:
+    """The journal kept beside a campaign's JSON file: ``out.json`` -> ``out.journal.jsonl``."""
+    p = Path(json_path)
+    stem = p.stem if p.suffix.lower() == ".json" else p.name
+    return p.with_name(f"{stem}.journal.jsonl")
 
 
 def load_cases(path: str | os.PathLike[str]) -> list[tuple[Path, Case]]:
@@ -148,6 +176,9 @@ def run_trials(
     record_first: bool = False,
     progress: Progress | None = None,
     on_episode: EpisodeCallback | None = None,
+    on_step: TrialStepCallback | None = None,
+    journal: str | os.PathLike[str] | None = None,
+    restart: bool = False,
 ) -> dict[str, Any]:
     """Run ``trials`` search episodes on every case and return the metrics (module docstring).
 
@@ -173,14 +204,26 @@ def run_trials(
         steps: include every step's record in the trials' summaries.
         record_first: record the belief maps of trial 0 of every case (for
             ``on_episode``; e.g. an animation).
-        progress: see :data:`Progress`.
-        on_episode: see :data:`EpisodeCallback` (e.g. keep the results).
+        progress: see :data:`Progress` (``done`` counts resumed episodes too).
+        on_episode: see :data:`EpisodeCallback` (e.g. keep the results); not
+            called for resumed episodes.
+        on_step: see :data:`TrialStepCallback` (signs of life within an episode).
+        journal: keep every finished episode in this JSON-lines file and skip
+            the ones already there (module docstring); None keeps nothing.
+            With estimator or planner objects, give the options they were
+            built with: they are how a journal tells runs apart.
+        restart: discard an existing journal instead of resuming it.
 
     Returns:
         ``{"settings", "aggregate", "per_case"}``, JSON-ready.
+
+    Raises:
+        InputDataError: bad settings, no cases, or a journal written with other
+            settings or for a case file that has changed since.
     """
     from dgse.estimators.registry import get_estimator
     from dgse.search.episode import run_episode
+    from dgse.search.journal import Journal, case_fingerprint
     from dgse.search.metrics import aggregate, episode_metrics
     from dgse.search.planners import get_planner
 
@@ -203,52 +246,81 @@ def run_trials(
     else:
         plan = planner
         planner_name = planner_name or str(getattr(planner, "name", type(planner).__name__))
+    model = est_kw.get("model")
+    settings = json_safe(
+        {
+            "method": method,
+            "model": model if isinstance(model, str) else None,
+            "planner": planner_name,
+            "planner_options": plan_kw,
+            "estimator_options": {k: v for k, v in est_kw.items() if k != "model"},
+            "trials": trials,
+            "seed": seed,
+            "time_limit_s": time_limit,
+            "frames": use_frames,
+            "speed": speed,
+            "dwell": dwell,
+            "min_start_distance_m": min_start_distance,
+            "include_compute_time": include_compute_time,
+        }
+    )
+    identity = {**{k: v for k, v in settings.items() if k != "trials"}, "steps": bool(steps)}
+    book = None if journal is None else Journal(journal, "search", identity, restart=restart, unit="episode")
+    kept = {} if book is None else {(r.get("case"), r.get("trial")): r for r in book.records}
 
     per_case: list[dict[str, Any]] = []
     all_rows: list[dict[str, Any]] = []
     total, done = len(pairs) * trials, 0
-    for path, case in pairs:
-        trial_rows: list[dict[str, Any]] = []
-        for r in range(trials):
-            if progress is not None:
-                progress(f"{path.stem} trial {r + 1}/{trials}", done, total)
-            result = run_episode(
-                case,
-                est,
-                plan,
-                rng=trial_seed(seed, path.stem, r),
-                speed=speed,
-                dwell=dwell,
-                time_limit=time_limit,
-                include_compute_time=include_compute_time,
-                record=record_first and r == 0,
-                use_frames=use_frames,
-                min_start_distance=min_start_distance,
-            )
-            m = episode_metrics(result)
-            trial_rows.append({"trial": r, **result.to_dict(steps=steps), "metrics": m})
-            all_rows.append(m)
-            if on_episode is not None:
-                on_episode(path, case, r, result)
-            done += 1
-        agg = aggregate([t["metrics"] for t in trial_rows])
-        per_case.append({"case": case.name, "file": str(path), "metrics": agg, "trials": trial_rows})
+    try:
+        for path, case in pairs:
+            fingerprint = None if book is None else case_fingerprint(case)
+            trial_rows: list[dict[str, Any]] = []
+            for r in range(trials):
+                old = kept.get((path.stem, r))
+                if old is not None and book is not None:
+                    if old.get("case_fingerprint") != fingerprint:
+                        raise InputDataError(
+                            f"{path} differs from the case whose episodes {book.path} keeps (re-solved?): "
+                            "start afresh with --restart (restart=True), or give another output path"
+                        )
+                    row = old["row"]
+                else:
+                    if progress is not None:
+                        progress(f"{path.stem} trial {r + 1}/{trials}", done, total)
+                    step_cb = None
+                    if on_step is not None:
+                        step_cb = functools.partial(on_step, path, r)
+                    result = run_episode(
+                        case,
+                        est,
+                        plan,
+                        rng=trial_seed(seed, path.stem, r),
+                        speed=speed,
+                        dwell=dwell,
+                        time_limit=time_limit,
+                        include_compute_time=include_compute_time,
+                        record=record_first and r == 0,
+                        use_frames=use_frames,
+                        min_start_distance=min_start_distance,
+                        on_step=step_cb,
+                    )
+                    row = json_safe(
+                        {"trial": r, **result.to_dict(steps=steps), "metrics": episode_metrics(result)}
+                    )
+                    if book is not None:
+                        book.append(
+                            {"case": path.stem, "trial": r, "case_fingerprint": fingerprint, "row": row}
+                        )
+                    if on_episode is not None:
+                        on_episode(path, case, r, result)
+                trial_rows.append(row)
+                all_rows.append(row["metrics"])
+                done += 1
+            agg = aggregate([t["metrics"] for t in trial_rows])
+            per_case.append({"case": case.name, "file": str(path), "metrics": agg, "trials": trial_rows})
+    finally:
+        if book is not None:
+            book.close()
     if progress is not None:
         progress("done", done, total)
-    model = est_kw.get("model")
-    settings = {
-        "method": method,
-        "model": model if isinstance(model, str) else None,
-        "planner": planner_name,
-        "planner_options": plan_kw,
-        "estimator_options": {k: v for k, v in est_kw.items() if k != "model"},
-        "trials": trials,
-        "seed": seed,
-        "time_limit_s": time_limit,
-        "frames": use_frames,
-        "speed": speed,
-        "dwell": dwell,
-        "min_start_distance_m": min_start_distance,
-        "include_compute_time": include_compute_time,
-    }
     return json_safe({"settings": settings, "aggregate": aggregate(all_rows), "per_case": per_case})

@@ -25,6 +25,12 @@ and, with ``record=True``, the belief maps for :mod:`dgse.search.animate`
 (source posterior, wind mean, ``log(1 + c)`` mean), float32, block-averaged
 to at most ``record_max_cells`` cells.
 
+Signs of life: ``on_step`` (:data:`StepCallback`) gets every step's
+:class:`StepRecord` as soon as it is made (step index, the simulated clock at
+the reading ``time_s``, the normalized entropy, the current error, ...), e.g.
+to show them while a long episode runs; an exception it raises (e.g.
+``KeyboardInterrupt``) ends the episode.
+
 Computation time split: *preprocessing* is the loop's own handling of the
 readings (checking and appending them) plus, if the estimator reports it in
 ``belief.info["timings"]["preprocessing"]`` (s), its input preparation;
@@ -42,7 +48,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -61,6 +67,7 @@ __all__ = [
     "DEFAULT_TIME_LIMIT",
     "REASONS",
     "EpisodeResult",
+    "StepCallback",
     "StepRecord",
     "episode_streams",
     "run_episode",
@@ -133,6 +140,10 @@ class StepRecord:
             "compute_s": self.compute_s,
             "goal": None if self.goal is None else list(self.goal),
         }
+
+
+#: ``on_step(record)``: called after every step of :func:`run_episode` (signs of life).
+StepCallback = Callable[[StepRecord], None]
 
 
 @dataclass(eq=False)
@@ -293,6 +304,7 @@ def run_episode(
     min_start_distance: float = 0.0,
     connectivity: int = 8,
     record_max_cells: int = 10_000,
+    on_step: StepCallback | None = None,
 ) -> EpisodeResult:
     """Run one active search on ``case`` (see the module docstring).
 
@@ -315,6 +327,8 @@ def run_episode(
         connectivity: 8 or 4 (:class:`~dgse.search.paths.FreeSpaceGraph`).
         record_max_cells: recorded maps are block-averaged (the posterior
             block-summed) to at most this many cells.
+        on_step: called with every step's record right after the step's
+            decision (before the move); see :data:`StepCallback`.
 
     Returns:
         The :class:`EpisodeResult`.
@@ -404,6 +418,8 @@ def run_episode(
             if belief.log_conc_mean is not None:
                 rec.log_conc_mean = _block_reduce(belief.log_conc_mean, factor, "mean")
         steps.append(rec)
+        if on_step is not None:
+            on_step(rec)
 
         if include_compute_time:
             robot.wait(rec.compute_s, until=time_limit)
