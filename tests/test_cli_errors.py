@@ -90,3 +90,29 @@ def test_a_bug_prints_one_line_and_logs_the_traceback(capsys, monkeypatch, tmp_p
     assert len(logs) == 1 and str(logs[0]) in line
     text = logs[0].read_text()
     assert "Traceback" in text and "RuntimeError: boom" in text and "command: dgse engines" in text
+
+
+def test_demo_out_file_fails_within_seconds(capsys, tmp_path):
+    a_file = tmp_path / "taken"
+    a_file.write_text("x")
+    t0 = time.perf_counter()
+    _assert_one_line_error(*_run(capsys, "demo", "--out", a_file), "is a file, not a folder")
+    assert time.perf_counter() - t0 < 10
+    _assert_one_line_error(*_run(capsys, "demo", "--eta", "1.5", "--out", tmp_path / "d"), "--eta")
+
+
+@pytest.mark.parametrize(
+    ("args", "fragments"),
+    [
+        (["-p", "foo=1"], ["unknown estimator 'dgse-s' option(s) foo"]),
+        (["-O", "K=abc"], ["option K='abc' must be an integer"]),
+        (["-P", "bogus=1"], ["unknown planner 'utility' option(s) bogus"]),
+        (["--method", "adjoint", "-p", "q_max=lots"], ["q_max='lots' must be a number or None"]),
+        (["--method", "dgse-s", "-p", "device=gpu"], ["unknown device 'gpu'"]),
+    ],
+)
+def test_search_bad_options(capsys, tmp_path, case_file, args, fragments):
+    out = tmp_path / "s.json"
+    code, o, err = _run(capsys, "search", case_file, "--trials", "1", "--json", out, "--no-progress", *args)
+    _assert_one_line_error(code, o, err, *fragments)
+    assert not out.exists()

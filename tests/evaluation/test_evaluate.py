@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 import typer
 
+from dgse.cli.common import parse_params
 from dgse.cli.main import main as models_main
-from dgse.cli.models import parse_params, register
+from dgse.cli.models import register
 from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators.belief import Belief, normalize_source_probs
 from dgse.evaluation.evaluate import (

@@ -15,7 +15,7 @@ import pytest
 from dgse.cli.main import main
 from dgse.errors import InputDataError
 from dgse.evaluation.evaluate import evaluate
-from dgse.search.journal import count_records
+from dgse.journal import count_records
 from tests.search import PeakEstimator, UniformEstimator, corridor_case
 
 #: The module (``dgse.evaluation.evaluate`` is also the name of the function the package exports).

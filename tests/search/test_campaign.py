@@ -7,8 +7,8 @@ import json
 import pytest
 
 from dgse.errors import InputDataError
-from dgse.search.campaign import estimator_options, journal_path, load_cases, run_trials, trial_seed
-from dgse.search.journal import count_records
+from dgse.journal import count_records, journal_path
+from dgse.search.campaign import estimator_options, load_cases, run_trials, trial_seed
 from dgse.search.planners import UtilityPlanner
 from tests.search import PeakEstimator, corridor_case
 

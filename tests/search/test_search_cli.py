@@ -162,7 +162,7 @@ def test_param_reaches_the_estimator_and_planner_has_no_short_form(peak, tmp_pat
     assert built[-1] == {"adaptive": True, "sigma": 0.2}
     # -p is not the planner any more: a planner name is not KEY=VALUE
     code, _, err = _run(capsys, cases, "-p", "utility", "--no-progress")
-    assert code == 2 and "--param takes KEY=VALUE" in err
+    assert code == 2 and "--param needs KEY=VALUE" in err
     code, help_text, _ = _run(capsys, "--help")
     assert "--param" in help_text and "--option" not in help_text and "dgse-out/search-" in help_text
 
@@ -222,7 +222,7 @@ def test_sigterm_is_an_interrupt():
     import os
     import signal
 
-    from dgse.cli.search import sigterm_as_interrupt
+    from dgse.cli.common import sigterm_as_interrupt
 
     before = signal.getsignal(signal.SIGTERM)
     with pytest.raises(KeyboardInterrupt), sigterm_as_interrupt():
@@ -233,8 +233,9 @@ def test_sigterm_is_an_interrupt():
 
 
 def test_step_text_and_default_names():
+    from dgse.cli.common import default_output
     from dgse.cli.demo import step_text
-    from dgse.cli.search import _step_text, default_output
+    from dgse.cli.search import _step_text
     from dgse.search.episode import StepRecord
 
     rec = StepRecord(4, (1, 2), 123.4, 5.0, (0.1, 0.0), 3.0, 0.71, (1.0, 2.0), 0.456)

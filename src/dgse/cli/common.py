@@ -9,12 +9,18 @@ traceback (:func:`write_crash_log`) and exits with :data:`EXIT_BUG`.
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import json
 import os
+import re
+import shlex
+import signal
 import sys
 import tempfile
+import threading
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
 from datetime import datetime
 from pathlib import Path
 from typing import Any, TypeVar
@@ -174,3 +180,100 @@ def check_output_dir(path: Path | None, what: str = "output folder") -> None:
 def path_text(path: Path | str) -> str:
     """A path escaped for rich markup."""
     return escape(str(path))
+
+
+def parse_params(items: Sequence[str] | None, flag: str = "--param") -> dict[str, Any]:
+    """``["K=3", "name=x"]`` -> ``{"K": 3, "name": "x"}`` (values JSON-decoded when they parse).
+
+    The one reading of ``-p/--param`` (estimator) and ``-P/--planner-option`` options in every command.
+
+    Raises:
+        InputDataError: an item without ``=`` or whose key is not a Python name.
+    """
+    out: dict[str, Any] = {}
+    for item in items or ():
+        key, sep, raw = item.partition("=")
+        key = key.strip()
+        if not sep or not key.isidentifier():
+            raise InputDataError(f"{flag} needs KEY=VALUE with KEY a Python name, got {item!r}")
+        try:
+            out[key] = json.loads(raw)
+        except json.JSONDecodeError:
+            out[key] = raw
+    return out
+
+
+#: Folder of the results of a command run without an output path.
+OUTPUT_DIR = Path("dgse-out")
+
+
+# -- long runs: default output, interruption, the command that resumes -------------------
+def default_output(command: str, *names: str) -> Path:
+    """``dgse-out/<command>-<name>-....json``, the names made safe for a file name."""
+    parts = [re.sub(r"[^A-Za-z0-9._+-]+", "_", n).strip("._") or "x" for n in (command, *names)]
+    return OUTPUT_DIR / ("-".join(parts) + ".json")
+
+
+@contextlib.contextmanager
+def sigterm_as_interrupt() -> Iterator[None]:
+    """Within the block, SIGTERM (``kill``) raises ``KeyboardInterrupt`` as Ctrl-C does."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _option_words(param: Any, value: Any) -> list[str]:
+    if param.is_flag and param.secondary_opts:
+        return [(param.opts if value else param.secondary_opts)[0]]
+    name = next((o for o in param.opts if o.startswith("--")), param.opts[0])
+    if param.is_flag:
+        return [name] if value else []
+    values = value if param.multiple else [value]
+    return [w for v in values for w in (name, str(v))]
+
+
+def resume_command(ctx: typer.Context, drop: Sequence[str] = ("restart",)) -> str:
+    """The running command's line as a shell takes it: ``dgse <command>``, its arguments and
+    every option that differs from its default (the options named in ``drop`` left out)."""
+    words = ["dgse", *ctx.command_path.split()[1:]]
+    options: list[str] = []
+    for param in ctx.command.params:
+        if param.name is None or param.name in drop or param.name not in ctx.params:
+            continue
+        value = ctx.params[param.name]
+        if param.param_type_name == "argument":
+            words += [str(v) for v in (value if isinstance(value, list | tuple) else [value])]
+        elif param.param_type_name == "option" and value is not None and value != param.default:
+            if getattr(param, "multiple", False) and not value:
+                continue
+            options += _option_words(param, value)
+    return shlex.join(words + options)
+
+
+def report_interrupt(kept: int, unit: str, where: Path, command: str) -> None:
+    """One line on standard error after Ctrl-C: what was kept, where, how to resume."""
+    plural = unit if kept == 1 else unit + "s"
+    err_console.print(
+        f"[yellow]interrupted: {kept} finished {plural} kept in {path_text(where)}; "
+        f"resume with: {escape(command)}[/]",
+        soft_wrap=True,
+    )
+
+
+def kept_note(journal: Path, unit: str, restart: bool) -> str:
+    """The line that says where finished pieces are kept (and how many an earlier run left)."""
+    from dgse.journal import count_records
+
+    n = 0 if restart else count_records(journal)
+    if n:
+        return f"{n} finished {unit}{'s' * (n != 1)} of an earlier run in [cyan]{path_text(journal)}[/]"
+    return f"finished {unit}s are kept in [cyan]{path_text(journal)}[/] as they finish"

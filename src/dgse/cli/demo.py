@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import math
 import secrets
 import time
 from pathlib import Path
@@ -20,7 +21,8 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 from rich.table import Table
 
-from dgse.cli.common import console, path_text, user_errors
+from dgse.cli.common import check_output_dir, console, path_text, user_errors
+from dgse.errors import InputDataError
 
 if TYPE_CHECKING:
     from dgse.search.episode import StepRecord
@@ -57,6 +59,13 @@ def demo_cmd(
     threads: Annotated[int, typer.Option("--threads", help="PyTorch CPU threads.")] = 1,
 ) -> None:
     """Solve a random scenario and find its gas source with the shipped DGSE-S model."""
+    check_output_dir(out)
+    if not (math.isfinite(time_limit) and time_limit > 0):
+        raise InputDataError(f"--time-limit must be a positive number of seconds, got {time_limit:g}")
+    if not (math.isfinite(eta) and 0 < eta <= 1):
+        raise InputDataError(f"--eta must be in (0, 1], got {eta:g}")
+    if threads < 1:
+        raise InputDataError(f"--threads must be at least 1, got {threads}")
     import torch
 
     from dgse.estimators.registry import get_estimator

@@ -27,7 +27,6 @@ exits with status 2 (:mod:`dgse.cli.common`).
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -38,7 +37,7 @@ from rich import box
 from rich.markup import escape
 from rich.table import Table
 
-from dgse.cli.common import console, path_text, user_errors
+from dgse.cli.common import check_output_file, console, parse_params, path_text, user_errors
 from dgse.errors import InputDataError
 
 __all__ = [
@@ -67,21 +66,6 @@ def _set_threads(threads: int | None) -> None:
     import torch
 
     torch.set_num_threads(threads)
-
-
-def parse_params(items: Sequence[str] | None) -> dict[str, Any]:
-    """``["K=3", "name=x"]`` -> ``{"K": 3, "name": "x"}`` (values JSON-decoded when they parse)."""
-    out: dict[str, Any] = {}
-    for item in items or []:
-        key, sep, raw = item.partition("=")
-        key = key.strip()
-        if not sep or not key.isidentifier():
-            raise InputDataError(f"--param needs KEY=VALUE with KEY a Python name, got {item!r}")
-        try:
-            out[key] = json.loads(raw)
-        except json.JSONDecodeError:
-            out[key] = raw
-    return out
 
 
 def _is_dgse(method: str) -> bool:
@@ -187,8 +171,10 @@ def estimate_cmd(
 
     kwargs = _estimator_kwargs(method, model, k, t, device, dtype, params)
     _set_threads(threads)
+    check_output_file(out, "estimate file")
     if plot is not None:
         _check_figure_path(plot)
+        check_output_file(plot, "figure")
     case = Case.load(case_file)
     case_id = case_file.stem
     obs = draw_observations(case, observations, seed, case_id, trial=0)
@@ -388,8 +374,8 @@ def evaluate_cmd(
     Every finished estimate is kept at once (in the journal beside the JSON
     file); after Ctrl-C or a kill, the same command resumes where it stopped.
     """
-    from dgse.cli.common import EXIT_INTERRUPTED, check_output_file
-    from dgse.cli.search import (
+    from dgse.cli.common import (
+        EXIT_INTERRUPTED,
         default_output,
         kept_note,
         report_interrupt,
@@ -397,8 +383,7 @@ def evaluate_cmd(
         sigterm_as_interrupt,
     )
     from dgse.evaluation.evaluate import evaluate, write_json
-    from dgse.search.campaign import journal_path
-    from dgse.search.journal import count_records
+    from dgse.journal import count_records, journal_path
 
     cases, counts = _split_positionals(args, observations or [])
     kwargs = _estimator_kwargs(method, model, k, t, device, dtype, params)
@@ -455,6 +440,7 @@ def export_onnx_cmd(
     from dgse.models.checkpoint import load_model
     from dgse.models.onnx_export import check_onnx, export_onnx
 
+    check_output_file(out, "ONNX file")
     if model == "default":
         from dgse.estimators.dgse import default_model_path
 

@@ -36,7 +36,7 @@ Signs of life and keeping what was done: the progress bar shows the running
 episode's step, simulated clock (of the time limit), normalized entropy and
 current error.  Every finished episode is kept at once in the journal beside
 the JSON file (``out.json`` -> ``out.journal.jsonl``,
-:func:`dgse.search.campaign.journal_path`); without ``--json`` the JSON file
+:func:`dgse.journal.journal_path`); without ``--json`` the JSON file
 is ``dgse-out/search-<method>-<planner>.json`` (printed).  Ctrl-C (or
 SIGTERM) stops the run with one line: how many episodes are kept, where, and
 the command that resumes the run (exit status 130).  Running the same command
@@ -52,15 +52,9 @@ The helpers :func:`default_output`, :func:`kept_note`, :func:`resume_command`,
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
-import re
-import shlex
-import signal
-import threading
 import time
-from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -75,13 +69,18 @@ from dgse.cli.common import (
     check_output_dir,
     check_output_file,
     console,
-    err_console,
+    default_output,
+    kept_note,
+    parse_params,
     path_text,
+    report_interrupt,
+    resume_command,
+    sigterm_as_interrupt,
     user_errors,
 )
 from dgse.errors import InputDataError
-from dgse.search.campaign import journal_path, json_safe, load_cases, trial_seed
-from dgse.search.journal import count_records
+from dgse.journal import count_records, journal_path
+from dgse.search.campaign import json_safe, load_cases, trial_seed
 from dgse.search.metrics import format_mean_std
 from dgse.world.case import Case
 
@@ -89,106 +88,11 @@ if TYPE_CHECKING:
     from dgse.search.episode import EpisodeResult, StepRecord
 
 __all__ = [
-    "OUTPUT_DIR",
-    "default_output",
-    "kept_note",
     "load_cases",
     "register",
-    "report_interrupt",
-    "resume_command",
     "search_cmd",
-    "sigterm_as_interrupt",
     "trial_seed",
 ]
-
-#: Folder of the results of a command run without an output path.
-OUTPUT_DIR = Path("dgse-out")
-
-
-# -- helpers -----------------------------------------------------------------------------
-def _parse_options(items: Sequence[str] | None, flag: str) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for item in items or ():
-        key, sep, value = item.partition("=")
-        key = key.strip()
-        if not sep or not key.isidentifier():
-            raise InputDataError(f"{flag} takes KEY=VALUE with a Python identifier as KEY, got {item!r}")
-        try:
-            out[key] = json.loads(value)
-        except ValueError:
-            out[key] = value
-    return out
-
-
-# -- long runs: default output, interruption, the command that resumes -------------------
-def default_output(command: str, *names: str) -> Path:
-    """``dgse-out/<command>-<name>-....json``, the names made safe for a file name."""
-    parts = [re.sub(r"[^A-Za-z0-9._+-]+", "_", n).strip("._") or "x" for n in (command, *names)]
-    return OUTPUT_DIR / ("-".join(parts) + ".json")
-
-
-@contextlib.contextmanager
-def sigterm_as_interrupt() -> Iterator[None]:
-    """Within the block, SIGTERM (``kill``) raises ``KeyboardInterrupt`` as Ctrl-C does."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def interrupt(signum: int, frame: Any) -> None:
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGTERM, interrupt)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-
-
-def _option_words(param: Any, value: Any) -> list[str]:
-    if param.is_flag and param.secondary_opts:
-        return [(param.opts if value else param.secondary_opts)[0]]
-    name = next((o for o in param.opts if o.startswith("--")), param.opts[0])
-    if param.is_flag:
-        return [name] if value else []
-    values = value if param.multiple else [value]
-    return [w for v in values for w in (name, str(v))]
-
-
-def resume_command(ctx: typer.Context, drop: Sequence[str] = ("restart",)) -> str:
-    """The running command's line as a shell takes it: ``dgse <command>``, its arguments and
-    every option that differs from its default (the options named in ``drop`` left out)."""
-    words = ["dgse", *ctx.command_path.split()[1:]]
-    options: list[str] = []
-    for param in ctx.command.params:
-        if param.name is None or param.name in drop or param.name not in ctx.params:
-            continue
-        value = ctx.params[param.name]
-        if param.param_type_name == "argument":
-            words += [str(v) for v in (value if isinstance(value, list | tuple) else [value])]
-        elif param.param_type_name == "option" and value is not None and value != param.default:
-            if getattr(param, "multiple", False) and not value:
-                continue
-            options += _option_words(param, value)
-    return shlex.join(words + options)
-
-
-def report_interrupt(kept: int, unit: str, where: Path, command: str) -> None:
-    """One line on standard error after Ctrl-C: what was kept, where, how to resume."""
-    plural = unit if kept == 1 else unit + "s"
-    err_console.print(
-        f"[yellow]interrupted: {kept} finished {plural} kept in {path_text(where)}; "
-        f"resume with: {escape(command)}[/]",
-        soft_wrap=True,
-    )
-
-
-def kept_note(journal: Path, unit: str, restart: bool) -> str:
-    """The line that says where finished pieces are kept (and how many an earlier run left)."""
-    n = 0 if restart else count_records(journal)
-    if n:
-        return f"{n} finished {unit}{'s' * (n != 1)} of an earlier run in [cyan]{path_text(journal)}[/]"
-    return f"finished {unit}s are kept in [cyan]{path_text(journal)}[/] as they finish"
-
 
 def _step_text(stem: str, trial: int, trials: int, rec: StepRecord, time_limit: float) -> str:
     return (
@@ -333,9 +237,9 @@ def search_cmd(
         torch.set_num_threads(threads)
 
     cases = load_cases(cases_path)
-    options = _parse_options([*(option or []), *(param or [])], "--param")
+    options = parse_params([*(option or []), *(param or [])], "--param")
     est_kwargs = estimator_options(method, model=model, seed=seed, options=options)
-    plan_kwargs = _parse_options(planner_option, "--planner-option")
+    plan_kwargs = parse_params(planner_option, "--planner-option")
     if eta is not None:
         plan_kwargs["eta"] = eta
     estimator = get_estimator(method, **est_kwargs)

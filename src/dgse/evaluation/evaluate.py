@@ -69,7 +69,7 @@ paper's per-environment figures (Fig. 8, Fig. gsl_only: 20 trials per
 environment) plot.
 
 Keeping and resuming (``journal=``): every finished estimate is appended at
-once to a JSON-lines journal (:class:`dgse.search.journal.Journal`, kind
+once to a JSON-lines journal (:class:`dgse.journal.Journal`, kind
 ``"evaluate"``) with the fingerprint of its case; a rerun with the same
 journal skips the ``(case id, n_obs, trial)`` it finds there and returns what
 an uninterrupted run returns (up to ``seconds``, ``seconds_total`` and
@@ -108,7 +108,7 @@ from dgse.sensing.sensors import Observations, random_observations
 from dgse.world.case import Case
 
 if TYPE_CHECKING:
-    from dgse.search.journal import Journal
+    from dgse.journal import Journal
 
 __all__ = [
     "FORMAT_NAME",
@@ -535,7 +535,7 @@ def evaluate(
         with open_cases(cases_or_store, split, limit) as (refs, info):
             kept: dict[tuple[Any, Any, Any], dict[str, Any]] = {}
             if journal is not None:
-                from dgse.search.journal import Journal
+                from dgse.journal import Journal
 
                 book = Journal(journal, "evaluate", identity, restart=restart, unit="estimate")
                 for entry in book.records:
@@ -606,7 +606,7 @@ def _evaluate_case(
     total: int,
 ) -> list[dict[str, Any]]:
     """The records of one case in loop order: kept ones from the journal, the others estimated."""
-    from dgse.search.journal import case_fingerprint
+    from dgse.journal import case_fingerprint
 
     case = ref.load()
     fingerprint = None if book is None else case_fingerprint(case)

@@ -22,7 +22,7 @@ For DGSE methods (``dgse-*``) the estimator gets ``model="default"`` (the
 shipped weights) and ``seed=`` unless given (:func:`estimator_options`).
 
 Keeping and resuming (``journal=``): every finished episode is appended to a
-JSON-lines journal (:class:`~dgse.search.journal.Journal`, kind ``"search"``)
+JSON-lines journal (:class:`~dgse.journal.Journal`, kind ``"search"``)
 as soon as it finishes, with its case file's stem, trial index, the case's
 fingerprint and its row of ``per_case[...]["trials"]``.  A rerun with the
 same journal skips the (stem, trial) pairs it finds there, and (as the trial
@@ -33,7 +33,7 @@ journal written with another method, planner, options, seed, time limit, ...
 is refused with an :class:`~dgse.errors.InputDataError` that names the
 difference (``restart=True`` discards it); more or fewer trials, or other
 cases, reuse what fits.  A case file whose contents changed since its episodes
-were kept is refused too.  :func:`journal_path` is where ``dgse search``
+were kept is refused too.  :func:`dgse.journal.journal_path` is where ``dgse search``
 keeps the journal of its JSON file.
 """
 
@@ -61,7 +61,6 @@ __all__ = [
     "Progress",
     "TrialStepCallback",
     "estimator_options",
-    "journal_path",
     "json_safe",
     "load_cases",
     "run_trials",
@@ -74,13 +73,6 @@ Progress = Callable[[str, int, int], None]
 EpisodeCallback = Callable[[Path, Case, int, EpisodeResult], None]
 #: ``on_step(path, trial, record)``: called after every step of every episode run.
 TrialStepCallback = Callable[[Path, int, StepRecord], None]
-
-
-def journal_path(json_path: str | os.PathLike[str]) -> Path:
-    """The journal kept beside a campaign's JSON file: ``out.json`` -> ``out.journal.jsonl``."""
-    p = Path(json_path)
-    stem = p.stem if p.suffix.lower() == ".json" else p.name
-    return p.with_name(f"{stem}.journal.jsonl")
 
 
 def load_cases(path: str | os.PathLike[str]) -> list[tuple[Path, Case]]:
@@ -222,8 +214,8 @@ def run_trials(
             settings or for a case file that has changed since.
     """
     from dgse.estimators.registry import get_estimator
+    from dgse.journal import Journal, case_fingerprint
     from dgse.search.episode import run_episode
-    from dgse.search.journal import Journal, case_fingerprint
     from dgse.search.metrics import aggregate, episode_metrics
     from dgse.search.planners import get_planner
 

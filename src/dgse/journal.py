@@ -40,10 +40,24 @@ import numpy as np
 from dgse.errors import InputDataError
 from dgse.world.case import Case
 
-__all__ = ["JOURNAL_FORMAT", "JOURNAL_VERSION", "Journal", "case_fingerprint", "count_records"]
+__all__ = [
+    "JOURNAL_FORMAT",
+    "JOURNAL_VERSION",
+    "Journal",
+    "case_fingerprint",
+    "count_records",
+    "journal_path",
+]
 
 JOURNAL_FORMAT = "dgse-journal"
 JOURNAL_VERSION = 1
+
+
+def journal_path(json_path: str | os.PathLike[str]) -> Path:
+    """The journal kept beside a run's JSON file: ``out.json`` -> ``out.journal.jsonl``."""
+    p = Path(json_path)
+    stem = p.stem if p.suffix.lower() == ".json" else p.name
+    return p.with_name(f"{stem}.journal.jsonl")
 
 
 def case_fingerprint(case: Case) -> str:

@@ -7,7 +7,7 @@ import json
 import pytest
 
 from dgse.errors import InputDataError
-from dgse.search.journal import Journal, case_fingerprint, count_records
+from dgse.journal import Journal, case_fingerprint, count_records
 from tests.search import corridor_case
 
 
