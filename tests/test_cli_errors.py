@@ -116,3 +116,37 @@ def test_search_bad_options(capsys, tmp_path, case_file, args, fragments):
     code, o, err = _run(capsys, "search", case_file, "--trials", "1", "--json", out, "--no-progress", *args)
     _assert_one_line_error(code, o, err, *fragments)
     assert not out.exists()
+
+
+def test_knowledge_is_checked_and_recorded(capsys, tmp_path, case_file):
+    import json
+
+    import numpy as np
+
+    _assert_one_line_error(
+        *_run(capsys, "estimate", case_file, "-n", "5", "-o", tmp_path / "a.npz", "--method", "adjoint"),
+        "adjoint works at knowledge level 'openings' or 'wind', not 'map': give --knowledge openings",
+    )
+    _assert_one_line_error(
+        *_run(capsys, "demo", "--knowledge", "everything", "--out", tmp_path / "d"), "unknown knowledge level"
+    )
+    _assert_one_line_error(
+        *_run(capsys, "search", case_file, "--method", "adjoint-oracle", "--knowledge", "openings"),
+        "not 'openings': give --knowledge wind",
+    )
+    code, out, err = _run(
+        capsys, "estimate", case_file, "-n", "8", "-o", tmp_path / "b.npz", "--method", "adjoint",
+        "--knowledge", "openings", "-p", "candidate_speeds=[1.0]",
+    )  # fmt: skip
+    assert code == 0, err
+    assert "knowledge: openings" in out
+    with np.load(tmp_path / "b.npz", allow_pickle=False) as d:
+        assert json.loads(str(d["extra"]))["knowledge"] == "openings"
+        assert json.loads(str(d["info"]))["knowledge"] == "openings"
+    out_json = tmp_path / "s.json"
+    code, out, err = _run(
+        capsys, "search", case_file, "--method", "adjoint", "--knowledge", "openings", "-p",
+        "candidate_speeds=[1.0]", "--trials", "1", "--time-limit", "30", "--json", out_json, "--no-progress",
+    )  # fmt: skip
+    assert code == 0, err
+    assert json.loads(out_json.read_text())["settings"]["knowledge"] == "openings"

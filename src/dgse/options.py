@@ -15,7 +15,7 @@ the class's signature.
 
 Example::
 
-    @options_from(AdjointEstimator, drop=("wind",), extra={"case_path": str})
+    @options_from(AdjointEstimator, drop=("wind",))
     def make_adjoint(**kwargs): ...
 
     check_options("estimator 'adjoint'", make_adjoint, {"q_max": "abc"})
@@ -34,7 +34,7 @@ from typing import Any
 
 from dgse.errors import InputDataError
 
-__all__ = ["check_options", "options_from"]
+__all__ = ["accepts", "check_options", "options_from"]
 
 #: attribute set by :func:`options_from`
 _ATTR = "__dgse_options__"
@@ -89,6 +89,12 @@ def _accepted(target: Callable[..., Any]) -> tuple[dict[str, Any], bool]:
             names[p.name] = hints.get(p.name, _NOT_CHECKED)
     names.update(extra)
     return names, is_open
+
+
+def accepts(target: Callable[..., Any], name: str) -> bool:
+    """True when ``target`` (a factory, class or function; see :func:`options_from`) takes option ``name``."""
+    accepted, _ = _accepted(target)
+    return name in accepted
 
 
 def _describe(hint: Any) -> str:

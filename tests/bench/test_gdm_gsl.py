@@ -88,12 +88,23 @@ def test_gdm_evaluations_are_reused_only_for_the_same_plan(gdm: dict, bench_root
     (bench_root / "gdm" / "eval_kdmvw_other.json").unlink()
 
 
+def test_methods_at_a_knowledge_level_are_named(bench_root: Path) -> None:
+    from dgse.bench.core import BenchContext
+
+    ctx = BenchContext("gsl", bench_root, quick=True)
+    kept, left = ctx.methods_at_level(GSL_METHODS)
+    assert ctx.knowledge == "map" and set(left) == {"adjoint", "adjoint-oracle"}
+    assert "dgse-s" in kept and "openings" in left["adjoint"] and ctx.notes
+
+
 def test_gsl_quick(bench_root: Path) -> None:
-    m = _manifest(run_suite("gsl", bench_root, quick=True))
+    # at 'wind' every method of the comparison works (the oracle needs the flow)
+    m = _manifest(run_suite("gsl", bench_root, quick=True, knowledge="wind"))
+    assert m["knowledge"] == "wind"
     files = {f["file"] for s in m["sections"] for f in s["figures"]}
     assert {"fig_gsl_only.png", "gsl_time.png"} <= files
     text = m["sections"][0]["text"]
-    assert "grgsl is excluded" in text and "lower-bound" in text
+    assert "grgsl is excluded" in text and "lower-bound" in text and "Knowledge: 'wind'" in text
     rows = _table(m, "gsl_only")
     assert {r["method"] for r in rows} == set(GSL_METHODS)
     for r in rows:

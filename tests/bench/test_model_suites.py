@@ -67,7 +67,7 @@ def test_samples_quick(bench_root: Path) -> None:
 
 
 def test_calibration_quick(bench_root: Path) -> None:
-    m = _manifest(run_suite("calibration", bench_root, quick=True))
+    m = _manifest(run_suite("calibration", bench_root, quick=True, knowledge="openings"))
     tab = m["sections"][1]["tables"][0]
     cols = tab["columns"]
     seen = set()

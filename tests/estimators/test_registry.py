@@ -8,6 +8,7 @@ import pytest
 from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators import registry
 from dgse.estimators.belief import Belief, normalize_source_probs
+from dgse.estimators.knowledge import KnowledgeUser
 from dgse.estimators.registry import (
     Estimator,
     StreamingEstimator,
@@ -18,7 +19,7 @@ from dgse.estimators.registry import (
 from dgse.sensing.sensors import Observations
 
 
-class CountingEstimator:
+class CountingEstimator(KnowledgeUser):
     """Uniform posterior; counts its calls and remembers the observations it saw."""
 
     def __init__(self, tag: str = "") -> None:

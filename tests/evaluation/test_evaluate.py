@@ -19,6 +19,7 @@ from dgse.cli.main import main as models_main
 from dgse.cli.models import register
 from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators.belief import Belief, normalize_source_probs
+from dgse.estimators.knowledge import KnowledgeUser
 from dgse.evaluation.evaluate import (
     draw_observations,
     evaluate,
@@ -69,7 +70,7 @@ def checkpoint(tmp_path_factory) -> Path:
     return save_model(tiny_model("dgse-s"), tmp_path_factory.mktemp("model") / "tiny-s.safetensors")
 
 
-class Recorder:
+class Recorder(KnowledgeUser):
     """A uniform-posterior estimator that records what it was given (no fields)."""
 
     name = "recorder"
@@ -343,7 +344,17 @@ def test_cli_errors(case_dir, checkpoint, tmp_path, capsys):
         "not found",
     )
     _assert_user_error(
-        *_run(capsys, "evaluate", case_dir, "-n", 5, "--method", "nope", "-K", 3), "apply to the DGSE"
+        *_run(capsys, "evaluate", case_dir, "-n", 5, "--method", "nope", "-K", 3), "unknown estimator 'nope'"
+    )
+    _assert_user_error(
+        *_run(capsys, "evaluate", case_dir, "-n", 5, "--method", "kdmv", "-K", 3), "-K does not apply to kdmv"
+    )
+    _assert_user_error(
+        *_run(capsys, "evaluate", case_dir, "-n", 5, "--method", "adjoint"),
+        "adjoint works at knowledge level 'openings' or 'wind', not 'map': give --knowledge openings",
+    )
+    _assert_user_error(
+        *_run(capsys, "evaluate", case_dir, "-n", 5, "--knowledge", "all"), "unknown knowledge level 'all'"
     )
 
 

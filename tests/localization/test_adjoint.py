@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 from scipy import integrate, stats
 
-from dgse.errors import InputDataError
+from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators import get_estimator
+from dgse.estimators.knowledge import Knowledge
 from dgse.localization.adjoint import AdjointEstimator, adjoint_log_evidence, flow_model
 from dgse.sensing.sensors import Observations
 from tests.localization import cell_distance, channel_case, dense_readings
@@ -59,6 +60,11 @@ def test_flat_prior_and_truncation_term() -> None:
     assert logl[0] > logl[1] + 1.0
 
 
+def _oracle(case):
+    """The oracle, told the flow of ``case`` (knowledge level ``wind``)."""
+    return get_estimator("adjoint-oracle", knowledge=Knowledge.from_case(case, "wind"))
+
+
 def test_oracle_noiseless_linear_forward_peaks_at_the_source() -> None:
     case = channel_case()
     fm = flow_model(case.layout, case.inlet_velocity)
@@ -66,7 +72,7 @@ def test_oracle_noiseless_linear_forward_peaks_at_the_source() -> None:
     field = fm.mesh.field(fm.forward(src, [0.2]))[0]  # the same linear operator as the adjoint
     obs = dense_readings(case, 40, seed=1)
     obs = Observations(obs.cells, field[obs.cells[:, 0], obs.cells[:, 1]], obs.wind)
-    b = AdjointEstimator(wind="oracle", case=case).estimate(case.occupancy, case.resolution, obs)
+    b = _oracle(case).estimate(case.occupancy, case.resolution, obs)
     assert b.most_likely_cell() == case.source_cell
     assert b.source_probs[case.source_cell] > 0.5
     assert b.info["release_rate_at_map_gps"] == pytest.approx(0.2, rel=1e-3)
@@ -76,7 +82,7 @@ def test_oracle_on_the_case_and_registry() -> None:
     import dgse.localization.register  # noqa: F401
 
     case = channel_case()
-    est = get_estimator("adjoint-oracle", case=case)
+    est = get_estimator("adjoint-oracle", knowledge=Knowledge.from_case(case, "wind"))
     obs = dense_readings(case, 40, seed=2)
     b = est.estimate(case.occupancy, case.resolution, obs)
     assert cell_distance(b.most_likely_cell(), case.source_cell) <= 2.0
@@ -89,7 +95,9 @@ def test_oracle_on_the_case_and_registry() -> None:
 
 def test_estimated_wind_fits_the_inlet_speed() -> None:
     case = channel_case()
-    est = AdjointEstimator(wind="estimated", case=case, candidate_speeds=(0.5, 2.0))
+    est = get_estimator(
+        "adjoint", knowledge=Knowledge.from_case(case, "openings"), candidate_speeds=(0.5, 2.0)
+    )
     obs = dense_readings(case, 40, seed=3)
     b = est.estimate(case.occupancy, case.resolution, obs)
     assert b.info["inlet_velocity"] == pytest.approx(case.inlet_velocity, rel=0.15)
@@ -104,7 +112,7 @@ def test_heteroscedastic_noise_average() -> None:
     noisy = Observations(
         obs.cells, np.maximum(obs.gas * (1.0 + 0.5 * rng.standard_normal(len(obs))), 0.0), obs.wind
     )
-    b = AdjointEstimator(wind="oracle", case=case).estimate(case.occupancy, case.resolution, noisy)
+    b = _oracle(case).estimate(case.occupancy, case.resolution, noisy)
     w = np.array(b.info["kappa_weights"])
     assert w.sum() == pytest.approx(1.0)
     assert w[0] < 0.5  # proportional noise is recognized
@@ -113,7 +121,7 @@ def test_heteroscedastic_noise_average() -> None:
 
 def test_bad_input_is_rejected() -> None:
     case = channel_case()
-    est = AdjointEstimator(wind="oracle", case=case)
+    est = get_estimator("adjoint-oracle", knowledge=Knowledge.from_case(case, "wind"))
     with pytest.raises(InputDataError, match="no observations"):
         est.estimate(case.occupancy, case.resolution, Observations.empty())
     occ = case.occupancy.copy()
@@ -123,7 +131,10 @@ def test_bad_input_is_rejected() -> None:
         est.estimate(occ, case.resolution, bad)
     with pytest.raises(InputDataError, match="needs"):
         AdjointEstimator(wind="estimated").estimate(case.occupancy, case.resolution, dense_readings(case, 3))
-    with pytest.raises(InputDataError, match="oracle"):
-        AdjointEstimator(wind="oracle", layout=case.layout)
+    with pytest.raises(UnsupportedError, match="works at knowledge level 'wind', not 'openings'"):
+        AdjointEstimator(wind="oracle").set_knowledge(Knowledge.from_case(case, "openings"))
+    wind_no_openings = Knowledge("wind", case.occupancy, case.resolution, wind=case.wind)
+    with pytest.raises(UnsupportedError, match="needs the openings"):
+        AdjointEstimator(wind="estimated").set_knowledge(wind_no_openings)
     with pytest.raises(InputDataError):
         AdjointEstimator(wind="sideways")  # type: ignore[arg-type]

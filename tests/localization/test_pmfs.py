@@ -7,6 +7,7 @@ import pytest
 
 from dgse.errors import InputDataError
 from dgse.estimators.belief import Belief, normalize_source_probs
+from dgse.estimators.knowledge import Knowledge
 from dgse.localization.pmfs import (
     PMFSEstimator,
     PMFSMaps,
@@ -109,8 +110,11 @@ def test_likelihood_peaks_near_the_true_source() -> None:
 
 def test_physical_case_runs_with_openings() -> None:
     case = channel_case()
-    est = PMFSEstimator(case=case, params=PMFSParams(hit_threshold_fraction=0.05))
+    est = PMFSEstimator(params=PMFSParams(hit_threshold_fraction=0.05))
     obs = dense_readings(case, 60, seed=0)
+    est.set_knowledge(Knowledge.from_case(case, "map"))
+    assert est.estimate(case.occupancy, case.resolution, obs).info["edges"] != "openings of the layout"
+    est.set_knowledge(Knowledge.from_case(case, "openings"))
     b = est.estimate(case.occupancy, case.resolution, obs)
     assert b.info["edges"] == "openings of the layout"
     assert b.info["hit_threshold_ppm"] == pytest.approx(0.05 * obs.gas.max())

@@ -9,11 +9,12 @@ import time
 import numpy as np
 
 from dgse.estimators.belief import Belief, normalize_source_probs
+from dgse.estimators.knowledge import KnowledgeUser
 from dgse.sensing.sensors import Observations
 from dgse.world.case import Case
 
 
-class PeakEstimator:
+class PeakEstimator(KnowledgeUser):
     """A posterior peaked at the highest gas reading so far: ``exp(-d^2 / (2 s^2))`` with ``s = sigma``.
 
     Uniform when no reading is above ``threshold`` ppm.  Deterministic; the
@@ -66,7 +67,7 @@ class PeakEstimator:
         )
 
 
-class UniformEstimator:
+class UniformEstimator(KnowledgeUser):
     """Always the uniform posterior over the free cells, no fields."""
 
     name = "uniform"

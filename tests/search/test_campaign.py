@@ -75,13 +75,15 @@ def test_named_methods_and_checks(tmp_path):
 
 
 def test_estimator_options_defaults():
-    assert estimator_options("dgse-s", seed=3) == {"model": "default", "seed": 3}
+    # the campaign's seed goes to every estimator that takes one (no name checks)
+    assert estimator_options("dgse-s", seed=3) == {"seed": 3}
     assert estimator_options("dgse-o", model="m.safetensors", options={"seed": 1}) == {
         "model": "m.safetensors",
         "seed": 1,
     }
-    assert estimator_options("pmfs") == {}
-    assert estimator_options("pmfs", model="x") == {"model": "x"}
+    assert estimator_options("pmfs", seed=2) == {"seed": 2}
+    assert estimator_options("kdmv", seed=2) == {}
+    assert estimator_options("kdmv", model="x") == {"model": "x"}  # rejected when it is built
     assert trial_seed(1, "a", 0).entropy == trial_seed(1, "a", 0).entropy
 
 

@@ -97,10 +97,15 @@ def run_suite(
     quick: bool = False,
     data: str | os.PathLike[str] | None = None,
     seed: int = 0,
+    knowledge: str = "map",
     progress: bool = False,
     command: str | None = None,
 ) -> Path:
-    """Run suite ``name`` into ``out/<name>/`` and return its manifest path."""
+    """Run suite ``name`` into ``out/<name>/`` and return its manifest path.
+
+    ``knowledge``: what every method is told besides its readings (methods that do
+    not work at that level are left out, and the manifest says so).
+    """
     if name not in SUITES:
         raise InputDataError(f"unknown suite {name!r}; the suites are: {', '.join(SUITES)}")
     info = SUITES[name]
@@ -110,6 +115,7 @@ def run_suite(
         quick=quick,
         data=data,
         seed=seed,
+        knowledge=knowledge,
         progress=progress,
         command=command,
         title=info.title,

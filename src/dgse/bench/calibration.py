@@ -38,17 +38,13 @@ FIELD_METHODS = ("dgse-s", "dgse-p", "gwgmrf", "ggmrf")
 SOURCE_METHODS = ("dgse-s", "dgse-p", "dgse-o", "adjoint", "dualmode")
 
 
-def _estimator(method: str) -> Any:
-    from dgse.estimators.registry import get_estimator
-
-    return get_estimator(method, model="default") if method.startswith("dgse-") else get_estimator(method)
-
-
 def _collect(ctx: BenchContext, method: str, files: list[Path], counts: list[int], trials: int) -> dict:
+    from dgse.estimators.knowledge import Knowledge
+    from dgse.estimators.registry import get_estimator
     from dgse.evaluation.evaluate import draw_observations, estimator_seed
     from dgse.world.case import Case
 
-    est = _estimator(method)
+    est = get_estimator(method)  # published defaults; the shipped weights for DGSE
     levels = list(DEFAULT_LEVELS)
     acc: dict[str, Any] = {
         str(n): {"wind_hits": np.zeros(len(levels), np.int64), "wind_n": 0,
@@ -57,8 +53,7 @@ def _collect(ctx: BenchContext, method: str, files: list[Path], counts: list[int
     }  # fmt: skip
     for f in files:
         case = Case.load(f)
-        if hasattr(est, "set_case"):
-            est.set_case(case)
+        est.set_knowledge(Knowledge.from_case(case, ctx.knowledge))
         free = case.occupancy == 0
         logc = np.log1p(np.maximum(case.concentration, 0.0))
         for n in counts:
@@ -128,7 +123,8 @@ def run(ctx: BenchContext) -> None:
     for method in dict.fromkeys(FIELD_METHODS + SOURCE_METHODS):
         try:
             results[method] = ctx.cached(
-                f"calibration_{method}", lambda m=method: _collect(ctx, m, files, counts, trials)
+                ctx.level_name(f"calibration_{method}"),
+                lambda m=method: _collect(ctx, m, files, counts, trials),
             )
         except UnsupportedError as e:  # e.g. no shipped weights for a variant
             ctx.note(f"{method} left out: {e}")

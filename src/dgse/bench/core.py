@@ -202,6 +202,9 @@ class BenchContext:
         data: a dataset store whose test split gives the ``test`` scenarios (None:
             random layouts solved here).
         seed: the run's seed (scenarios, observations, episodes).
+        knowledge: what every method is told about each scenario besides its
+            readings (:mod:`dgse.estimators.knowledge`); methods that do not work
+            at this level are left out and named (:meth:`methods_at_level`).
         progress: show progress bars.
         command: the command line recorded in the manifest.
     """
@@ -214,11 +217,14 @@ class BenchContext:
         quick: bool = False,
         data: str | os.PathLike[str] | None = None,
         seed: int = 0,
+        knowledge: str = "map",
         progress: bool = False,
         command: str | None = None,
         title: str = "",
         description: str = "",
     ) -> None:
+        from dgse.estimators.knowledge import check_level
+
         self.suite = suite
         self.root = Path(out_root)
         self.out = self.root / suite
@@ -228,6 +234,7 @@ class BenchContext:
         if self.data is not None and not self.data.is_file():
             raise InputDataError(f"{self.data}: no such dataset store")
         self.seed = int(seed)
+        self.knowledge = check_level(knowledge)
         self.progress = bool(progress)
         self.command = command if command is not None else " ".join(["dgse", *sys.argv[1:]])
         self.title = title or suite
@@ -312,6 +319,30 @@ class BenchContext:
         """A remark for the report (e.g. skipped scenarios)."""
         self.notes.append(text)
 
+    def level_name(self, name: str) -> str:
+        """``name`` of a result file, marked with the knowledge level unless it is ``map``."""
+        return name if self.knowledge == "map" else f"{name}_{self.knowledge}"
+
+    def methods_at_level(self, methods: Sequence[str]) -> tuple[list[str], dict[str, str]]:
+        """``(kept, left_out)``: the estimators of ``methods`` that work at :attr:`knowledge`, and
+        for each one left out why (the levels it needs); a note records the left-out ones."""
+        from dgse.estimators.registry import get_estimator
+
+        kept: list[str] = []
+        left: dict[str, str] = {}
+        for m in methods:
+            levels = tuple(get_estimator(m).knowledge_levels)
+            if self.knowledge in levels:
+                kept.append(m)
+            else:
+                left[m] = f"works at knowledge level {' or '.join(levels)}, not {self.knowledge}"
+        if left:
+            self.note(
+                f"knowledge {self.knowledge!r}: left out "
+                + "; ".join(f"{m} ({why})" for m, why in left.items())
+            )
+        return kept, left
+
     def finish(self) -> Path:
         """Write the manifest ``suite.json`` and return its path.
 
@@ -331,6 +362,7 @@ class BenchContext:
             "description": self.description,
             "quick": self.quick,
             "seed": self.seed,
+            "knowledge": self.knowledge,
             "command": self.command,
             "data": self.data_info or ({"store": str(self.data)} if self.data else {"store": None}),
             "started": self.started,

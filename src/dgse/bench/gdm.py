@@ -43,7 +43,6 @@ __all__ = [
     "METHODS",
     "NLL_METHODS",
     "case_label",
-    "estimator_kwargs",
     "eval_time_text",
     "evaluate_cached",
     "run",
@@ -60,11 +59,6 @@ NLL_EXCLUDED = {
 }
 
 
-def estimator_kwargs(method: str) -> dict[str, Any]:
-    """Factory arguments of the suites: the shipped weights for DGSE, published defaults otherwise."""
-    return {"model": "default"} if method.startswith("dgse-") else {}
-
-
 def evaluate_cached(
     ctx: BenchContext,
     name: str,
@@ -74,10 +68,12 @@ def evaluate_cached(
     trials: int,
     limit: int | None = None,
 ) -> dict[str, Any]:
-    """:func:`dgse.evaluation.evaluate` of ``method``, reused from an earlier run with the same plan."""
+    """:func:`dgse.evaluation.evaluate` of ``method`` at the run's knowledge level (published defaults,
+    the shipped weights for DGSE), reused from an earlier run with the same plan."""
     from dgse.evaluation import evaluate
 
     n_cases = len(sorted(cases.glob("*.npz"))) if limit is None else limit
+    name = ctx.level_name(name)
     got = ctx.load_json(name)
     if (
         got is not None
@@ -86,6 +82,7 @@ def evaluate_cached(
         and got.get("trials") == trials
         and got.get("n_cases") == n_cases
         and got.get("seed") == ctx.seed
+        and got.get("knowledge", "map") == ctx.knowledge
     ):
         return got
     import torch
@@ -98,9 +95,9 @@ def evaluate_cached(
             counts,
             trials=trials,
             seed=ctx.seed,
-            estimator_kwargs=estimator_kwargs(method),
             progress=ctx.progress,
             limit=limit,
+            knowledge=ctx.knowledge,
         )
     finally:
         # numba's OpenMP layer (PMFS's parallel filament simulation) resets the OpenMP thread count,
@@ -267,12 +264,13 @@ def _wins_text(results: dict[str, dict[str, Any]], cases: list[str]) -> str:
 # -- fig7 -----------------------------------------------------------------------------------------
 def _maps(ctx: BenchContext, files: list[Path], n_obs: int) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """Trial-0 beliefs at ``n_obs`` per scenario and method; also the ppm-choice check rows."""
+    from dgse.estimators.knowledge import Knowledge
     from dgse.estimators.registry import get_estimator
     from dgse.evaluation.evaluate import draw_observations, estimator_seed
     from dgse.evaluation.metrics import concentration_metrics, gaussian_nll
     from dgse.world.case import Case
 
-    ests = {m: get_estimator(m, **estimator_kwargs(m)) for m in METHODS}
+    ests = {m: get_estimator(m) for m in METHODS}
     out: dict[str, Any] = {}
     check: list[dict[str, Any]] = []
     for f in files:
@@ -283,8 +281,7 @@ def _maps(ctx: BenchContext, files: list[Path], n_obs: int) -> tuple[dict[str, A
         obs = draw_observations(case, n_obs, ctx.seed, case_id=cid, trial=0)
         beliefs = {}
         for m, est in ests.items():
-            if hasattr(est, "set_case"):
-                est.set_case(case)
+            est.set_knowledge(Knowledge.from_case(case, ctx.knowledge))
             if hasattr(est, "seed"):
                 est.seed = estimator_seed(ctx.seed, cid, n_obs, 0)
             beliefs[m] = est.estimate(case.occupancy, case.resolution, obs)

@@ -203,24 +203,28 @@ def run(ctx: BenchContext) -> None:
     method_limit["pmfs"] = ctx.pick(None, 1)
     # quick runs: the adjoint's flow solves for the candidate inlet speeds dominate, one scenario
     method_limit["adjoint"] = ctx.pick(None, 1)
+    methods, left_out = ctx.methods_at_level(METHODS)
     cases_dir = ctx.scenarios(n_scen, "test")
     files = sorted(cases_dir.glob("*.npz"))
     cases = [f.stem for f in files]
     labels = {f.stem: case_label(Case.load(f)) for f in files}
 
     results: dict[str, dict[str, Any]] = {}
-    for m in METHODS:
+    for m in methods:
         results[m] = evaluate_cached(
             ctx, f"eval_{m}", cases_dir, m, [n_obs], method_trials[m], method_limit[m]
         )
 
     reduced = []
-    for m in METHODS:
+    for m in methods:
         if method_trials[m] != trials or method_limit[m] is not None:
             scen = f"the first {method_limit[m]} scenario(s), " if method_limit[m] is not None else ""
             lab = style_of(m)["label"]
             reduced.append(f"{lab}: {scen}{method_trials[m]} trial(s) per scenario (its cost)")
     text = (
+        f"Knowledge: {ctx.knowledge!r} for every method"
+        + (f" ({'; '.join(f'{m} left out: {why}' for m, why in left_out.items())})" if left_out else "")
+        + ". "
         f"{n_scen} test scenarios, {n_obs} random observations (distinct free cells, Table I noise), "
         f"{trials} trials per scenario"
         + (f" ({'; '.join(reduced)})" if reduced else "")

@@ -216,6 +216,7 @@ def _run_method(
         "trials": trials,
         "time_limit_s": time_limit,
         "seed": ctx.seed,
+        "knowledge": ctx.knowledge,
         "frames": use_frames,
         "estimator_options": est_kw,
         "planner_options": dict(planner_options),
@@ -224,7 +225,7 @@ def _run_method(
     paths: dict[str, Any] = {}
     settings: dict[str, Any] = {}
     for i, (path, case) in enumerate(cases):
-        piece = ctx.out / "runs" / f"{method.key}_{kind}_{path.stem}.json"
+        piece = ctx.out / "runs" / f"{ctx.level_name(method.key)}_{kind}_{path.stem}.json"
         plan = _jsonable({**base, "case": path.stem, "keep_path": i < keep_paths})
         got = _read_piece(piece)
         fresh = got is None or got.get("plan") != plan
@@ -259,6 +260,7 @@ def _run_method(
                     record_first=keep_record is not None and i == 0,
                     progress=_progress(ctx, f"{method.label} {kind}"),
                     on_episode=keep,
+                    knowledge=ctx.knowledge,
                 )
             finally:
                 # numba's OpenMP (PMFS) resets the OpenMP thread count, which is PyTorch's too
@@ -282,7 +284,7 @@ def _run_method(
         "per_case": per_case,
         "paths": paths,
     }
-    ctx.save_json(f"run_{method.key}_{kind}", data)
+    ctx.save_json(ctx.level_name(f"run_{method.key}_{kind}"), data)
     return _jsonable(data)
 
 
@@ -746,5 +748,6 @@ def _rerun_first(ctx: BenchContext, first: tuple[Path, Any], plan: Plan) -> tupl
         record=True,
         use_frames=False,
         min_start_distance=2.0,
+        knowledge=ctx.knowledge,
     )
     return result, case

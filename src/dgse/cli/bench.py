@@ -15,7 +15,14 @@ from typing import Annotated
 import typer
 from rich.markup import escape
 
-from dgse.cli.common import check_output_dir, check_output_file, console, path_text, user_errors
+from dgse.cli.common import (
+    KnowledgeOption,
+    check_output_dir,
+    check_output_file,
+    console,
+    path_text,
+    user_errors,
+)
 from dgse.errors import InputDataError
 
 __all__ = ["bench_cmd", "register", "report_cmd"]
@@ -42,9 +49,17 @@ def bench_cmd(
     threads: Annotated[int | None, typer.Option("--threads", help="PyTorch CPU threads.")] = None,
     report: Annotated[bool, typer.Option("--report/--no-report", help="Also write DIR/report.html.")] = True,
     progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Progress bars.")] = True,
+    knowledge: KnowledgeOption = "map",
 ) -> None:
-    """Run benchmark suites that reproduce the paper's experiments (JSON, CSV, PNG per suite)."""
+    """Run benchmark suites that reproduce the paper's experiments (JSON, CSV, PNG per suite).
+
+    Every method is told the same --knowledge; methods that do not work at that level are
+    left out and named in the suite's notes.
+    """
     from dgse.bench import SUITES, run_suite
+    from dgse.estimators.knowledge import check_level
+
+    check_level(knowledge)
 
     names = list(SUITES) if "all" in suites else list(dict.fromkeys(suites))
     unknown = [s for s in names if s not in SUITES]
@@ -62,7 +77,9 @@ def bench_cmd(
     for name in names:
         t0 = time.perf_counter()
         console.print(f"[bold]{escape(name)}[/]: {escape(SUITES[name].title)}{' (quick)' if quick else ''}")
-        manifest = run_suite(name, out, quick=quick, data=data, seed=seed, progress=progress)
+        manifest = run_suite(
+            name, out, quick=quick, data=data, seed=seed, knowledge=knowledge, progress=progress
+        )
         console.print(f"  done in {time.perf_counter() - t0:.1f} s: [cyan]{path_text(manifest.parent)}[/]")
     if report:
         from dgse.bench.report import write_report

@@ -23,7 +23,7 @@ import traceback
 from collections.abc import Callable, Iterator, Sequence
 from datetime import datetime
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Annotated, Any, TypeVar
 
 import typer
 from rich.console import Console
@@ -201,6 +201,15 @@ def parse_params(items: Sequence[str] | None, flag: str = "--param") -> dict[str
         except json.JSONDecodeError:
             out[key] = raw
     return out
+
+
+#: ``--knowledge``: what an estimator is told besides its readings (dgse.estimators.knowledge).
+KNOWLEDGE_HELP = (
+    "What the estimator is told besides the readings: map (occupancy only, the paper's setting), "
+    "openings (plus the inlets and outlets), wind (plus the case's wind field and inlet speed, as from "
+    "the user's own CFD). Recorded in the results."
+)
+KnowledgeOption = Annotated[str, typer.Option("--knowledge", metavar="LEVEL", help=KNOWLEDGE_HELP)]
 
 
 #: Folder of the results of a command run without an output path.

@@ -2,10 +2,13 @@
 
 1. draw a random multi-room scenario of the training distribution and solve
    its flow and one gas release with the built-in solver;
-2. run one active search (paper Algorithm 1) with the shipped DGSE-S model
-   and the utility planner (entropy test from the 5th reading on, the fewest
-   the network was trained with), the robot starting at least 2 m from the source,
-   showing the step, the simulated clock, the entropy and the error as it goes;
+2. run one active search (paper Algorithm 1) with the method for the
+   knowledge given (``--knowledge``; :data:`DEMO_METHODS`: the shipped DGSE-S
+   model on the map alone, the adjoint posterior when the openings are known,
+   the adjoint on the given flow at ``wind``) and the utility planner
+   (entropy test from the 5th reading on, the fewest the networks were
+   trained with), the robot starting at least 2 m from the source, showing
+   the step, the simulated clock, the entropy and the error as it goes;
 3. print the outcome and write the case figure, the final belief, the last
    search step and the animation of the search into the output folder.
 """
@@ -16,18 +19,35 @@ import math
 import secrets
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
+from rich.markup import escape
 from rich.table import Table
 
-from dgse.cli.common import check_output_dir, console, path_text, user_errors
+from dgse.cli.common import KnowledgeOption, check_output_dir, console, path_text, user_errors
 from dgse.errors import InputDataError
+from dgse.estimators.knowledge import DEFAULT_LEVEL, check_level, require_level
 
 if TYPE_CHECKING:
     from dgse.search.episode import StepRecord
 
-__all__ = ["demo_cmd", "register", "step_text"]
+__all__ = ["DEMO_METHODS", "demo_cmd", "register", "step_text"]
+
+#: The demo's method per knowledge level: the lowest source-localization error from random
+#: readings measured at that level (issue 12's table: the adjoint beats DGSE-S at every count
+#: once the openings are known).  ``dgse-phys`` replaces them when it lands.
+DEMO_METHODS = {"map": "dgse-s", "openings": "adjoint", "wind": "adjoint-oracle"}
+#: Entropy threshold of the shipped DGSE-S, tuned on the validation split (benchmarks/tune_eta.py).
+DGSE_S_ETA = 0.78
+
+
+def _told(level: str) -> str:
+    return {
+        "map": "the map only",
+        "openings": "the map, its inlets and outlets",
+        "wind": "the map, its openings and the mean wind field with its inlet speed",
+    }[level]
 
 
 def step_text(rec: StepRecord, time_limit: float, eta: float) -> str:
@@ -47,28 +67,37 @@ def demo_cmd(
     ] = "default",
     time_limit: Annotated[float, typer.Option("--time-limit", help="Search time limit, s.")] = 2000.0,
     eta: Annotated[
-        float,
+        float | None,
         typer.Option(
             "--eta",
-            help="Entropy termination H <= eta log N.  0.78 for the shipped model, tuned on the "
-            "validation split (benchmarks/tune_eta.py; its posteriors are broader than the paper's, "
-            "which used 0.65).",
+            help="Entropy termination H <= eta log N.  Default: 0.78 for the shipped DGSE-S, tuned on "
+            "the validation split (benchmarks/tune_eta.py; its posteriors are broader than the paper's), "
+            "else the paper's 0.65.",
         ),
-    ] = 0.78,
+    ] = None,
     animate: Annotated[bool, typer.Option("--animate/--no-animate", help="Write the GIF.")] = True,
     threads: Annotated[int, typer.Option("--threads", help="PyTorch CPU threads.")] = 1,
+    knowledge: KnowledgeOption = DEFAULT_LEVEL,
+    method: Annotated[
+        str | None,
+        typer.Option("--method", "-m", help="Estimator (default: the demo's method for --knowledge)."),
+    ] = None,
 ) -> None:
-    """Solve a random scenario and find its gas source with the shipped DGSE-S model."""
+    """Solve a random scenario and find its gas source with the method for the knowledge given."""
+    level = check_level(knowledge)
+    method = DEMO_METHODS[level] if method is None else method
     check_output_dir(out)
     if not (math.isfinite(time_limit) and time_limit > 0):
         raise InputDataError(f"--time-limit must be a positive number of seconds, got {time_limit:g}")
-    if not (math.isfinite(eta) and 0 < eta <= 1):
+    if eta is None:
+        eta = DGSE_S_ETA if method == "dgse-s" else None
+    if eta is not None and not (math.isfinite(eta) and 0 < eta <= 1):
         raise InputDataError(f"--eta must be in (0, 1], got {eta:g}")
     if threads < 1:
         raise InputDataError(f"--threads must be at least 1, got {threads}")
     import torch
 
-    from dgse.estimators.registry import get_estimator
+    from dgse.estimators.registry import estimator_accepts, get_estimator
     from dgse.physics.scenario import random_cases
     from dgse.search.animate import animate_episode, plot_search_step
     from dgse.search.episode import run_episode
@@ -80,8 +109,18 @@ def demo_cmd(
     torch.set_num_threads(max(1, threads))
     seed = secrets.randbelow(2**31) if seed is None else seed
     t0 = time.perf_counter()
-    # bf16 + channels-last: the same estimates as float32 on the reference cases, ~2.5x faster
-    estimator = get_estimator("dgse-s", model=model, dtype="bf16", channels_last=True)
+    kwargs: dict[str, Any] = {}
+    if estimator_accepts(method, "model"):
+        kwargs["model"] = model
+    elif model != "default":
+        raise InputDataError(f"--model applies to the DGSE networks, not to {method}")
+    if estimator_accepts(method, "dtype") and estimator_accepts(method, "channels_last"):
+        # bf16 + channels-last: the same estimates as float32 on the reference cases, ~2.5x faster
+        kwargs.update(dtype="bf16", channels_last=True)
+    estimator = get_estimator(method, **kwargs)
+    require_level(estimator, method, level)
+    planner = get_planner("utility", min_observations=MIN_SENSORS, **({} if eta is None else {"eta": eta}))
+    stop_at = float(planner.eta)
     with console.status("solving a random multi-room scenario (built-in RANS + gas transport)"):
         case = random_cases(seed, n_sources=1)[0]
     t_solve = time.perf_counter() - t0
@@ -91,15 +130,17 @@ def demo_cmd(
         f"source at ({case.source[0]:.2f}, {case.source[1]:.2f}) m releasing {case.release_rate:.2f} g/s "
         f"[dim](solved in {t_solve:.1f} s)[/]"
     )
-    with console.status("searching: sense, estimate (DGSE-S, K = T = 5), plan, move") as status:
+    console.print(f"method {escape(method)}, knowledge {level}: {escape(_told(level))}")
+    with console.status(f"searching: sense, estimate ({escape(method)}), plan, move") as status:
         result = run_episode(
             case,
             estimator,
-            get_planner("utility", eta=eta, min_observations=MIN_SENSORS),
+            planner,
             rng=seed,
             time_limit=time_limit,
             min_start_distance=2.0,
-            on_step=lambda rec: status.update(step_text(rec, time_limit, eta)),
+            on_step=lambda rec: status.update(step_text(rec, time_limit, stop_at)),
+            knowledge=level,
         )
     m = episode_metrics(result)
     table = Table(title="active search", title_justify="left", show_header=False)

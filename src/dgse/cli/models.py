@@ -37,8 +37,16 @@ from rich import box
 from rich.markup import escape
 from rich.table import Table
 
-from dgse.cli.common import check_output_file, console, parse_params, path_text, user_errors
+from dgse.cli.common import (
+    KnowledgeOption,
+    check_output_file,
+    console,
+    parse_params,
+    path_text,
+    user_errors,
+)
 from dgse.errors import InputDataError
+from dgse.estimators.knowledge import DEFAULT_LEVEL, Knowledge, check_level
 
 __all__ = [
     "estimate_cmd",
@@ -48,9 +56,6 @@ __all__ = [
     "register",
 ]
 
-
-#: Defaults of the DGSE options (applied only to the DGSE methods).
-DEFAULT_K = DEFAULT_T = 5
 
 _MODEL_HELP = "DGSE weights: 'default' (shipped with dgse) or a .safetensors checkpoint."
 _PARAM_HELP = "Estimator argument KEY=VALUE (VALUE as JSON, else a string); repeatable."
@@ -68,10 +73,6 @@ def _set_threads(threads: int | None) -> None:
     torch.set_num_threads(threads)
 
 
-def _is_dgse(method: str) -> bool:
-    return method in ("dgse-o", "dgse-p", "dgse-s")
-
-
 def _estimator_kwargs(
     method: str,
     model: str | None,
@@ -81,29 +82,29 @@ def _estimator_kwargs(
     dtype: str | None,
     params: Sequence[str] | None,
 ) -> dict[str, Any]:
-    """Keyword arguments of ``get_estimator(method, ...)`` from the command's options."""
+    """Keyword arguments of ``get_estimator(method, ...)`` from the command's options.
+
+    The shortcut options go to the estimators that take them (the DGSE networks:
+    ``model``, ``K``, ``T``, ``device``, ``dtype``); given to one that does not,
+    they are an error that names the options it takes.
+    """
+    from dgse.estimators.registry import estimator_accepts, estimator_names
+
+    given = {"--model": ("model", model), "-K": ("K", k), "-T": ("T", t),
+             "--device": ("device", device), "--dtype": ("dtype", dtype)}  # fmt: skip
+    for name, v in (("-K", k), ("-T", t)):
+        if v is not None and v < 1:
+            raise InputDataError(f"{name} must be at least 1, got {v}")
     kwargs: dict[str, Any] = {}
-    given = {"--model": model, "-K": k, "-T": t, "--device": device, "--dtype": dtype}
-    if _is_dgse(method):
-        for name, v in (("-K", k), ("-T", t)):
-            if v is not None and v < 1:
-                raise InputDataError(f"{name} must be at least 1, got {v}")
-        kwargs = {
-            "model": model or "default",
-            "K": DEFAULT_K if k is None else k,
-            "T": DEFAULT_T if t is None else t,
-        }
-        if device is not None:
-            kwargs["device"] = device
-        if dtype is not None:
-            kwargs["dtype"] = dtype
-    else:
-        extra = [name for name, v in given.items() if v is not None]
-        if extra:
+    for flag, (key, v) in given.items():
+        if v is None:
+            continue
+        if method in estimator_names() and not estimator_accepts(method, key):
             raise InputDataError(
-                f"{', '.join(extra)} apply to the DGSE methods; "
-                f"give {method}'s arguments as --param KEY=VALUE"
+                f"{flag} does not apply to {method} (it takes no {key!r}); "
+                f"give {method}'s options as --param KEY=VALUE"
             )
+        kwargs[key] = v
     kwargs.update(parse_params(params))
     return kwargs
 
@@ -156,6 +157,7 @@ def estimate_cmd(
     params: Annotated[list[str] | None, typer.Option("--param", "-p", help=_PARAM_HELP)] = None,
     threads: Annotated[int | None, typer.Option("--threads", help=_THREADS_HELP)] = None,
     plot: Annotated[Path | None, typer.Option("--plot", help="Also save a figure of the belief.")] = None,
+    knowledge: KnowledgeOption = DEFAULT_LEVEL,
 ) -> None:
     """Estimate the source (and fields) of a case from random noisy observations.
 
@@ -169,6 +171,7 @@ def estimate_cmd(
     from dgse.evaluation.metrics import evaluate_belief
     from dgse.world.case import Case
 
+    level = check_level(knowledge)
     kwargs = _estimator_kwargs(method, model, k, t, device, dtype, params)
     _set_threads(threads)
     check_output_file(out, "estimate file")
@@ -179,7 +182,7 @@ def estimate_cmd(
     case_id = case_file.stem
     obs = draw_observations(case, observations, seed, case_id, trial=0)
     with console.status(f"loading {escape(method)} ..."):
-        est: Any = get_estimator(method, **kwargs)
+        est: Any = get_estimator(method, knowledge=Knowledge.from_case(case, level), **kwargs)
     if hasattr(est, "seed") and "seed" not in kwargs:
         est.seed = estimator_seed(seed, case_id, observations, 0)
     import time
@@ -192,6 +195,7 @@ def estimate_cmd(
         "case": str(case_file),
         "case_id": case_id,
         "method": method,
+        "knowledge": level,
         "seed": seed,
         "n_obs": observations,
         "seconds": seconds,
@@ -208,7 +212,9 @@ def estimate_cmd(
     table.add_column(style="bold")
     table.add_column()
     table.add_row("case", f"{escape(case.name)} ({case.grid.width} x {case.grid.height} cells)")
-    table.add_row("method", f"{escape(method)}, {observations} observations, seed {seed}")
+    table.add_row(
+        "method", f"{escape(method)} (knowledge: {level}), {observations} observations, seed {seed}"
+    )
     table.add_row("source estimate", f"({x:.2f}, {y:.2f}) m; most likely cell ({i}, {j})")
     table.add_row("true source", f"({sx:.2f}, {sy:.2f}) m")
     table.add_row("error", f"[bold]{m['sl_error_m']:.2f} m[/] (most likely cell {m['map_error_m']:.2f} m)")
@@ -363,6 +369,7 @@ def evaluate_cmd(
     threads: Annotated[int | None, typer.Option("--threads", help=_THREADS_HELP)] = None,
     limit: Annotated[int | None, typer.Option("--limit", help="Only the first N cases.")] = None,
     progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")] = True,
+    knowledge: KnowledgeOption = DEFAULT_LEVEL,
 ) -> None:
     """Evaluate an estimator on cases from random noisy observations (paper Sec. V).
 
@@ -385,10 +392,12 @@ def evaluate_cmd(
     from dgse.evaluation.evaluate import evaluate, write_json
     from dgse.journal import count_records, journal_path
 
+    level = check_level(knowledge)
     cases, counts = _split_positionals(args, observations or [])
     kwargs = _estimator_kwargs(method, model, k, t, device, dtype, params)
     _set_threads(threads)
-    out = json_out if json_out is not None else default_output("evaluate", method)
+    names = (method,) if level == DEFAULT_LEVEL else (method, level)
+    out = json_out if json_out is not None else default_output("evaluate", *names)
     journal = journal_path(out)
     check_output_file(out, "JSON file")
     check_output_file(journal, "journal")
@@ -407,6 +416,7 @@ def evaluate_cmd(
                 limit=limit,
                 journal=journal,
                 restart=restart,
+                knowledge=level,
             )
     except KeyboardInterrupt:
         report_interrupt(count_records(journal), "estimate", journal, resume_command(ctx))

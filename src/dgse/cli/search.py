@@ -66,6 +66,7 @@ from rich.table import Table
 
 from dgse.cli.common import (
     EXIT_INTERRUPTED,
+    KnowledgeOption,
     check_output_dir,
     check_output_file,
     console,
@@ -79,6 +80,7 @@ from dgse.cli.common import (
     user_errors,
 )
 from dgse.errors import InputDataError
+from dgse.estimators.knowledge import DEFAULT_LEVEL, check_level, require_level
 from dgse.journal import count_records, journal_path
 from dgse.search.campaign import json_safe, load_cases, trial_seed
 from dgse.search.metrics import format_mean_std
@@ -212,6 +214,7 @@ def search_cmd(
         int | None, typer.Option("--threads", help="PyTorch CPU threads (1 is fastest on busy cores).")
     ] = None,
     progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")] = True,
+    knowledge: KnowledgeOption = DEFAULT_LEVEL,
 ) -> None:
     """Run active source search trials and report success rate, error, ST, TD, step time, PER.
 
@@ -222,6 +225,7 @@ def search_cmd(
     from dgse.search.campaign import estimator_options, run_trials
     from dgse.search.planners import get_planner
 
+    level = check_level(knowledge)
     if trials < 1:
         raise InputDataError(f"--trials must be at least 1, got {trials}")
     for name, v in (("--time-limit", time_limit), ("--speed", speed), ("--dwell", dwell)):
@@ -243,8 +247,10 @@ def search_cmd(
     if eta is not None:
         plan_kwargs["eta"] = eta
     estimator = get_estimator(method, **est_kwargs)
+    require_level(estimator, method, level)
     plan = get_planner(planner, **plan_kwargs)
-    out = json_out if json_out is not None else default_output("search", method, planner)
+    names = (method, planner) if level == DEFAULT_LEVEL else (method, planner, level)
+    out = json_out if json_out is not None else default_output("search", *names)
     journal = journal_path(out)
     check_output_file(out, "JSON file")
     check_output_file(journal, "journal")
@@ -253,7 +259,8 @@ def search_cmd(
 
     console.print(
         f"searching {len(cases)} case{'s' * (len(cases) != 1)} x {trials} trials with "
-        f"[bold]{escape(method)}[/] + [bold]{escape(planner)}[/] (seed {seed}, time limit {time_limit:g} s)"
+        f"[bold]{escape(method)}[/] + [bold]{escape(planner)}[/] (knowledge {level}, seed {seed}, "
+        f"time limit {time_limit:g} s)"
     )
     console.print(kept_note(journal, "episode", restart))
     gifs: list[Path] = []
@@ -314,6 +321,7 @@ def search_cmd(
                 on_step=step if progress else None,
                 journal=journal,
                 restart=restart,
+                knowledge=level,
             )
     except KeyboardInterrupt:
         report_interrupt(count_records(journal), "episode", journal, resume_command(ctx))

@@ -38,6 +38,7 @@ import torch
 from dgse.data.rasterize import DEFAULT_CANVAS, DEFAULT_STRIDE, canvas_shape_for, rasterize
 from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators.belief import Belief, normalize_source_probs
+from dgse.estimators.knowledge import KnowledgeUser
 from dgse.models.checkpoint import load_checkpoint
 from dgse.models.inference import Prediction, make_generator, predict, resolve_device
 from dgse.models.networks import DGSEModel
@@ -65,7 +66,7 @@ def _as_dtype(dtype: torch.dtype | str) -> torch.dtype:
     raise InputDataError(f"dtype must be float32, bfloat16 or float16, got {dtype!r}")
 
 
-class DGSEEstimator:
+class DGSEEstimator(KnowledgeUser):
     """A DGSE network behind the :class:`~dgse.estimators.registry.Estimator` protocol.
 
     Args:

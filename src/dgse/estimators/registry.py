@@ -1,7 +1,10 @@
 """The estimator interface, a streaming wrapper and the registry of estimators by name.
 
 Every estimator (DGSE networks, classical baselines) implements
-:class:`Estimator`: ``estimate(occupancy, resolution, observations) -> Belief``.
+:class:`Estimator`: ``estimate(occupancy, resolution, observations) -> Belief``,
+after being told what it may know besides the readings with
+``set_knowledge(knowledge)`` (:mod:`dgse.estimators.knowledge`: ``map``,
+``openings`` or ``wind``); ``knowledge_levels`` states the levels it works at.
 
 The registry maps a name to a factory ``factory(**kwargs) -> Estimator``.  A
 factory may be given lazily as ``"package.module:function"``: it is imported
@@ -24,12 +27,14 @@ import numpy as np
 
 from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators.belief import Belief
+from dgse.estimators.knowledge import Knowledge
 from dgse.sensing.sensors import Observations, check_sensor_cells
 
 __all__ = [
     "Estimator",
     "EstimatorFactory",
     "StreamingEstimator",
+    "estimator_accepts",
     "estimator_names",
     "get_estimator",
     "register_estimator",
@@ -38,13 +43,20 @@ __all__ = [
 
 @runtime_checkable
 class Estimator(Protocol):
-    """Anything that turns a map and observations into a :class:`Belief`.
+    """Anything that turns a map, its prior knowledge and observations into a :class:`Belief`.
 
-    Optional hook: ``set_case(case)``, called by the evaluation and search loops
-    before a scenario's estimates.  It hands over what a robot is assumed to
-    know besides the map: the layout's openings.  Only oracles (names ending in
-    ``-oracle``) may use more of the case (the true inlet velocity).
+    The evaluation, search and benchmark loops call ``set_knowledge`` before a
+    scenario's estimates with a :class:`~dgse.estimators.knowledge.Knowledge`
+    of the level they were asked for (never the case itself); a level outside
+    ``knowledge_levels`` raises :class:`~dgse.errors.UnsupportedError`.
+    :class:`~dgse.estimators.knowledge.KnowledgeUser` implements both.
     """
+
+    knowledge_levels: tuple[str, ...]
+
+    def set_knowledge(self, knowledge: Knowledge) -> None:
+        """Use ``knowledge`` (its map, and the openings or wind its level includes) from now on."""
+        ...
 
     def estimate(self, occupancy: np.ndarray, resolution: float, observations: Observations) -> Belief:
         """The belief given ``occupancy`` (``(H, W)``, 1 solid), cell size ``resolution`` (m)
@@ -115,14 +127,24 @@ def _resolve(name: str) -> EstimatorFactory:
     return factory
 
 
-def get_estimator(name: str, **kwargs: Any) -> Estimator:
-    """A new estimator ``name`` built with ``kwargs``.
+def estimator_accepts(name: str, option: str) -> bool:
+    """True when the registered estimator ``name`` takes keyword option ``option`` (False if unknown)."""
+    from dgse.options import accepts
+
+    if name not in _REGISTRY:
+        return False
+    return accepts(_resolve(name), option)
+
+
+def get_estimator(name: str, knowledge: Knowledge | None = None, **kwargs: Any) -> Estimator:
+    """A new estimator ``name`` built with ``kwargs``, told ``knowledge`` if given.
 
     Raises:
         UnsupportedError: an unknown name (the message lists the known ones)
             or an estimator whose dependencies are missing here.
         InputDataError: an option the estimator does not take, or a value of
             the wrong type (:func:`dgse.options.check_options`).
+        UnsupportedError: ``knowledge`` of a level the estimator does not work at.
     """
     from dgse.options import check_options
 
@@ -131,7 +153,15 @@ def get_estimator(name: str, **kwargs: Any) -> Estimator:
             f"unknown estimator {name!r}; known estimators: {', '.join(estimator_names())}"
         )
     factory = _resolve(name)
-    return factory(**check_options(f"estimator {name!r}", factory, kwargs))
+    est = factory(**check_options(f"estimator {name!r}", factory, kwargs))
+    if not callable(getattr(est, "set_knowledge", None)):
+        raise UnsupportedError(
+            f"estimator {name!r} does not implement the Estimator protocol (no set_knowledge); "
+            "derive it from dgse.estimators.knowledge.KnowledgeUser"
+        )
+    if knowledge is not None:
+        est.set_knowledge(knowledge)
+    return est
 
 
 class StreamingEstimator:

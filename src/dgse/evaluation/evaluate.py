@@ -101,6 +101,7 @@ import numpy as np
 
 from dgse.errors import DGSEError, InputDataError
 from dgse.estimators.belief import Belief
+from dgse.estimators.knowledge import DEFAULT_LEVEL, Knowledge, check_level, require_level
 from dgse.estimators.registry import Estimator, get_estimator
 from dgse.evaluation.metrics import METRIC_KEYS, EstimateMetrics, evaluate_belief
 from dgse.sensing.noise import NoiseModel, NoiseParams
@@ -470,6 +471,7 @@ def evaluate(
     limit: int | None = None,
     journal: str | os.PathLike[str] | None = None,
     restart: bool = False,
+    knowledge: str = DEFAULT_LEVEL,
 ) -> dict[str, Any]:
     """Evaluate one estimator on a set of cases (see the module docstring for protocol and result).
 
@@ -492,6 +494,9 @@ def evaluate(
         journal: keep every finished estimate in this JSON-lines file and skip
             those already there (module docstring); None keeps nothing.
         restart: discard an existing journal instead of resuming it.
+        knowledge: what the estimator is told about each case besides the readings
+            (:mod:`dgse.estimators.knowledge`: ``"map"``, ``"openings"`` or ``"wind"``);
+            recorded in the result.
 
     Returns:
         The result dict (JSON-ready; :func:`write_json` writes it).
@@ -500,8 +505,10 @@ def evaluate(
         InputDataError: bad counts/trials/seed, missing or unreadable cases, more
             observations than a case has free cells, a journal written with other
             settings or for a case that has changed since.
-        UnsupportedError: an unknown method name (the message lists the known ones).
+        UnsupportedError: an unknown method name (the message lists the known ones), or
+            a knowledge level the estimator does not work at.
     """
+    level = check_level(knowledge)
     counts = _check_counts(observation_counts)
     if isinstance(trials, bool) or not isinstance(trials, (int, np.integer)) or int(trials) < 1:
         raise InputDataError(f"trials must be a positive integer, got {trials!r}")
@@ -518,6 +525,7 @@ def evaluate(
             raise InputDataError(f"{type(method).__name__} is not an estimator (no estimate method)")
         est = method
         method_name = str(getattr(method, "name", type(method).__name__))
+    require_level(est, method_name, level)
     reseed = hasattr(est, "seed") and "seed" not in kwargs
     original_seed = getattr(est, "seed", None)
     noise = "Table I" if noise_model is None else _jsonable(vars(noise_model.ranges))
@@ -527,6 +535,7 @@ def evaluate(
         "estimator_kwargs": _jsonable(kwargs),
         "seed": int(seed),
         "noise": noise,
+        "knowledge": level,
     }
     t_start = time.perf_counter()
     records: list[dict[str, Any]] = []
@@ -549,7 +558,7 @@ def evaluate(
                 for ref in refs:
                     records += _evaluate_case(
                         est, ref, counts, trials, seed, noise_model, reseed, book, kept, before, callback,
-                        done=len(records), total=total,
+                        done=len(records), total=total, level=level,
                     )  # fmt: skip
             case_ids = [r.id for r in refs]
     finally:
@@ -569,6 +578,7 @@ def evaluate(
         "observation_counts": counts,
         "trials": trials,
         "seed": int(seed),
+        "knowledge": level,
         "n_cases": len(case_ids),
         "cases": case_ids,
         "protocol": {
@@ -604,14 +614,14 @@ def _evaluate_case(
     *,
     done: int,
     total: int,
+    level: str,
 ) -> list[dict[str, Any]]:
     """The records of one case in loop order: kept ones from the journal, the others estimated."""
     from dgse.journal import case_fingerprint
 
     case = ref.load()
     fingerprint = None if book is None else case_fingerprint(case)
-    if hasattr(est, "set_case"):  # see dgse.estimators.registry.Estimator
-        est.set_case(case)
+    est.set_knowledge(Knowledge.from_case(case, level))  # what it may know besides the readings
     for n in counts:
         _check_count(case, ref.id, n)
     out: list[dict[str, Any]] = []

@@ -60,23 +60,21 @@ proper prior's truncation term cancels that factor (``T(q_max / t) - T(0)
 
 Wind
 ----
-``wind="oracle"`` (registry ``adjoint-oracle``): the true flow.  The
-estimator protocol only gets the map and the readings, so the oracle is
-built with the true scenario: ``get_estimator("adjoint-oracle", case=case)``
-(or ``case_path=``, ``cases=[...]`` looked up by the map, ``layout=`` +
-``inlet_velocity=``, or a precomputed ``transport=`` (+ ``flow=``)), and
-:meth:`AdjointEstimator.set_case` switches it to another case (the hook an
-evaluation loop over many cases calls).  The flow is re-solved with the
-built-in solver from the case's layout and inlet speed (cached per layout
-and speed; the case's stored wind alone does not give the face fluxes and
-eddy viscosity the transport needs).  With the built-in solver's own cases
+``wind="oracle"`` (registry ``adjoint-oracle``): the true flow.  It works at
+knowledge level ``wind`` (:mod:`dgse.estimators.knowledge`: the user's CFD,
+with the openings and the inlet speed it was run with):
+``get_estimator("adjoint-oracle", knowledge=Knowledge.from_case(case, "wind"))``,
+or a precomputed ``transport=`` (+ ``flow=``).  The flow is re-solved with
+the built-in solver from the openings and the inlet speed (cached per layout
+and speed; the stored wind alone does not give the face fluxes and eddy
+viscosity the transport needs).  With the built-in solver's own cases
 this is the exact generating model up to the convection-scheme difference;
 with OpenFOAM or GADEN cases it is the built-in physics of that scenario.
 
 ``wind="estimated"`` (registry ``adjoint``): the robot knows the map *and
-its openings* (inlets/outlets from the layout, like the map: given by
-``layout=`` or taken from ``case=``'s layout, never from the case's wind,
-concentration, inlet speed or source), but not the inlet speed.  RANS is not
+its openings* (knowledge level ``openings``:
+``get_estimator("adjoint", knowledge=Knowledge.from_case(case, "openings"))``),
+but not the inlet speed.  RANS is not
 linear in ``v_in``, but the flow's shape changes slowly with it, so: solve
 the layout for the ``candidate_speeds`` (default 0.5, 1, 2, 3.5, 5 m/s;
 cached), fit each candidate's wind at the reading cells to the wind readings
@@ -110,14 +108,14 @@ import time
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 from scipy import stats
 
-from dgse.errors import InputDataError
+from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators.belief import Belief
+from dgse.estimators.knowledge import Knowledge, KnowledgeUser, Level
 from dgse.localization import check_inputs, log_moments_from_ppm, map_key
 from dgse.options import options_from
 from dgse.physics.builtin import flow_and_transport
@@ -126,7 +124,6 @@ from dgse.physics.engines import FlowField
 from dgse.physics.rans import FlowSettings
 from dgse.physics.transport import TransportSolver
 from dgse.sensing.sensors import Observations
-from dgse.world.case import Case
 from dgse.world.layout import Layout
 
 __all__ = [
@@ -431,24 +428,19 @@ class AdjointResponseModel:
 
 
 # -- the estimator ------------------------------------------------------------------------------
-def _as_case(case: Case | str | Path) -> Case:
-    return case if isinstance(case, Case) else Case.load(case)
-
-
 @dataclass(eq=False)
-class AdjointEstimator:
+class AdjointEstimator(KnowledgeUser):
     """Exact Bayesian posterior of the discretized physics (see the module docstring).
 
+    Knowledge (:meth:`set_knowledge`): the estimated variant works at
+    ``openings`` and ``wind`` and needs the openings; the oracle works at
+    ``wind`` only and needs the openings and the inlet speed (it re-solves
+    the flow the user's CFD gave), unless it was built with a precomputed
+    ``transport``.
+
     Args:
-        wind: ``"oracle"`` (the true flow; needs the true scenario) or
-            ``"estimated"`` (inlet speed fitted to the wind readings; needs the
-            layout's openings).
-        case: a :class:`Case` or a case file path: the oracle uses its layout and
-            inlet speed, the estimated variant its layout only.
-        cases: several cases, looked up by the map passed to :meth:`estimate`
-            (a map shared by cases with different flows is refused).
-        layout: the layout (map + openings) instead of a case.
-        inlet_velocity: the true inlet speed for the oracle with ``layout``.
+        wind: ``"oracle"`` (the true flow) or ``"estimated"`` (inlet speed
+            fitted to the wind readings).
         transport: a precomputed transport operator (oracle; ``flow`` gives its wind).
         flow: the :class:`FlowField` (or a ``(2, H, W)`` wind) of ``transport``.
         q_max: release-rate prior ``U[0, q_max]`` g/s (None: flat on ``q >= 0``).
@@ -463,9 +455,6 @@ class AdjointEstimator:
     """
 
     wind: Literal["oracle", "estimated"] = "estimated"
-    case: Case | str | Path | None = None
-    cases: Sequence[Case] | None = None
-    layout: Layout | None = None
     inlet_velocity: float | None = None
     transport: TransportSolver | None = None
     flow: FlowField | np.ndarray | None = None
@@ -479,7 +468,6 @@ class AdjointEstimator:
     conc_components: int = 32
     flow_settings: FlowSettings | None = None
     physics: Physics = DEFAULT_PHYSICS
-    _by_map: dict[str, list[tuple[Layout, float]]] = field(default_factory=dict, init=False, repr=False)
     _fixed: FlowModel | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -507,68 +495,40 @@ class AdjointEstimator:
                 raise InputDataError(f"flow wind {wind.shape} does not match the transport mesh")
             v = float("nan") if self.inlet_velocity is None else float(self.inlet_velocity)
             self._fixed = FlowModel(wind, self.transport, v, {"precomputed": True}, self.transport.physics)
-        if self.case is not None:
-            self.set_case(self.case)
-        elif self.layout is not None:
-            self._add(self.layout, self.inlet_velocity)
-        for c in self.cases or ():
-            c = _as_case(c)
-            self._add(c.layout, c.inlet_velocity if self.wind == "oracle" else None)
 
     @property
     def name(self) -> str:
         """Registry name: ``adjoint-oracle`` or ``adjoint``."""
         return "adjoint-oracle" if self.wind == "oracle" else "adjoint"
 
-    # -- scenario bookkeeping --------------------------------------------------------------
-    def _add(self, layout: Layout, inlet_velocity: float | None) -> None:
-        if self.wind == "oracle":
-            if inlet_velocity is None:
-                raise InputDataError(
-                    "the oracle needs the true inlet velocity (give case= or inlet_velocity=)"
-                )
-            v = float(inlet_velocity)
-            if not (v > 0 and math.isfinite(v)):
-                raise InputDataError(f"inlet velocity must be positive, got {inlet_velocity}")
-        else:
-            v = float("nan")
-        key = map_key(layout.occupancy, layout.resolution)
-        entries = self._by_map.setdefault(key, [])
-        lk = _layout_key(layout)
-        for lay, vv in entries:
-            if _layout_key(lay) == lk and (vv == v or (math.isnan(vv) and math.isnan(v))):
-                return
-        entries.append((layout, v))
+    @property
+    def knowledge_levels(self) -> tuple[Level, ...]:  # type: ignore[override]
+        """``("openings", "wind")``; the oracle ``("wind",)``."""
+        return ("wind",) if self.wind == "oracle" else ("openings", "wind")
 
-    def set_case(self, case: Case | str | Path) -> None:
-        """Use ``case``'s scenario from now on (the oracle: layout and inlet speed; else the layout only).
-
-        The hook for evaluation loops over many cases: call it before the
-        case's estimates (``est.set_case(case)`` when ``hasattr(est, "set_case")``).
-        """
-        c = _as_case(case)
-        self._by_map.clear()
-        self._add(c.layout, c.inlet_velocity if self.wind == "oracle" else None)
+    # -- what it is told ---------------------------------------------------------------------
+    def _use_knowledge(self, knowledge: Knowledge) -> None:
+        if self._fixed is not None:
+            return  # the oracle with a precomputed flow needs nothing more
+        if not knowledge.has_openings:
+            raise UnsupportedError(
+                f"{self.name} needs the openings (inlets and outlets), which knowledge "
+                f"{knowledge.level!r} of {knowledge.name or 'this map'!r} does not include"
+            )
+        if self.wind == "oracle" and knowledge.inlet_velocity is None:
+            raise UnsupportedError(f"{self.name} needs the inlet speed of the flow it is told")
 
     def _scenario(self, occ: np.ndarray, res: float) -> tuple[Layout, float]:
-        key = map_key(occ, res)
-        entries = self._by_map.get(key)
-        if not entries:
-            what = (
-                "the true case (case=, cases=, layout= + inlet_velocity=)"
-                if self.wind == "oracle"
-                else ("the layout's openings (layout= or case=)")
-            )
-            if self._by_map:
-                raise InputDataError(
-                    f"{self.name}: the map passed to estimate() matches no known case/layout"
-                )
-            raise InputDataError(f"{self.name} needs {what}; construct it with them or call set_case()")
-        if len(entries) > 1:
+        k = self.knowledge
+        if k is None:
+            need = "'wind' (openings and inlet speed)" if self.wind == "oracle" else "'openings'"
             raise InputDataError(
-                f"{self.name}: {len(entries)} scenarios share this map; use set_case() before estimating"
+                f"{self.name} needs knowledge {need}: call set_knowledge(Knowledge.from_case(case, ...)) "
+                "or give --knowledge"
             )
-        return entries[0]
+        k.check_map(occ, res, self.name)
+        v = k.inlet_velocity if self.wind == "oracle" and k.inlet_velocity is not None else float("nan")
+        return k.layout, float(v)
 
     # -- flows ---------------------------------------------------------------------------
     def _oracle_flow(self, occ: np.ndarray, res: float) -> tuple[FlowModel, dict[str, Any]]:
@@ -674,6 +634,7 @@ class AdjointEstimator:
             "method": self.name,
             "n_observations": len(obs),
             "wind_model": self.wind,
+            "knowledge": None if self.knowledge is None else self.knowledge.level,
             **finfo,
             "q_max_gps": self.q_max,
             "map_cell": [bi, bj],
@@ -703,22 +664,14 @@ def _flow_info(fm: FlowModel) -> dict[str, Any]:
     return {"flow_converged": fm.info.get("converged"), "flow_solve_seconds": fm.info.get("seconds")}
 
 
-@options_from(AdjointEstimator, drop=("wind",), extra={"case_path": str})
+@options_from(AdjointEstimator, drop=("wind", "transport", "flow", "inlet_velocity"))
 def make_adjoint(**kwargs: Any) -> AdjointEstimator:
-    """Registry factory ``adjoint``: wind fitted to the readings; give ``layout=`` or ``case=``."""
-    kwargs.pop("wind", None)
-    path = kwargs.pop("case_path", None)
-    if path is not None:
-        kwargs["case"] = Case.load(path)
+    """Registry factory ``adjoint``: wind fitted to the readings; needs knowledge ``openings``."""
     return AdjointEstimator(wind="estimated", **kwargs)
 
 
-@options_from(AdjointEstimator, drop=("wind",), extra={"case_path": str})
+@options_from(AdjointEstimator, drop=("wind",))
 def make_adjoint_oracle(**kwargs: Any) -> AdjointEstimator:
-    """Registry factory ``adjoint-oracle``: the true flow; pass ``case=``, ``case_path=``, ``cases=``,
-    ``layout=`` + ``inlet_velocity=``, or ``transport=`` (+ ``flow=``)."""
-    kwargs.pop("wind", None)
-    path = kwargs.pop("case_path", None)
-    if path is not None:
-        kwargs["case"] = Case.load(path)
+    """Registry factory ``adjoint-oracle``: the true flow; needs knowledge ``wind`` (or ``transport=``
+    (+ ``flow=``, ``inlet_velocity=``))."""
     return AdjointEstimator(wind="oracle", **kwargs)

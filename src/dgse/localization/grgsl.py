@@ -56,6 +56,7 @@ import numpy as np
 
 from dgse.errors import InputDataError
 from dgse.estimators.belief import Belief
+from dgse.estimators.knowledge import KnowledgeUser
 from dgse.localization import check_inputs, probs_from_log, uniform_probs
 from dgse.sensing.sensors import Observations
 
@@ -152,7 +153,7 @@ def grgsl_weights(
 
 
 @dataclass(eq=False)
-class GrGSLEstimator:
+class GrGSLEstimator(KnowledgeUser):
     """GrGSL's sequential grid posterior (see the module docstring).
 
     Args:

@@ -83,6 +83,7 @@ from scipy import ndimage
 
 from dgse.errors import InputDataError
 from dgse.estimators.belief import Belief, normalize_source_probs
+from dgse.estimators.knowledge import KnowledgeUser
 from dgse.localization import (
     blur_probs,
     check_inputs,
@@ -157,7 +158,7 @@ class _State:
 
 
 @dataclass(eq=False)
-class ParticleFilterEstimator:
+class ParticleFilterEstimator(KnowledgeUser):
     """Particle filter over ``(x0, y0, Q)`` with the obstacle-aware Gaussian model (module docstring).
 
     Args:

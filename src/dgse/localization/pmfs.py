@@ -87,7 +87,6 @@ import heapq
 import math
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numba as nb
@@ -98,12 +97,12 @@ from scipy import ndimage
 
 from dgse.errors import InputDataError
 from dgse.estimators.belief import Belief
+from dgse.estimators.knowledge import Knowledge, KnowledgeUser
 from dgse.localization import check_inputs, probs_from_log
 from dgse.options import options_from
 from dgse.search.paths import Cell
 from dgse.search.planners import SearchHistory
 from dgse.sensing.sensors import Observations
-from dgse.world.case import Case
 from dgse.world.layout import Layout
 
 __all__ = [
@@ -654,32 +653,31 @@ def _open_mask(layout: Layout) -> np.ndarray:
 
 
 @dataclass(eq=False)
-class PMFSEstimator:
+class PMFSEstimator(KnowledgeUser):
     """PMFS's source posterior (module docstring).
+
+    Works at every knowledge level: with the openings known (``openings``, or
+    ``wind`` with openings) filaments leave through them only; at ``map``
+    every map edge is open.
 
     Args:
         params: :class:`PMFSParams` (launch values converted to metres).
-        layout: the layout whose openings let filaments out (None: every map edge is open).
-        case: take ``layout`` from a case (its openings only).
+        layout: the layout whose openings let filaments out (None: every map edge is
+            open); set from the knowledge by :meth:`set_knowledge`.
         seed: base seed of the simulations (hypothesis ``k`` uses ``seed + k``).
     """
 
     params: PMFSParams = field(default_factory=PMFSParams)
     layout: Layout | None = None
-    case: Case | str | Path | None = None
     seed: int | None = 0
     name: str = field(default="pmfs", init=False)
 
     def __post_init__(self) -> None:
         if isinstance(self.params, dict):
             self.params = PMFSParams(**self.params)
-        if self.case is not None:
-            self.set_case(self.case)
 
-    def set_case(self, case: Case | str | Path) -> None:
-        """Use ``case``'s openings (its layout only) from now on."""
-        c = case if isinstance(case, Case) else Case.load(case)
-        self.layout = c.layout
+    def _use_knowledge(self, knowledge: Knowledge) -> None:
+        self.layout = knowledge.layout if knowledge.has_openings else None
 
     def estimate(self, occupancy: np.ndarray, resolution: float, observations: Observations) -> Belief:
         """The PMFS posterior over free cells.

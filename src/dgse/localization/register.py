@@ -8,16 +8,15 @@ the flow solver): each factory is imported on first use.
 Estimators (:func:`dgse.estimators.get_estimator`):
 
 * ``adjoint``: adjoint Bayesian posterior with the wind fitted to the wind
-  readings; needs the layout's openings: ``get_estimator("adjoint", case=case)``
-  (only ``case.layout`` is used) or ``layout=``;
-* ``adjoint-oracle``: the same with the true flow:
-  ``get_estimator("adjoint-oracle", case=case)`` (or ``case_path=``, ``cases=``,
-  ``layout=`` + ``inlet_velocity=``); an evaluation over many cases calls
-  ``est.set_case(case)`` before each case's estimates;
-* ``dualmode``: the dual-mode planner's particle filter;
-* ``pmfs``: PMFS (``case=``/``layout=`` optional: filaments then leave only
-  through the openings; ``set_case`` as for the adjoint);
-* ``grgsl``: GrGSL.
+  readings; knowledge ``openings`` or ``wind`` (it needs the openings):
+  ``get_estimator("adjoint", knowledge=Knowledge.from_case(case, "openings"))``;
+* ``adjoint-oracle``: the same with the true flow; knowledge ``wind`` (openings
+  and inlet speed); the evaluation and search loops call ``set_knowledge``
+  before each case's estimates;
+* ``dualmode``: the dual-mode planner's particle filter (any level; map only);
+* ``pmfs``: PMFS (any level; with the openings known, filaments leave only
+  through them);
+* ``grgsl``: GrGSL (any level; map only).
 
 Planners (:func:`dgse.search.planners.get_planner`): ``infotaxis``,
 ``entrotaxis``, ``dualmode``, ``pmfs``.

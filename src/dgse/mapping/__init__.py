@@ -93,6 +93,7 @@ import numpy as np
 
 from dgse.errors import InputDataError
 from dgse.estimators.belief import Belief, normalize_source_probs
+from dgse.estimators.knowledge import KnowledgeUser
 from dgse.options import check_options
 from dgse.sensing.sensors import Observations, check_sensor_cells
 
@@ -320,7 +321,7 @@ def positive(name: str, value: float, *, allow_zero: bool = False) -> float:
     return v
 
 
-class MappingEstimator:
+class MappingEstimator(KnowledgeUser):
     """An :class:`~dgse.estimators.registry.Estimator` around a mapping function.
 
     Subclasses set ``name`` and implement :meth:`map`; :meth:`estimate` times

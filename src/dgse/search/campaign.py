@@ -50,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from dgse.errors import InputDataError
+from dgse.estimators.knowledge import DEFAULT_LEVEL, check_level, require_level
 from dgse.estimators.registry import Estimator
 from dgse.search.episode import DEFAULT_TIME_LIMIT, EpisodeResult, StepRecord
 from dgse.search.planners import Planner
@@ -124,16 +125,17 @@ def estimator_options(
 ) -> dict[str, Any]:
     """The keyword arguments of estimator ``method`` in a search campaign.
 
-    DGSE methods (``dgse-*``) get ``model`` (default ``"default"``: the shipped
-    weights) and ``seed``; other methods get ``model`` only when it is given.
-    ``options`` come first (they win over both).
+    ``model`` when it is given; the campaign's ``seed`` for every estimator
+    that takes a ``seed`` option (the DGSE networks' sampling, PMFS's
+    simulations).  ``options`` come first (they win over both).
     """
+    from dgse.estimators.registry import estimator_accepts
+
     kw = dict(options or {})
-    if method.startswith("dgse-"):
-        kw.setdefault("model", model or "default")
-        kw.setdefault("seed", seed)
-    elif model is not None:
+    if model is not None:
         kw.setdefault("model", model)
+    if estimator_accepts(method, "seed"):
+        kw.setdefault("seed", seed)
     return kw
 
 
@@ -171,6 +173,7 @@ def run_trials(
     on_step: TrialStepCallback | None = None,
     journal: str | os.PathLike[str] | None = None,
     restart: bool = False,
+    knowledge: str = DEFAULT_LEVEL,
 ) -> dict[str, Any]:
     """Run ``trials`` search episodes on every case and return the metrics (module docstring).
 
@@ -205,6 +208,8 @@ def run_trials(
             With estimator or planner objects, give the options they were
             built with: they are how a journal tells runs apart.
         restart: discard an existing journal instead of resuming it.
+        knowledge: what the estimator is told about each case besides its readings
+            (:mod:`dgse.estimators.knowledge`); recorded in ``settings``.
 
     Returns:
         ``{"settings", "aggregate", "per_case"}``, JSON-ready.
@@ -212,6 +217,7 @@ def run_trials(
     Raises:
         InputDataError: bad settings, no cases, or a journal written with other
             settings or for a case file that has changed since.
+        UnsupportedError: a knowledge level the estimator does not work at.
     """
     from dgse.estimators.registry import get_estimator
     from dgse.journal import Journal, case_fingerprint
@@ -220,6 +226,7 @@ def run_trials(
     from dgse.search.planners import get_planner
 
     _check_settings(trials, time_limit, speed, dwell, min_start_distance)
+    level = check_level(knowledge)
     pairs = load_cases(cases) if isinstance(cases, str | os.PathLike) else [(Path(p), c) for p, c in cases]
     if not pairs:
         raise InputDataError("no cases to search")
@@ -238,10 +245,12 @@ def run_trials(
     else:
         plan = planner
         planner_name = planner_name or str(getattr(planner, "name", type(planner).__name__))
+    require_level(est, method, level)
     model = est_kw.get("model")
     settings = json_safe(
         {
             "method": method,
+            "knowledge": level,
             "model": model if isinstance(model, str) else None,
             "planner": planner_name,
             "planner_options": plan_kw,
@@ -295,6 +304,7 @@ def run_trials(
                         use_frames=use_frames,
                         min_start_distance=min_start_distance,
                         on_step=step_cb,
+                        knowledge=level,
                     )
                     row = json_safe(
                         {"trial": r, **result.to_dict(steps=steps), "metrics": episode_metrics(result)}

@@ -56,6 +56,7 @@ import numpy as np
 
 from dgse.errors import InputDataError
 from dgse.estimators.belief import Belief
+from dgse.estimators.knowledge import DEFAULT_LEVEL, Knowledge
 from dgse.estimators.registry import Estimator, StreamingEstimator
 from dgse.search.paths import Cell, graph_for
 from dgse.search.planners import Planner, SearchHistory
@@ -305,6 +306,7 @@ def run_episode(
     connectivity: int = 8,
     record_max_cells: int = 10_000,
     on_step: StepCallback | None = None,
+    knowledge: str = DEFAULT_LEVEL,
 ) -> EpisodeResult:
     """Run one active search on ``case`` (see the module docstring).
 
@@ -329,12 +331,16 @@ def run_episode(
             block-summed) to at most this many cells.
         on_step: called with every step's record right after the step's
             decision (before the move); see :data:`StepCallback`.
+        knowledge: what the estimator is told about ``case`` besides its readings
+            (:mod:`dgse.estimators.knowledge`: ``"map"``, ``"openings"``, ``"wind"``).
 
     Returns:
         The :class:`EpisodeResult`.
+
+    Raises:
+        UnsupportedError: a knowledge level the estimator does not work at.
     """
-    if hasattr(estimator, "set_case"):  # see dgse.estimators.registry.Estimator
-        estimator.set_case(case)
+    estimator.set_knowledge(Knowledge.from_case(case, knowledge))
     time_limit = float(time_limit)
     if not (math.isfinite(time_limit) and time_limit > 0):
         raise InputDataError(f"time limit must be a positive number of seconds, got {time_limit}")

@@ -1,0 +1,271 @@
+"""What an estimator is told about a scenario besides its readings: the prior knowledge.
+
+Three levels, each adding to the one before (``LEVELS``):
+
+* ``"map"``: the occupancy grid and its resolution (the paper's setting);
+* ``"openings"``: plus the inlet and outlet segments, as a building plan shows
+  vents and doors;
+* ``"wind"``: plus a mean wind field on the map, as from the user's own CFD
+  (GADEN users have one), and the inlet speed when it is known.  The
+  openings may be unknown at this level (a 3-D CFD flow sliced to 2-D).
+
+A :class:`Knowledge` holds exactly what its level allows and nothing of the
+scenario's truth besides (no concentration, no source).  Every estimator
+states the levels it works at (:attr:`KnowledgeUser.knowledge_levels`) and is
+handed a :class:`Knowledge` before the estimates on a map
+(:meth:`KnowledgeUser.set_knowledge`); a level it cannot work at is an
+:class:`~dgse.errors.UnsupportedError` that says which level it needs.  The
+evaluation, search and benchmark loops build the knowledge from the case with
+:meth:`Knowledge.from_case` and record its level in their results, so that
+every comparison says who knew what.
+
+Example::
+
+    k = Knowledge.from_case(case, "openings")
+    est = get_estimator("adjoint", knowledge=k)      # or est.set_knowledge(k)
+    belief = est.estimate(k.occupancy, k.resolution, observations)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, ClassVar, Literal
+
+import numpy as np
+
+from dgse.errors import InputDataError, UnsupportedError
+from dgse.world.layout import Layout, Opening
+
+if TYPE_CHECKING:
+    from dgse.world.case import Case
+
+__all__ = [
+    "DEFAULT_LEVEL",
+    "LEVELS",
+    "Knowledge",
+    "KnowledgeUser",
+    "Level",
+    "check_level",
+    "require_level",
+]
+
+Level = Literal["map", "openings", "wind"]
+#: The knowledge levels, from least to most.
+LEVELS: tuple[Level, ...] = ("map", "openings", "wind")
+#: The paper's setting, and the default of every command.
+DEFAULT_LEVEL: Level = "map"
+#: Largest wind speed (m/s) tolerated in a solid cell of a given wind field.
+WALL_WIND_TOLERANCE = 1e-6
+
+
+def check_level(level: str) -> Level:
+    """``level`` if it is one of :data:`LEVELS`; else a clear :class:`InputDataError`."""
+    if level not in LEVELS:
+        raise InputDataError(f"unknown knowledge level {level!r}; one of {', '.join(LEVELS)}")
+    return level  # type: ignore[return-value]
+
+
+def require_level(estimator: Any, name: str, level: str) -> None:
+    """Raise :class:`UnsupportedError` unless ``estimator`` works at knowledge ``level``.
+
+    The message names the levels it works at and the option that gives one.
+    """
+    levels = tuple(getattr(estimator, "knowledge_levels", ()))
+    if level in levels:
+        return
+    if not levels:
+        raise UnsupportedError(f"{name} states no knowledge levels (derive it from KnowledgeUser)")
+    need = " or ".join(repr(v) for v in levels)
+    raise UnsupportedError(
+        f"{name} works at knowledge level {need}, not {level!r}: give --knowledge {levels[0]}"
+    )
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, copy=True)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class Knowledge:
+    """Prior knowledge about one scenario at one level (module docstring).
+
+    Attributes:
+        level: ``"map"``, ``"openings"`` or ``"wind"``.
+        occupancy: ``uint8 (H, W)`` map, 1 solid (read-only copy).
+        resolution: cell size, m.
+        inlets, outlets: the openings (``"openings"``: required; ``"wind"``: optional).
+        wind: ``float64 (2, H, W)`` mean wind, m/s, 0 in solid cells (``"wind"`` only).
+        inlet_velocity: the inlet speed in m/s when known (``"wind"`` only, optional).
+        name: the scenario's name (for messages).
+    """
+
+    level: Level
+    occupancy: np.ndarray
+    resolution: float
+    inlets: tuple[Opening, ...] = ()
+    outlets: tuple[Opening, ...] = ()
+    wind: np.ndarray | None = None
+    inlet_velocity: float | None = None
+    name: str = ""
+    _layout: Layout | None = field(default=None, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        check_level(self.level)
+        occ = np.asarray(self.occupancy)
+        if occ.ndim != 2 or min(occ.shape) < 1:
+            raise InputDataError(f"knowledge: the map must be 2-D, got shape {occ.shape}")
+        set_(self, "occupancy", _frozen((occ != 0).astype(np.uint8)))
+        res = float(self.resolution)
+        if not (res > 0 and math.isfinite(res)):
+            raise InputDataError(f"knowledge: resolution must be positive (m), got {self.resolution}")
+        set_(self, "resolution", res)
+        set_(self, "inlets", tuple(self.inlets))
+        set_(self, "outlets", tuple(self.outlets))
+        has_openings = bool(self.inlets or self.outlets)
+        if self.level == "map" and (has_openings or self.wind is not None or self.inlet_velocity is not None):
+            raise InputDataError("knowledge at level 'map' is the map alone (no openings, wind, inlet speed)")
+        if self.level == "openings":
+            if not (self.inlets and self.outlets):
+                raise InputDataError("knowledge at level 'openings' needs at least one inlet and one outlet")
+            if self.wind is not None or self.inlet_velocity is not None:
+                raise InputDataError("knowledge at level 'openings' holds no wind field or inlet speed")
+        if has_openings:
+            if not (self.inlets and self.outlets):
+                raise InputDataError("knowledge: give both the inlets and the outlets, or neither")
+            # a Layout checks that the openings lie on the map's edge
+            layout = Layout(
+                self.occupancy,
+                self.inlets,
+                self.outlets,
+                resolution=self.resolution,
+                name=self.name or "layout",
+            )
+            set_(self, "_layout", layout)
+        if self.level == "wind":
+            if self.wind is None:
+                raise InputDataError("knowledge at level 'wind' needs a wind field (2, H, W), m/s")
+            set_(self, "wind", _frozen(self.check_wind(self.wind)))
+        if self.inlet_velocity is not None:
+            v = float(self.inlet_velocity)
+            if not (v > 0 and math.isfinite(v)):
+                raise InputDataError(f"knowledge: inlet velocity must be positive, got {self.inlet_velocity}")
+            set_(self, "inlet_velocity", v)
+
+    def check_wind(self, wind: np.ndarray) -> np.ndarray:
+        """``wind`` as ``float64 (2, H, W)``, checked against this map (shape, finite, no flow in walls)."""
+        w = np.asarray(wind, dtype=np.float64)
+        shape = (2, *self.occupancy.shape)
+        if w.shape != shape:
+            raise InputDataError(f"wind field has shape {w.shape}; the map needs {shape} (u_x, u_y per cell)")
+        if not np.isfinite(w).all():
+            raise InputDataError("wind field has NaN or infinite values")
+        solid = self.occupancy != 0
+        speed = np.hypot(w[0], w[1])
+        through = solid & (speed > WALL_WIND_TOLERANCE)
+        if through.any():
+            raise InputDataError(
+                f"wind field has flow through walls: {int(through.sum())} solid cells carry wind "
+                f"(up to {float(speed[through].max()):.3g} m/s); solid cells must be 0"
+            )
+        return w
+
+    # -- constructors ------------------------------------------------------------------------
+    @classmethod
+    def from_case(cls, case: Case, level: str = DEFAULT_LEVEL) -> Knowledge:
+        """What a robot is told about ``case`` at ``level``: never its concentration or source.
+
+        ``"wind"`` takes the case's wind field (the stand-in for the user's CFD), its
+        openings and its inlet speed.
+        """
+        lv = check_level(level)
+        base: dict[str, Any] = {"occupancy": case.occupancy, "resolution": case.resolution, "name": case.name}
+        if lv == "map":
+            return cls("map", **base)
+        layout = case.layout
+        base.update(inlets=layout.inlets, outlets=layout.outlets)
+        if lv == "openings":
+            return cls("openings", **base)
+        return cls("wind", wind=case.wind, inlet_velocity=case.inlet_velocity, **base)
+
+    @classmethod
+    def from_map(cls, occupancy: np.ndarray, resolution: float, name: str = "") -> Knowledge:
+        """The paper's setting: the map alone."""
+        return cls("map", occupancy, resolution, name=name)
+
+    # -- queries -----------------------------------------------------------------------------
+    @property
+    def has_openings(self) -> bool:
+        """True when the inlets and outlets are known."""
+        return self._layout is not None
+
+    @property
+    def layout(self) -> Layout:
+        """The map with its openings (a :class:`~dgse.world.layout.Layout`).
+
+        Raises:
+            UnsupportedError: the openings are not part of this knowledge.
+        """
+        if not self.has_openings or self._layout is None:
+            raise UnsupportedError(
+                f"the openings (inlets and outlets) are not known at knowledge level {self.level!r}"
+            )
+        return self._layout
+
+    def covers(self, level: str) -> bool:
+        """True when this knowledge includes everything of ``level``."""
+        return LEVELS.index(self.level) >= LEVELS.index(check_level(level))
+
+    def check_map(self, occupancy: np.ndarray, resolution: float, who: str = "estimator") -> None:
+        """Raise :class:`InputDataError` unless ``occupancy``/``resolution`` are this knowledge's map."""
+        occ = np.asarray(occupancy)
+        if (
+            occ.shape != self.occupancy.shape
+            or not np.array_equal(occ != 0, self.occupancy != 0)
+            or not math.isclose(float(resolution), self.resolution, rel_tol=1e-9)
+        ):
+            what = f" of {self.name!r}" if self.name else ""
+            raise InputDataError(f"{who}: the map passed to estimate() is not the map of its knowledge{what}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON summary: the level and what it included (no arrays)."""
+        return {
+            "level": self.level,
+            "openings": self.has_openings,
+            "wind_field": self.wind is not None,
+            "inlet_velocity": self.inlet_velocity is not None,
+        }
+
+
+class KnowledgeUser:
+    """What every estimator shares about knowledge: the levels it works at, and receiving it.
+
+    Subclasses set :attr:`knowledge_levels` and, when they use more than the
+    map, override :meth:`_use_knowledge` (called by :meth:`set_knowledge` after
+    the level check).  Without a :meth:`set_knowledge` call an estimator
+    knows the map it is given in ``estimate`` and nothing more.
+    """
+
+    #: The levels this estimator works at (a higher level it does not use is ignored).
+    knowledge_levels: ClassVar[tuple[Level, ...]] = LEVELS
+    #: The knowledge handed over last (None: the map given to ``estimate`` only).
+    knowledge: Knowledge | None = None
+
+    def set_knowledge(self, knowledge: Knowledge) -> None:
+        """Use ``knowledge`` for the estimates on its map from now on.
+
+        Raises:
+            UnsupportedError: a level this estimator does not work at (the
+                message names the levels it needs).
+        """
+        if not isinstance(knowledge, Knowledge):
+            raise InputDataError(f"knowledge must be a Knowledge, got {type(knowledge).__name__}")
+        require_level(self, str(getattr(self, "name", type(self).__name__)), knowledge.level)
+        self._use_knowledge(knowledge)
+        self.knowledge = knowledge
+
+    def _use_knowledge(self, knowledge: Knowledge) -> None:
+        """Take what this estimator uses from ``knowledge`` (default: nothing beyond the map)."""
