@@ -215,6 +215,186 @@ def corrected_flux(phb, lapA, rAtU, p, nb, ft):
     return F
 
 
+class KEpsilon:
+    """The standard k-epsilon model with standard wall functions on one mesh (one step of it).
+
+    :meth:`step` updates ``k``, ``epsilon`` and ``nu_t`` of a :class:`FlowState`
+    for its current velocity and face fluxes: the epsilon then the k
+    equation, relaxed and solved by Gauss-Seidel as in :func:`_simplec`,
+    ``inletOutlet`` at outlets, wall functions in wall cells, and the
+    realizability guard on the length scale.  SIMPLEC calls it once per
+    iteration; :func:`solve_turbulence` iterates it on a frozen flow.
+
+    Args:
+        mesh: the free cells and face types.
+        physics: model constants.
+        ubx, uby: ``(n, 4)`` velocity components at the faces where the velocity is fixed (inlets).
+        k_in, eps_in: inlet turbulence.
+    """
+
+    def __init__(
+        self, mesh: Mesh, physics: Physics, ubx: np.ndarray, uby: np.ndarray, k_in: float, eps_in: float
+    ) -> None:
+        self.mesh = mesh
+        self.physics = physics
+        ft = mesh.ft
+        self.wall = ft == WALL
+        self.inlet = ft == INLET
+        self.outlet = ft == OUTLET
+        self.wall_cell = self.wall.any(axis=1)
+        self.fixed_u = self.wall | self.inlet
+        self.ubx, self.uby = ubx, uby
+        self.k_in, self.eps_in = float(k_in), float(eps_in)
+        self.nut_in = physics.C_mu * self.k_in**2 / self.eps_in
+        self.max_length = max(mesh.shape) * mesh.h
+
+    def wall_functions(self, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(y+, nu_t at walls)`` of the cells for turbulent kinetic energy ``k``."""
+        ph = self.physics
+        nu, y = ph.nu, 0.5 * self.mesh.h
+        yplus = ph.C_mu**0.25 * y * np.sqrt(k) / nu
+        ypl = ph.y_plus_lam
+        log_law = nu * (yplus * ph.kappa / np.log(ph.E * np.maximum(yplus, ypl)) - 1.0)
+        nutw = np.where(yplus > ypl, log_law, 0.0)
+        return yplus, nutw
+
+    def step(
+        self,
+        st: FlowState,
+        s: FlowSettings,
+        yplus: np.ndarray,
+        nutw: np.ndarray,
+        residuals: dict[str, float],
+        sweeps: dict[str, int],
+    ) -> int:
+        """One update of ``st.k``, ``st.eps``, ``st.nut``; returns the cells whose length scale was capped."""
+        mesh, physics = self.mesh, self.physics
+        nb, ft, h, n = mesh.nb, mesh.ft, mesh.h, mesh.n
+        V = h * h
+        nu, Cmu = physics.nu, physics.C_mu
+        Cmu25, Cmu75 = Cmu**0.25, Cmu**0.75
+        kappa, y = physics.kappa, 0.5 * h
+        inlet, outlet, wall_cell = self.inlet, self.outlet, self.wall_cell
+        k_in, eps_in, nut_in = self.k_in, self.eps_in, self.nut_in
+        F = st.F
+        gux = gradient(st.ux, self.ubx, self.fixed_u, nb, ft, h, False)
+        guy = gradient(st.uy, self.uby, self.fixed_u, nb, ft, h, False)
+        divu = gux[:, 0] + guy[:, 1]
+        G = st.nut * (
+            2.0 * gux[:, 0] ** 2 + 2.0 * guy[:, 1] ** 2 + (gux[:, 1] + guy[:, 0]) ** 2 - (2.0 / 3.0) * divu**2
+        )
+        k_old, eps_old = st.k, st.eps
+        log_region = yplus > physics.y_plus_lam
+        umag = np.hypot(st.ux, st.uy)
+        G0 = (nutw + nu) * (umag / y) * Cmu25 * np.sqrt(k_old) / (kappa * y)
+        eps_wall = np.where(log_region, Cmu75 * k_old**1.5 / (kappa * y), 2.0 * k_old * nu / y**2)
+        G = np.where(wall_cell, np.where(log_region, G0, 0.0), G)
+        fixed_t = inlet | (outlet & (F < 0))  # inletOutlet at outlets
+
+        deff = nu + st.nut / physics.sigma_eps
+        gam_b = np.where(inlet, nu + nut_in / physics.sigma_eps, deff[:, None])
+        aP, a, cb = assemble(F, deff, fixed_t, gam_b, nb, ft, True)
+        b = row_sum(cb) * eps_in + physics.C_1 * G * eps_old / k_old * V
+        aP = aP + physics.C_2 * eps_old / k_old * V
+        if s.high_order:
+            bval = np.full((n, 4), eps_in)
+            b += ho_source(st.eps, gradient(st.eps, bval, fixed_t, nb, ft, h, True), F, nb, ft, h)
+        aP, b = relax(aP, a, b, st.eps, s.alpha_turb)
+        # wall cells take the wall-function value (OpenFOAM's setValues)
+        aP = np.where(wall_cell, 1.0, aP)
+        b = np.where(wall_cell, eps_wall, b)
+        a = np.where(wall_cell[:, None], 0.0, a)
+        eps_new = st.eps.copy()[:, None]
+        n_sw, res = gauss_seidel(aP, a, b[:, None], nb, eps_new, s.rel_tol, s.max_sweeps)
+        sweeps["epsilon"] += n_sw
+        residuals["epsilon"] = float(res[0])
+        eps_new = eps_new[:, 0]
+        eps_new = bound(eps_new, nb, ft, 1e-15)
+
+        dk = nu + st.nut / physics.sigma_k
+        gam_b = np.where(inlet, nu + nut_in / physics.sigma_k, dk[:, None])
+        aP, a, cb = assemble(F, dk, fixed_t, gam_b, nb, ft, True)
+        b = row_sum(cb) * k_in + G * V
+        aP = aP + eps_new / k_old * V
+        if s.high_order:
+            bval = np.full((n, 4), k_in)
+            b += ho_source(st.k, gradient(st.k, bval, fixed_t, nb, ft, h, True), F, nb, ft, h)
+        aP, b = relax(aP, a, b, st.k, s.alpha_turb)
+        k_new = st.k.copy()[:, None]
+        n_sw, res = gauss_seidel(aP, a, b[:, None], nb, k_new, s.rel_tol, s.max_sweeps)
+        sweeps["k"] += n_sw
+        residuals["k"] = float(res[0])
+        k_new = k_new[:, 0]
+        st.k = bound(k_new, nb, ft, 1e-15)
+        # realizability guard: the length scale Cmu^0.75 k^1.5 / eps cannot exceed the
+        # domain; without it a transient dip of epsilon gives an unbounded nu_t
+        eps_floor = Cmu75 * st.k**1.5 / self.max_length
+        limited = eps_new < eps_floor
+        st.eps = np.where(limited, eps_floor, eps_new)
+        st.nut = Cmu * st.k**2 / st.eps
+        return int(limited.sum())
+
+
+def solve_turbulence(
+    mesh: Mesh,
+    ux: np.ndarray,
+    uy: np.ndarray,
+    F: np.ndarray,
+    physics: Physics = DEFAULT_PHYSICS,
+    settings: FlowSettings | None = None,
+    inlet_width_m: float | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    """k-epsilon on a frozen flow: ``(k, epsilon, nu_t, info)`` per cell for the given velocity and fluxes.
+
+    The turbulence closure of a mean wind known from elsewhere (a user's CFD):
+    the same model, wall functions and iteration as :func:`solve_flow`, with
+    the velocity and the face fluxes ``F (n, 4)`` held fixed.  Inlet faces are
+    the faces of type ``INLET`` (their velocity is ``-F / h`` along the normal);
+    the inlet turbulence comes from the mean inflow speed and ``inlet_width_m``
+    (default: the total width of the inlet faces), as for a solved layout.
+    """
+    s = settings or FlowSettings()
+    t0 = time.perf_counter()
+    h, n = mesh.h, mesh.n
+    inlet = mesh.ft == INLET
+    vel = -np.where(inlet, F, 0.0) / h  # inflow speed through each inlet face (> 0 for inflow)
+    ubx = np.where(inlet & (AXIS == 0), -SIGN * vel, 0.0)
+    uby = np.where(inlet & (AXIS == 1), -SIGN * vel, 0.0)
+    n_in = int(inlet.sum())
+    v_in = float(np.maximum(vel[inlet], 0.0).mean()) if n_in else float(np.hypot(ux, uy).mean())
+    v_in = max(v_in, 1e-3)
+    width = inlet_width_m if inlet_width_m is not None else max(n_in, 1) * h
+    k_in, eps_in = physics.inlet_turbulence(v_in, width)
+    turb = KEpsilon(mesh, physics, ubx, uby, k_in, eps_in)
+    st = FlowState(
+        ux=np.asarray(ux, float), uy=np.asarray(uy, float), p=np.zeros(n),
+        k=np.full(n, k_in), eps=np.full(n, eps_in), nut=np.full(n, turb.nut_in), F=np.asarray(F, float),
+    )  # fmt: skip
+    residuals: dict[str, float] = {}
+    sweeps = {"k": 0, "epsilon": 0}
+    converged = False
+    it = 0
+    while it < s.max_iterations:
+        it += 1
+        yplus, nutw = turb.wall_functions(st.k)
+        turb.step(st, s, yplus, nutw, residuals, sweeps)
+        if not (np.isfinite(st.k).all() and np.isfinite(st.eps).all()):
+            break
+        if all(v < s.tolerance for v in residuals.values()):
+            converged = True
+            break
+        if time.perf_counter() - t0 > s.max_seconds:
+            break
+    info = {
+        "iterations": it,
+        "converged": converged,
+        "residuals": dict(residuals),
+        "seconds": time.perf_counter() - t0,
+        "inlet_speed": v_in,
+    }
+    return st.k, st.eps, st.nut, info
+
+
 def solve_flow(
     layout: Layout,
     mesh: Mesh,
@@ -272,22 +452,17 @@ def _simplec(
     V = h * h
     nu = physics.nu
     Cmu = physics.C_mu
-    Cmu25, Cmu75 = Cmu**0.25, Cmu**0.75
-    kappa, E = physics.kappa, physics.E
-    ypl = physics.y_plus_lam
-    y = 0.5 * h
     k_in, eps_in = physics.inlet_turbulence(inlet_velocity, max(o.width_m for o in layout.inlets))
-    nut_in = Cmu * k_in**2 / eps_in
-    max_length = max(mesh.shape) * h
 
-    wall = ft == WALL
     inlet = ft == INLET
     outlet = ft == OUTLET
-    wall_cell = wall.any(axis=1)
-    fixed_u = wall | inlet
     # inflow velocity points against the outward normal of the inlet face
     ubx = np.where(inlet & (AXIS == 0), -SIGN * inlet_velocity, 0.0)
     uby = np.where(inlet & (AXIS == 1), -SIGN * inlet_velocity, 0.0)
+    turb = KEpsilon(mesh, physics, ubx, uby, k_in, eps_in)
+    fixed_u = turb.fixed_u
+    wall = turb.wall
+    nut_in = turb.nut_in
     zero4 = np.zeros((n, 4))
     stencil = StencilMatrix(mesh)
     psolver = PressureSolver(s.max_krylov)
@@ -312,8 +487,7 @@ def _simplec(
     for it in range(1, s.max_iterations + 1):
         F = st.F
         nueff = nu + st.nut
-        yplus = Cmu25 * y * np.sqrt(st.k) / nu
-        nutw = np.where(yplus > ypl, nu * (yplus * kappa / np.log(E * np.maximum(yplus, ypl)) - 1.0), 0.0)
+        yplus, nutw = turb.wall_functions(st.k)
         # ---- momentum predictor ---------------------------------------------------------
         gam_b = np.where(wall, (nu + nutw)[:, None], np.where(inlet, nu + nut_in, nueff[:, None]))
         aP, a, cb = assemble(F, nueff, fixed_u, gam_b, nb, ft, True)
@@ -359,63 +533,7 @@ def _simplec(
         st.uy = hbyay - rAtU * gp[:, 1]
 
         # ---- k-epsilon ---------------------------------------------------------------------
-        F = st.F
-        gux = gradient(st.ux, ubx, fixed_u, nb, ft, h, False)
-        guy = gradient(st.uy, uby, fixed_u, nb, ft, h, False)
-        divu = gux[:, 0] + guy[:, 1]
-        G = st.nut * (
-            2.0 * gux[:, 0] ** 2 + 2.0 * guy[:, 1] ** 2 + (gux[:, 1] + guy[:, 0]) ** 2 - (2.0 / 3.0) * divu**2
-        )
-        k_old, eps_old = st.k, st.eps
-        log_region = yplus > ypl
-        umag = np.hypot(st.ux, st.uy)
-        G0 = (nutw + nu) * (umag / y) * Cmu25 * np.sqrt(k_old) / (kappa * y)
-        eps_wall = np.where(log_region, Cmu75 * k_old**1.5 / (kappa * y), 2.0 * k_old * nu / y**2)
-        G = np.where(wall_cell, np.where(log_region, G0, 0.0), G)
-        fixed_t = inlet | (outlet & (F < 0))  # inletOutlet at outlets
-
-        deff = nu + st.nut / physics.sigma_eps
-        gam_b = np.where(inlet, nu + nut_in / physics.sigma_eps, deff[:, None])
-        aP, a, cb = assemble(F, deff, fixed_t, gam_b, nb, ft, True)
-        b = row_sum(cb) * eps_in + physics.C_1 * G * eps_old / k_old * V
-        aP = aP + physics.C_2 * eps_old / k_old * V
-        if s.high_order:
-            bval = np.full((n, 4), eps_in)
-            b += ho_source(st.eps, gradient(st.eps, bval, fixed_t, nb, ft, h, True), F, nb, ft, h)
-        aP, b = relax(aP, a, b, st.eps, s.alpha_turb)
-        # wall cells take the wall-function value (OpenFOAM's setValues)
-        aP = np.where(wall_cell, 1.0, aP)
-        b = np.where(wall_cell, eps_wall, b)
-        a = np.where(wall_cell[:, None], 0.0, a)
-        eps_new = st.eps.copy()[:, None]
-        n_sw, res = gauss_seidel(aP, a, b[:, None], nb, eps_new, s.rel_tol, s.max_sweeps)
-        sweeps["epsilon"] += n_sw
-        residuals["epsilon"] = float(res[0])
-        eps_new = eps_new[:, 0]
-        eps_new = bound(eps_new, nb, ft, 1e-15)
-
-        dk = nu + st.nut / physics.sigma_k
-        gam_b = np.where(inlet, nu + nut_in / physics.sigma_k, dk[:, None])
-        aP, a, cb = assemble(F, dk, fixed_t, gam_b, nb, ft, True)
-        b = row_sum(cb) * k_in + G * V
-        aP = aP + eps_new / k_old * V
-        if s.high_order:
-            bval = np.full((n, 4), k_in)
-            b += ho_source(st.k, gradient(st.k, bval, fixed_t, nb, ft, h, True), F, nb, ft, h)
-        aP, b = relax(aP, a, b, st.k, s.alpha_turb)
-        k_new = st.k.copy()[:, None]
-        n_sw, res = gauss_seidel(aP, a, b[:, None], nb, k_new, s.rel_tol, s.max_sweeps)
-        sweeps["k"] += n_sw
-        residuals["k"] = float(res[0])
-        k_new = k_new[:, 0]
-        st.k = bound(k_new, nb, ft, 1e-15)
-        # realizability guard: the length scale Cmu^0.75 k^1.5 / eps cannot exceed the
-        # domain; without it a transient dip of epsilon gives an unbounded nu_t
-        eps_floor = Cmu75 * st.k**1.5 / max_length
-        limited = eps_new < eps_floor
-        n_limited = int(limited.sum())
-        st.eps = np.where(limited, eps_floor, eps_new)
-        st.nut = Cmu * st.k**2 / st.eps
+        n_limited = turb.step(st, s, yplus, nutw, residuals, sweeps)
 
         history.append(dict(residuals))
         if progress is not None:

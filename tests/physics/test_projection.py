@@ -1,0 +1,109 @@
+"""A given wind made a mass-conserving flow with an eddy viscosity (dgse.physics.projection)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from dgse.errors import InputDataError
+from dgse.physics.fv import INLET, OUTLET, WALL
+from dgse.physics.projection import (
+    divergence,
+    edge_mesh,
+    face_fluxes,
+    project_fluxes,
+    project_wind,
+    transport_from_wind,
+)
+from dgse.physics.scenario import solve_cases
+from tests.conftest import two_rooms
+
+
+@pytest.fixture(scope="module")
+def case():
+    return solve_cases(two_rooms(), 1.0, [((2.05, 0.55), 0.8)])[0]
+
+
+def _noisy(case, seed=0):
+    rng = np.random.default_rng(seed)
+    w = case.wind * (1.0 + 0.3 * rng.standard_normal(case.wind.shape)) + 0.05 * rng.standard_normal(
+        case.wind.shape
+    )
+    return np.where(case.occupancy == 1, 0.0, w)
+
+
+@pytest.mark.parametrize("openings", [True, False])
+def test_every_cell_is_mass_balanced(case, openings):
+    flow = project_wind(case.occupancy, case.resolution, _noisy(case), case.layout if openings else None)
+    scale = np.abs(flow.F).max()
+    assert np.abs(divergence(flow.F)).max() < 1e-10 * scale
+    assert flow.info["max_divergence_before"] > 1e3 * flow.info["max_divergence_after"]
+    # internal faces: the two cells see opposite fluxes; walls carry none
+    m = flow.mesh
+    for d, opp in ((0, 1), (1, 0), (2, 3), (3, 2)):
+        inn = m.nb[:, d] >= 0
+        assert np.allclose(flow.F[inn, d], -flow.F[m.nb[inn, d], opp])
+    assert np.all(flow.F[m.ft == WALL] == 0)
+    # open faces are split by the projected flow: inflow faces are inlets, outflow faces outlets
+    assert np.all(flow.F[m.ft == INLET] <= 0) and np.all(flow.F[m.ft == OUTLET] > 0)
+    assert flow.info["inlet_faces"] > 0 and flow.info["outlet_faces"] > 0
+
+
+def test_a_divergence_free_field_is_unchanged(case):
+    once = project_wind(case.occupancy, case.resolution, _noisy(case, 1), case.layout)
+    again, phi = project_fluxes(once.mesh, once.F)
+    assert np.array_equal(again, once.F) and not phi.any()
+    # a uniform wind through an empty room with every edge open already conserves mass
+    occ = np.zeros((12, 20), np.uint8)
+    wind = np.stack([np.full(occ.shape, 0.7), np.full(occ.shape, -0.2)])
+    mesh = edge_mesh(occ, 0.1)
+    F = face_fluxes(mesh, wind)
+    assert np.abs(divergence(F)).max() < 1e-14
+    flow = project_wind(occ, 0.1, wind, open_fraction=0.0)
+    assert flow.info["correction"] < 1e-12
+    assert np.allclose(flow.wind, wind)
+
+
+def test_a_closed_room_is_projected_too():
+    occ = np.zeros((10, 10), np.uint8)
+    rng = np.random.default_rng(2)
+    wind = rng.standard_normal((2, 10, 10)) * 0.1
+    mesh = edge_mesh(occ, 0.1)
+    closed = replace(mesh, ft=np.where(mesh.ft == INLET, WALL, mesh.ft))
+    F, _ = project_fluxes(closed, face_fluxes(closed, wind))
+    assert np.abs(divergence(F)).max() < 1e-12
+
+
+def test_the_k_epsilon_closure_gives_back_the_plume(case):
+    """The RANS wind of a built-in case, projected, with k-epsilon on it: the case's own plume."""
+    src = case.layout.grid.cell_of(*case.source)
+    free = case.free
+
+    def log_rmse(flow):
+        ts = transport_from_wind(flow)
+        c = ts.solve_cells([src], [case.release_rate])[0] * ts.physics.ppm_per_gm3
+        return float(np.sqrt(np.mean((np.log1p(np.maximum(c, 0)) - np.log1p(case.concentration))[free] ** 2)))
+
+    known = project_wind(case.occupancy, case.resolution, case.wind, case.layout)
+    assert known.info["closure"] == "k-epsilon" and known.info["turbulence"]["converged"]
+    assert log_rmse(known) < 0.1
+    unknown = project_wind(case.occupancy, case.resolution, case.wind)  # openings from the wind
+    assert log_rmse(unknown) < 0.3
+    # the algebraic closure is a stated, cruder option
+    ml = project_wind(case.occupancy, case.resolution, case.wind, case.layout, closure="mixing-length")
+    assert ml.info["closure"] == "mixing-length" and np.all(ml.nut[free] > 0)
+
+
+def test_bad_wind_is_a_clear_error(case):
+    with pytest.raises(InputDataError, match="shape"):
+        project_wind(case.occupancy, case.resolution, np.zeros((2, 3, 3)))
+    wall_wind = np.array(case.wind)
+    wall_wind[0][case.occupancy == 1] = 1.0
+    with pytest.raises(InputDataError, match="flow through walls"):
+        project_wind(case.occupancy, case.resolution, wall_wind)
+    with pytest.raises(InputDataError, match="NaN"):
+        project_wind(case.occupancy, case.resolution, np.full(case.wind.shape, np.nan))
+    with pytest.raises(InputDataError, match="unknown closure"):
+        project_wind(case.occupancy, case.resolution, case.wind, closure="smagorinsky")
