@@ -72,6 +72,8 @@ _BUILTIN: dict[str, str] = {
     "dgse-o": "dgse.estimators.dgse:make_dgse_o",
     "dgse-p": "dgse.estimators.dgse:make_dgse_p",
     "dgse-s": "dgse.estimators.dgse:make_dgse_s",
+    # the physics-guided estimator: the adjoint posterior mixed over flow hypotheses
+    "dgse-phys": "dgse.estimators.phys:make_dgse_phys",
     # gas distribution mapping baselines (paper Sec. V-B)
     "kdmv": "dgse.mapping.kernel:KernelDMV",
     "kdmvw": "dgse.mapping.kernel:KernelDMVW",

@@ -135,6 +135,7 @@ __all__ = [
     "flow_model",
     "make_adjoint",
     "make_adjoint_oracle",
+    "sigma_floor",
 ]
 
 #: Flow models kept in memory (each holds an LU factorization of the transport operator).
@@ -382,7 +383,7 @@ def adjoint_log_evidence(
     return logl, details
 
 
-def _sigma_floor(A: np.ndarray, z: np.ndarray, r: np.ndarray, s: int, alpha0: float, beta0: float) -> float:
+def sigma_floor(A: np.ndarray, z: np.ndarray, r: np.ndarray, s: int, alpha0: float, beta0: float) -> float:
     """Posterior-mean noise floor ``E[sigma^2]^(1/2)`` given the source ``s`` (ppm)."""
     w = 1.0 / r**2
     a = A[:, s]
@@ -627,7 +628,7 @@ class AdjointEstimator(KnowledgeUser):
         r_best = (
             np.ones_like(z) if chat is None or det["kappa"] == 0 else 1.0 + det["kappa"] * chat / det["cbar"]
         )
-        sig = _sigma_floor(A, z, r_best, best, self.alpha0, self.alpha0 * det["s0"] ** 2)
+        sig = sigma_floor(A, z, r_best, best, self.alpha0, self.alpha0 * det["s0"] ** 2)
         model = AdjointResponseModel(fm, qmap, sig, float(det["kappa"]), float(det.get("cbar", 1.0)))
         bi, bj = (int(v) for v in mesh.cells[best])
         info: dict[str, Any] = {

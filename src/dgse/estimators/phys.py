@@ -1,0 +1,337 @@
+r"""``dgse-phys``: the physics-guided estimator, a posterior mixed over flow hypotheses.
+
+The source posterior of the discretized physics (the adjoint evidence of
+:func:`dgse.localization.adjoint.adjoint_log_evidence`: release rate and
+Table I noise marginalized) is computed on every *flow hypothesis* the
+knowledge allows, and the hypotheses are weighed by how well they explain
+both the wind and the gas readings:
+
+``p(s | z, w) = sum_h p(h | z, w) p(s | z, h)``, ``p(h | z, w) ∝ p(w | h) p(z | h)``
+
+with ``p(z | h) = mean_s p(z | s, h)`` (uniform source prior over the free
+cells; the evidence's constant does not depend on the flow, so hypotheses
+compare directly).  Flow hypotheses per knowledge level
+(:mod:`dgse.estimators.knowledge`):
+
+* ``openings``: the built-in RANS flow of the layout for each of the
+  candidate inlet speeds ``speeds`` (cached per layout and speed): a
+  posterior over the speed, not one best fit;
+* ``wind``: the given wind field made mass-conserving on the map, with
+  k-epsilon on that frozen flow (:mod:`dgse.physics.projection`; the map's
+  edges are open where the field says so when the openings are unknown).
+
+The wind likelihood ``p(w | h)`` treats every wind reading as the flow's
+wind plus isotropic Gaussian noise of standard deviation ``sqrt((r |u|)^2 +
+sigma_w^2)`` (Table I's speed and direction noise grow with the speed;
+``sigma_w`` absorbs small-scale model error), averaged over the relative
+levels ``r`` in ``wind_noise_levels``.
+
+Belief: ``source_probs`` is the mixture; ``wind_mean``/``wind_var`` the
+mixture mean and variance of the hypotheses' winds (plus the wind noise
+level where readings are far); ``log_conc_mean``/``log_conc_var`` the
+moment-matched mixture of every hypothesis's posterior-predictive
+concentration (the most probable sources' forward fields, as the adjoint
+estimator forms it); ``info`` lists the hypotheses and their weights.
+
+Cost: the flows once per map (one RANS solve per candidate speed, or one
+projection and k-epsilon solve), then per estimate one adjoint row per new
+sensor cell and hypothesis, and the evidence (a few ``(m, N)`` products per
+hypothesis; hypotheses whose weight falls below ``min_weight`` are skipped
+in the predictive).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from dgse.errors import InputDataError, UnsupportedError
+from dgse.estimators.belief import Belief
+from dgse.estimators.knowledge import Knowledge, KnowledgeUser, Level
+from dgse.localization import check_inputs, log_moments_from_ppm
+from dgse.localization.adjoint import (
+    DEFAULT_KAPPAS,
+    AdjointResponseModel,
+    FlowModel,
+    adjoint_log_evidence,
+    flow_model,
+    sigma_floor,
+)
+from dgse.options import options_from
+from dgse.physics.constants import DEFAULT_PHYSICS, Physics
+from dgse.physics.projection import project_wind, transport_from_wind
+from dgse.physics.rans import FlowSettings
+from dgse.sensing.sensors import Observations
+
+__all__ = ["DEFAULT_SPEEDS", "FlowHypothesis", "PhysicsGuidedEstimator", "make_dgse_phys", "mix_posteriors"]
+
+#: Candidate inlet speeds at knowledge ``openings``, m/s (log-spaced over the training range).
+DEFAULT_SPEEDS = (0.35, 0.6, 1.0, 1.7, 2.9, 5.0)
+#: Relative wind-noise levels averaged in the wind likelihood (Table I: up to 0.5 in speed, 15 deg).
+DEFAULT_WIND_NOISE = (0.1, 0.25, 0.5)
+
+
+@dataclass(eq=False)
+class FlowHypothesis:
+    """One flow the readings are explained with.
+
+    Attributes:
+        label: what it is (``"v_in 1.7 m/s"``, ``"given wind"``).
+        flow: the flow and its factorized transport (adjoint rows cached per sensor cell).
+        prior: prior weight (the hypotheses' priors sum to 1).
+    """
+
+    label: str
+    flow: FlowModel
+    prior: float = 1.0
+
+
+def _logsumexp(x: np.ndarray) -> float:
+    top = float(np.max(x))
+    return top + math.log(float(np.exp(x - top).sum())) if math.isfinite(top) else top
+
+
+def mix_posteriors(
+    log_evidence: Sequence[np.ndarray], log_prior: Sequence[float] | np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(p(s | data), p(h | data))`` of a mixture over hypotheses ``h``.
+
+    Args:
+        log_evidence: per hypothesis, ``(N,)`` ``log p(data | s, h)`` up to one constant
+            shared by all hypotheses.
+        log_prior: ``(H,)`` log prior weights of the hypotheses (any data about ``h``
+            besides the gas, e.g. the wind readings' log likelihood, added in).
+
+    With one hypothesis holding all the prior weight the result is that
+    hypothesis's own posterior.
+    """
+    L = [np.asarray(x, dtype=np.float64) for x in log_evidence]
+    if not L:
+        raise InputDataError("no flow hypotheses to mix")
+    n = L[0].size
+    lp = np.asarray(log_prior, dtype=np.float64)
+    if lp.shape != (len(L),):
+        raise InputDataError(f"{len(L)} hypotheses but {lp.size} prior weights")
+    log_z = np.array([_logsumexp(x) - math.log(n) for x in L]) + lp  # log p(data, h)
+    hw = np.exp(log_z - _logsumexp(log_z))
+    post = np.zeros(n)
+    for w, x in zip(hw, L, strict=True):
+        if w > 0:
+            p = np.exp(x - x.max())
+            post += w * p / p.sum()
+    return post / post.sum(), hw
+
+
+def wind_log_likelihood(
+    predicted: np.ndarray, readings: np.ndarray, levels: Sequence[float], floor: float
+) -> float:
+    """``log p(readings | flow)``: isotropic noise ``sqrt((r |u|)^2 + floor^2)``, averaged over ``r``.
+
+    ``predicted``, ``readings``: ``(m, 2)`` winds at the reading cells, m/s.
+    """
+    u = np.asarray(predicted, dtype=np.float64)
+    w = np.asarray(readings, dtype=np.float64)
+    d2 = ((w - u) ** 2).sum(axis=1)
+    s2u = (u**2).sum(axis=1)
+    vals = []
+    for r in levels:
+        var = (r * r) * s2u + floor * floor
+        vals.append(float((-np.log(2.0 * math.pi * var) - 0.5 * d2 / var).sum()))
+    return _logsumexp(np.array(vals)) - math.log(len(vals))
+
+
+@dataclass(eq=False)
+class PhysicsGuidedEstimator(KnowledgeUser):
+    """``dgse-phys``: the adjoint posterior mixed over flow hypotheses (module docstring).
+
+    Args:
+        speeds: candidate inlet speeds at knowledge ``openings``, m/s.
+        wind_noise_levels: relative wind-noise levels of the wind likelihood.
+        wind_noise_floor: absolute wind noise (and model error) floor, m/s.
+        q_max, kappas, alpha0, sigma0_fraction: the gas evidence's priors
+            (:func:`~dgse.localization.adjoint.adjoint_log_evidence`).
+        conc_components: most probable sources per hypothesis in the concentration estimate.
+        min_weight: hypotheses below this posterior weight are left out of the predictive.
+        flow_settings: SIMPLEC controls of the built-in solver.
+        physics: physical constants.
+    """
+
+    knowledge_levels: ClassVar[tuple[Level, ...]] = ("openings", "wind")
+
+    speeds: Sequence[float] = DEFAULT_SPEEDS
+    wind_noise_levels: Sequence[float] = DEFAULT_WIND_NOISE
+    wind_noise_floor: float = 0.05
+    q_max: float | None = 5.0
+    kappas: Sequence[float] = DEFAULT_KAPPAS
+    alpha0: float = 1.0
+    sigma0_fraction: float = 0.25
+    conc_components: int = 32
+    min_weight: float = 1e-4
+    flow_settings: FlowSettings | None = None
+    physics: Physics = DEFAULT_PHYSICS
+    name: str = field(default="dgse-phys", init=False)
+    _hypotheses: list[FlowHypothesis] | None = field(default=None, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        speeds = [float(v) for v in self.speeds]
+        if not speeds or any(not (v > 0 and math.isfinite(v)) for v in speeds):
+            raise InputDataError(f"speeds must be positive numbers of m/s, got {self.speeds}")
+        self.speeds = tuple(speeds)
+        levels = [float(r) for r in self.wind_noise_levels]
+        if not levels or any(not (r > 0 and math.isfinite(r)) for r in levels):
+            raise InputDataError(f"wind_noise_levels must be positive, got {self.wind_noise_levels}")
+        self.wind_noise_levels = tuple(levels)
+        if not (self.wind_noise_floor > 0 and math.isfinite(self.wind_noise_floor)):
+            raise InputDataError(f"wind_noise_floor must be positive, got {self.wind_noise_floor}")
+        if int(self.conc_components) < 1:
+            raise InputDataError(f"conc_components must be >= 1, got {self.conc_components}")
+
+    # -- knowledge and flows --------------------------------------------------------------------
+    def _use_knowledge(self, knowledge: Knowledge) -> None:
+        if knowledge.level == "openings" and not knowledge.has_openings:
+            raise UnsupportedError("dgse-phys at 'openings' needs the inlets and outlets")
+        self._hypotheses = None  # built on the first estimate (solves take seconds)
+
+    def hypotheses(self) -> list[FlowHypothesis]:
+        """The flow hypotheses of the current knowledge (solved on first use, then cached)."""
+        k = self.knowledge
+        if k is None:
+            raise InputDataError(
+                "dgse-phys needs knowledge 'openings' or 'wind': call "
+                "set_knowledge(Knowledge.from_case(...)) or give --knowledge"
+            )
+        if self._hypotheses is None:
+            if k.level == "wind":
+                assert k.wind is not None
+                proj = project_wind(
+                    k.occupancy,
+                    k.resolution,
+                    k.wind,
+                    k.layout if k.has_openings else None,
+                    physics=self.physics,
+                )
+                fm = FlowModel(
+                    proj.wind, transport_from_wind(proj, self.physics), math.nan, proj.info, self.physics
+                )
+                self._hypotheses = [FlowHypothesis("given wind", fm, 1.0)]
+            else:
+                p = 1.0 / len(self.speeds)
+                self._hypotheses = [
+                    FlowHypothesis(
+                        f"v_in {v:g} m/s", flow_model(k.layout, v, self.physics, self.flow_settings), p
+                    )
+                    for v in self.speeds
+                ]
+        return self._hypotheses
+
+    # -- estimate ---------------------------------------------------------------------------------
+    def estimate(self, occupancy: np.ndarray, resolution: float, observations: Observations) -> Belief:
+        """The mixture posterior and fields given the readings (module docstring).
+
+        Raises:
+            InputDataError: no readings, a reading in a wall or off the map, no
+                knowledge, or a map other than the knowledge's.
+        """
+        t0 = time.perf_counter()
+        occ, res, obs = check_inputs(occupancy, resolution, observations)
+        if self.knowledge is None:
+            self.hypotheses()  # raises the message
+        assert self.knowledge is not None
+        self.knowledge.check_map(occ, res, self.name)
+        hyps = self.hypotheses()
+        t_flow = time.perf_counter() - t0
+        cells, z = obs.cells, obs.gas
+        log_ev, details, log_prior = [], [], []
+        for h in hyps:
+            A = h.flow.responses(cells)
+            logl, det = adjoint_log_evidence(
+                A,
+                z,
+                q_max=self.q_max,
+                kappas=self.kappas,
+                alpha0=self.alpha0,
+                sigma0_fraction=self.sigma0_fraction,
+            )
+            u = h.flow.wind[:, cells[:, 0], cells[:, 1]].T
+            lw = wind_log_likelihood(u, obs.wind, self.wind_noise_levels, self.wind_noise_floor)
+            log_ev.append(logl)
+            details.append((A, det))
+            log_prior.append(math.log(h.prior) + lw)
+        post, hw = mix_posteriors(log_ev, log_prior)
+        mesh = hyps[0].flow.mesh
+        # wind: mixture mean and variance of the hypotheses' winds
+        winds = np.stack([h.flow.wind for h in hyps])  # (H, 2, H, W)
+        wind_mean = np.tensordot(hw, winds, axes=1)
+        wind_var = np.tensordot(hw, (winds - wind_mean) ** 2, axes=1)
+        # concentration: every weighty hypothesis's predictive, mixed and moment matched
+        mean = np.zeros(mesh.n)
+        second = np.zeros(mesh.n)
+        qmax = np.inf if self.q_max is None else self.q_max
+        for w, h, logl, (_, det) in zip(hw, hyps, log_ev, details, strict=True):
+            if w < self.min_weight:
+                continue
+            ph = np.exp(logl - logl.max())
+            ph /= ph.sum()
+            order = np.argsort(ph)[::-1]
+            kk = int(np.searchsorted(np.cumsum(ph[order]), 0.99)) + 1
+            top = order[: max(1, min(kk, int(self.conc_components)))]
+            wts = ph[top] / ph[top].sum()
+            qmap = np.clip(det["qhat"], 0.0, qmax)
+            fields = h.flow.forward(mesh.cells[top], qmap[top])
+            mean += w * (wts @ fields)
+            second += w * (wts @ fields**2)
+        total = float(hw[hw >= self.min_weight].sum())
+        mean /= total
+        second /= total
+        var = np.maximum(second - mean**2, 0.0)
+        mu, s2 = log_moments_from_ppm(mesh.field(np.maximum(mean, 0.0)), mesh.field(var))
+        best_h = int(np.argmax(hw))
+        A_b, det_b = details[best_h]
+        best = int(np.argmax(post))
+        chat = det_b.get("chat")
+        r_best = (
+            np.ones_like(z)
+            if chat is None or det_b["kappa"] == 0
+            else 1.0 + det_b["kappa"] * chat / det_b["cbar"]
+        )
+        sig = sigma_floor(A_b, z, r_best, best, self.alpha0, self.alpha0 * det_b["s0"] ** 2)
+        qmap_b = np.clip(det_b["qhat"], 0.0, qmax)
+        model = AdjointResponseModel(
+            hyps[best_h].flow, qmap_b, sig, float(det_b["kappa"]), float(det_b.get("cbar", 1.0))
+        )
+        info: dict[str, Any] = {
+            "method": self.name,
+            "knowledge": self.knowledge.level,
+            "n_observations": len(obs),
+            "hypotheses": [
+                {"label": h.label, "weight": float(w), "inlet_velocity": h.flow.inlet_velocity}
+                for h, w in zip(hyps, hw, strict=True)
+            ],
+            "best_hypothesis": hyps[best_h].label,
+            "noise_floor_ppm": sig,
+            "response_model": model,
+            "timings": {"preprocessing": t_flow},
+            "conc_space": "ppm",
+        }
+        info["seconds"] = time.perf_counter() - t0
+        return Belief(
+            occupancy=occ,
+            resolution=res,
+            source_probs=mesh.field(post),
+            wind_mean=wind_mean,
+            wind_var=wind_var,
+            log_conc_mean=mu,
+            log_conc_var=s2,
+            info=info,
+        )
+
+
+@options_from(PhysicsGuidedEstimator)
+def make_dgse_phys(**kwargs: Any) -> PhysicsGuidedEstimator:
+    """Registry factory ``dgse-phys``; needs knowledge ``openings`` or ``wind``."""
+    return PhysicsGuidedEstimator(**kwargs)
