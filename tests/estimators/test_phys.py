@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dgse.errors import InputDataError, UnsupportedError
+from dgse.errors import InputDataError
 from dgse.estimators.knowledge import Knowledge
 from dgse.estimators.phys import FlowHypothesis, PhysicsGuidedEstimator, mix_posteriors, wind_log_likelihood
 from dgse.estimators.registry import get_estimator
@@ -78,9 +78,21 @@ def test_wind_level_works_without_openings(case):
     assert b.info["hypotheses"][0]["label"] == "given wind"
 
 
+def test_map_level_proposes_openings_from_the_wind_readings(case):
+    est = get_estimator("dgse-phys", knowledge=Knowledge.from_case(case, "map"), map_proposals=3)
+    obs = draw_observations(case, 40, seed=4)
+    b = est.estimate(case.occupancy, case.resolution, obs)
+    hyps = b.info["hypotheses"]
+    assert len(hyps) == 3 and b.info["knowledge"] == "map"
+    # two_rooms: inlet west 1.2-1.8 m, outlet east 0.2-0.8 m; the first proposal is the true pair
+    assert hyps[0]["label"] == "in west 1.0-2.0 m, out east 0.0-1.0 m"
+    assert sum(h["weight"] for h in hyps) == pytest.approx(1.0)
+    assert b.localization_error(tuple(case.source)) < 1.0
+    with pytest.raises(InputDataError, match="give readings"):
+        est.hypotheses(None)
+
+
 def test_levels_and_bad_input(case):
-    with pytest.raises(UnsupportedError, match="not 'map': give --knowledge openings"):
-        get_estimator("dgse-phys", knowledge=Knowledge.from_case(case, "map"))
     est = get_estimator("dgse-phys")
     with pytest.raises(InputDataError, match="needs knowledge"):
         est.estimate(case.occupancy, case.resolution, draw_observations(case, 5, seed=0))

@@ -47,3 +47,19 @@ def test_no_crossing_wind_is_a_clear_error():
         propose_openings(occ, 0.1, np.zeros((2, 10, 10)))
     with pytest.raises(InputDataError, match="shape"):
         propose_openings(occ, 0.1, np.zeros((2, 3, 3)))
+
+
+@pytest.mark.parametrize("seed", [3, 8, 12])
+def test_noiseless_readings_rank_the_true_openings_first(seed):
+    """Potential flow between edge windows, fitted to noiseless wind readings of a built-in case."""
+    from dgse.physics.openings import potential_flow_proposals
+
+    case = random_cases(seed, n_sources=1, width_range=(5, 7), height_range=(5, 7))[0]
+    rng = np.random.default_rng(seed)
+    free = np.argwhere(case.occupancy == 0)
+    cells = free[rng.choice(len(free), 80, replace=False)]
+    wind = case.wind[:, cells[:, 0], cells[:, 1]].T
+    props = potential_flow_proposals(case.occupancy, case.resolution, cells, wind, top=3)
+    (inlet,), (outlet,) = case.layout.inlets, case.layout.outlets
+    assert any(_matches(p.inlets[0], inlet, 0.6) and _matches(p.outlets[0], outlet, 0.6) for p in props)
+    assert _matches(props[0].inlets[0], inlet, 0.6) and _matches(props[0].outlets[0], outlet, 0.6)

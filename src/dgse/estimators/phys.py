@@ -18,7 +18,14 @@ compare directly).  Flow hypotheses per knowledge level
   posterior over the speed, not one best fit;
 * ``wind``: the given wind field made mass-conserving on the map, with
   k-epsilon on that frozen flow (:mod:`dgse.physics.projection`; the map's
-  edges are open where the field says so when the openings are unknown).
+  edges are open where the field says so when the openings are unknown);
+* ``map``: opening hypotheses proposed from the wind readings
+  (:func:`dgse.physics.openings.potential_flow_proposals`: the edge-window
+  pairs whose potential flow best fits the readings), each solved with the
+  built-in RANS at one inlet speed (``MAP_SPEED``); the wind likelihood fits
+  each flow's scale to the readings (the source posterior hardly depends on
+  the speed: concentrations scale as ``q / v_in``).  Proposed again each time
+  the readings have doubled.
 
 The wind likelihood ``p(w | h)`` treats every wind reading as the flow's
 wind plus isotropic Gaussian noise of standard deviation ``sqrt((r |u|)^2 +
@@ -64,14 +71,18 @@ from dgse.localization.adjoint import (
 )
 from dgse.options import options_from
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
+from dgse.physics.openings import potential_flow_proposals
 from dgse.physics.projection import project_wind, transport_from_wind
 from dgse.physics.rans import FlowSettings
 from dgse.sensing.sensors import Observations
+from dgse.world.layout import Layout
 
 __all__ = ["DEFAULT_SPEEDS", "FlowHypothesis", "PhysicsGuidedEstimator", "make_dgse_phys", "mix_posteriors"]
 
 #: Candidate inlet speeds at knowledge ``openings``, m/s (log-spaced over the training range).
 DEFAULT_SPEEDS = (0.35, 0.6, 1.0, 1.7, 2.9, 5.0)
+#: Inlet speed the opening proposals are solved at (map level), m/s.
+MAP_SPEED = 1.0
 #: Relative wind-noise levels averaged in the wind likelihood (Table I: up to 0.5 in speed, 15 deg).
 DEFAULT_WIND_NOISE = (0.1, 0.25, 0.5)
 
@@ -157,11 +168,15 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             (:func:`~dgse.localization.adjoint.adjoint_log_evidence`).
         conc_components: most probable sources per hypothesis in the concentration estimate.
         min_weight: hypotheses below this posterior weight are left out of the predictive.
+        map_proposals: opening hypotheses at knowledge ``map`` (the best pairs of
+            :func:`~dgse.physics.openings.potential_flow_proposals`).
+        temperature: the gas evidence is divided by it (a power posterior: ``T > 1``
+            absorbs model error by counting the readings as ``m / T`` independent ones).
         flow_settings: SIMPLEC controls of the built-in solver.
         physics: physical constants.
     """
 
-    knowledge_levels: ClassVar[tuple[Level, ...]] = ("openings", "wind")
+    knowledge_levels: ClassVar[tuple[Level, ...]] = ("map", "openings", "wind")
 
     speeds: Sequence[float] = DEFAULT_SPEEDS
     wind_noise_levels: Sequence[float] = DEFAULT_WIND_NOISE
@@ -172,10 +187,13 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     sigma0_fraction: float = 0.25
     conc_components: int = 32
     min_weight: float = 1e-4
+    temperature: float = 1.0
+    map_proposals: int = 5
     flow_settings: FlowSettings | None = None
     physics: Physics = DEFAULT_PHYSICS
     name: str = field(default="dgse-phys", init=False)
     _hypotheses: list[FlowHypothesis] | None = field(default=None, init=False, repr=False)
+    _proposed_at: int = field(default=0, init=False, repr=False)
 
     def __post_init__(self) -> None:
         speeds = [float(v) for v in self.speeds]
@@ -188,6 +206,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         self.wind_noise_levels = tuple(levels)
         if not (self.wind_noise_floor > 0 and math.isfinite(self.wind_noise_floor)):
             raise InputDataError(f"wind_noise_floor must be positive, got {self.wind_noise_floor}")
+        if not (self.temperature >= 1.0 and math.isfinite(self.temperature)):
+            raise InputDataError(f"temperature must be >= 1, got {self.temperature}")
         if int(self.conc_components) < 1:
             raise InputDataError(f"conc_components must be >= 1, got {self.conc_components}")
 
@@ -196,15 +216,45 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         if knowledge.level == "openings" and not knowledge.has_openings:
             raise UnsupportedError("dgse-phys at 'openings' needs the inlets and outlets")
         self._hypotheses = None  # built on the first estimate (solves take seconds)
+        self._proposed_at = 0
 
-    def hypotheses(self) -> list[FlowHypothesis]:
-        """The flow hypotheses of the current knowledge (solved on first use, then cached)."""
+    def _map_hypotheses(self, obs: Observations) -> list[FlowHypothesis]:
+        """Opening hypotheses from the wind readings (map level), proposed anew when the readings double."""
+        k = self.knowledge
+        assert k is not None
+        if self._hypotheses is not None and len(obs) < 2 * self._proposed_at:
+            return self._hypotheses
+        proposals = potential_flow_proposals(
+            k.occupancy, k.resolution, obs.cells, obs.wind, top=self.map_proposals
+        )
+        hyps = []
+        for prop in proposals:
+            layout = Layout(
+                k.occupancy, prop.inlets, prop.outlets, resolution=k.resolution, name=k.name or "map"
+            )
+            # the flow's shape is what matters: one speed, the wind fit scales it (see estimate)
+            fm = flow_model(layout, MAP_SPEED, self.physics, self.flow_settings)
+            hyps.append(FlowHypothesis(prop.label(), fm, 1.0 / len(proposals)))
+        self._hypotheses = hyps
+        self._proposed_at = len(obs)
+        return hyps
+
+    def hypotheses(self, observations: Observations | None = None) -> list[FlowHypothesis]:
+        """The flow hypotheses of the current knowledge (solved on first use, then cached).
+
+        At knowledge ``map`` they come from ``observations`` (proposed again each time
+        the readings have doubled since).
+        """
         k = self.knowledge
         if k is None:
             raise InputDataError(
                 "dgse-phys needs knowledge 'openings' or 'wind': call "
                 "set_knowledge(Knowledge.from_case(...)) or give --knowledge"
             )
+        if k.level == "map":
+            if observations is None or len(observations) == 0:
+                raise InputDataError("dgse-phys at 'map' proposes openings from wind readings: give readings")
+            return self._map_hypotheses(observations)
         if self._hypotheses is None:
             if k.level == "wind":
                 assert k.wind is not None
@@ -243,10 +293,11 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             self.hypotheses()  # raises the message
         assert self.knowledge is not None
         self.knowledge.check_map(occ, res, self.name)
-        hyps = self.hypotheses()
+        hyps = self.hypotheses(obs)
         t_flow = time.perf_counter() - t0
+        free_scale = self.knowledge.level == "map"  # proposals are solved at one speed
         cells, z = obs.cells, obs.gas
-        log_ev, details, log_prior = [], [], []
+        log_ev, details, log_prior, scales = [], [], [], []
         for h in hyps:
             A = h.flow.responses(cells)
             logl, det = adjoint_log_evidence(
@@ -258,14 +309,17 @@ class PhysicsGuidedEstimator(KnowledgeUser):
                 sigma0_fraction=self.sigma0_fraction,
             )
             u = h.flow.wind[:, cells[:, 0], cells[:, 1]].T
-            lw = wind_log_likelihood(u, obs.wind, self.wind_noise_levels, self.wind_noise_floor)
-            log_ev.append(logl)
+            uu = float((u * u).sum())
+            scale = max(float((u * obs.wind).sum()) / uu, 0.0) if free_scale and uu > 0 else 1.0
+            scales.append(scale)
+            lw = wind_log_likelihood(scale * u, obs.wind, self.wind_noise_levels, self.wind_noise_floor)
+            log_ev.append(logl / self.temperature)
             details.append((A, det))
             log_prior.append(math.log(h.prior) + lw)
         post, hw = mix_posteriors(log_ev, log_prior)
         mesh = hyps[0].flow.mesh
         # wind: mixture mean and variance of the hypotheses' winds
-        winds = np.stack([h.flow.wind for h in hyps])  # (H, 2, H, W)
+        winds = np.stack([s * h.flow.wind for s, h in zip(scales, hyps, strict=True)])  # (H, 2, H, W)
         wind_mean = np.tensordot(hw, winds, axes=1)
         wind_var = np.tensordot(hw, (winds - wind_mean) ** 2, axes=1)
         # concentration: every weighty hypothesis's predictive, mixed and moment matched

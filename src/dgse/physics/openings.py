@@ -135,3 +135,158 @@ def propose_openings(
     if not proposals:
         raise InputDataError("the wind shows no separate inflow and outflow at the map's edge")
     return sorted(proposals, key=lambda p: -p.score)
+
+
+# -- proposals from the wind readings alone: potential flow between edge windows ---------------------
+def _edge_windows(
+    occupancy: np.ndarray, resolution: float, window_m: float, stride_m: float
+) -> list[Opening]:
+    """Windows of ``window_m`` along every side's free edge cells, every ``stride_m``."""
+    occ = np.asarray(occupancy)
+    h = float(resolution)
+    n_win = max(1, round(window_m / h))
+    step = max(1, round(stride_m / h))
+    out: list[Opening] = []
+    for side in SIDES:
+        free, _ = _edge(occ, np.zeros((2, *occ.shape)), side)
+        for a, b in edge_runs(free, max_gap=0):
+            if b - a <= n_win:
+                out.append(Opening(side, a * h, b * h))
+                continue
+            starts = list(range(a, b - n_win + 1, step))
+            if starts[-1] != b - n_win:
+                starts.append(b - n_win)
+            out.extend(Opening(side, s * h, (s + n_win) * h) for s in starts)
+    return out
+
+
+def _window_cells(opening: Opening, shape: tuple[int, int], resolution: float) -> np.ndarray:
+    from dgse.world.grid import Grid
+
+    rows, cols = opening.cells(Grid(shape, resolution))
+    return np.stack([rows, cols], axis=1)
+
+
+def potential_flow_proposals(
+    occupancy: np.ndarray,
+    resolution: float,
+    cells: np.ndarray,
+    wind: np.ndarray,
+    *,
+    window_m: float = 1.0,
+    stride_m: float = 0.5,
+    top: int = 5,
+) -> list[OpeningProposal]:
+    """Inlet/outlet windows whose potential flow best explains the wind readings, best first.
+
+    Every pair of edge windows (``window_m`` wide, every ``stride_m``) is a
+    hypothesis: the irrotational flow entering through one and leaving through
+    the other (a Laplace problem on the free cells with walls closed).  By
+    linearity it is the difference of two responses to unit inflow through a
+    window (and outflow through a fixed reference window), so one
+    factorization and one solve per window serve every pair.  Each pair is
+    fitted to the wind readings ``wind`` (``(m, 2)`` m/s at ``cells``) with a
+    free positive scale; pairs are ranked by the residual.  Potential flow
+    has no jets or recirculation, so this ranks where air enters and leaves,
+    not the flow itself; the physics estimator solves RANS for the best pairs.
+    """
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    occ = np.asarray(occupancy)
+    free = occ == 0
+    H, W = occ.shape
+    c = np.asarray(cells, dtype=np.int64).reshape(-1, 2)
+    w = np.asarray(wind, dtype=np.float64).reshape(-1, 2)
+    if c.shape[0] != w.shape[0] or c.shape[0] == 0:
+        raise InputDataError(f"{c.shape[0]} reading cells but {w.shape[0]} wind readings")
+    idx = np.full(occ.shape, -1, dtype=np.int64)
+    ii, jj = np.nonzero(free)
+    n = ii.size
+    idx[ii, jj] = np.arange(n)
+    rows, cols, vals = [], [], []
+    deg = np.zeros(n)
+    for di, dj in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        ni, nj = ii + di, jj + dj
+        ok = (ni >= 0) & (ni < H) & (nj >= 0) & (nj < W)
+        nb = np.full(n, -1)
+        nb[ok] = idx[ni[ok], nj[ok]]
+        m = nb >= 0
+        rows.append(np.nonzero(m)[0])
+        cols.append(nb[m])
+        vals.append(-np.ones(int(m.sum())))
+        deg += m
+    L = sp.csr_matrix(
+        (
+            np.concatenate([deg, *vals]),
+            (np.concatenate([np.arange(n), *rows]), np.concatenate([np.arange(n), *cols])),
+        ),
+        shape=(n, n),
+    ).tolil()
+    windows = _edge_windows(occ, resolution, window_m, stride_m)
+    if len(windows) < 2:
+        raise InputDataError("the map's edge has fewer than two free windows: no openings to propose")
+    # unit inflow through window k, the same outflow through window 0 (the reference); phi pinned at one cell
+    pin = int(idx[tuple(_window_cells(windows[0], occ.shape, resolution)[0])])
+    L[pin, :] = 0.0
+    L[pin, pin] = 1.0
+    lu = spla.splu(L.tocsc())
+    B = np.zeros((n, len(windows)))
+    for k, o in enumerate(windows):
+        wc = _window_cells(o, occ.shape, resolution)
+        B[idx[wc[:, 0], wc[:, 1]], k] += 1.0 / len(wc)
+    ref = B[:, 0].copy()
+    B -= ref[:, None]
+    B[pin, :] = 0.0
+    phi = lu.solve(B)  # (n, K): potential of "in through k, out through the reference"
+    # velocity -grad(phi) at the reading cells (central differences over free neighbours)
+    grid_phi = np.zeros((H, W, len(windows)))
+    grid_phi[ii, jj] = phi
+
+    def neighbour(di: int, dj: int) -> tuple[np.ndarray, np.ndarray]:
+        ni, nj = np.clip(c[:, 0] + di, 0, H - 1), np.clip(c[:, 1] + dj, 0, W - 1)
+        ok = free[ni, nj] & (ni == c[:, 0] + di) & (nj == c[:, 1] + dj)
+        val = np.where(ok[:, None], grid_phi[ni, nj], grid_phi[c[:, 0], c[:, 1]])
+        return val, ok
+
+    e, eo = neighbour(0, 1)
+    wv, wo = neighbour(0, -1)
+    nn, no = neighbour(1, 0)
+    s, so = neighbour(-1, 0)
+    gx = (e - wv) / np.maximum(eo.astype(float) + wo, 1.0)[:, None]
+    gy = (nn - s) / np.maximum(no.astype(float) + so, 1.0)[:, None]
+    U = -np.stack([gx, gy], axis=1)  # (m, 2, K)
+    # pair (i, o): in through i, out through o = response_i - response_o
+    K = len(windows)
+    uu = np.einsum("mdk,mdl->kl", U, U)  # <U_k, U_l>
+    uw = np.einsum("mdk,md->k", U, w)
+    ww = float((w * w).sum())
+    diag = np.diag(uu)
+    norm2 = diag[:, None] + diag[None, :] - 2.0 * uu  # |U_i - U_o|^2
+    cross = uw[:, None] - uw[None, :]  # <U_i - U_o, w>
+    scale = np.where(norm2 > 0, np.maximum(cross, 0.0) / np.where(norm2 > 0, norm2, 1.0), 0.0)
+    resid = ww - scale * cross
+    np.fill_diagonal(resid, np.inf)
+    order = np.argsort(resid, axis=None)
+    out: list[OpeningProposal] = []
+    used: set[tuple[int, int]] = set()
+    for flat in order:
+        i, o = divmod(int(flat), K)
+        if not np.isfinite(resid[i, o]) or (i, o) in used:
+            continue
+        oi, oo = windows[i], windows[o]
+        if oi.side == oo.side and not (oi.end_m <= oo.start_m or oo.end_m <= oi.start_m):
+            continue  # overlapping windows
+        # skip pairs that are near-duplicates (both windows overlapping a kept pair's)
+        if any(_overlap(oi, p.inlets[0]) and _overlap(oo, p.outlets[0]) for p in out):
+            continue
+        used.add((i, o))
+        speed = float(scale[i, o]) / (len(_window_cells(oi, occ.shape, resolution)) * resolution)
+        out.append(OpeningProposal((oi,), (oo,), speed, float(-resid[i, o])))
+        if len(out) >= top:
+            break
+    return out
+
+
+def _overlap(a: Opening, b: Opening) -> bool:
+    return a.side == b.side and a.start_m < b.end_m and b.start_m < a.end_m
