@@ -4,7 +4,7 @@ Issue 12's table: mean (and median) source-localization error and source
 cross-entropy from 5, 20, 50, 150 and 300 random readings (Table I noise),
 each method at the knowledge level it is run with (``--knowledge``):
 
-* ``dgse-s`` at ``map`` (it uses nothing more);
+* ``dgse-s`` and ``dgse-phys`` at ``map`` (openings proposed from the wind readings);
 * ``adjoint`` and ``dgse-phys`` at ``openings``;
 * ``dgse-phys`` at ``wind`` (the case's wind as the user's CFD, openings from the wind);
 * ``adjoint-oracle`` at ``wind`` (the true flow re-solved).
@@ -31,6 +31,7 @@ from dgse.journal import journal_path
 COUNTS = [5, 20, 50, 150, 300]
 METHODS = [
     ("dgse-s", "map"),
+    ("dgse-phys", "map"),
     ("adjoint", "openings"),
     ("dgse-phys", "openings"),
     ("dgse-phys", "wind"),
