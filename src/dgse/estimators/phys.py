@@ -81,6 +81,9 @@ __all__ = ["DEFAULT_SPEEDS", "FlowHypothesis", "PhysicsGuidedEstimator", "make_d
 
 #: Candidate inlet speeds at knowledge ``openings``, m/s (log-spaced over the training range).
 DEFAULT_SPEEDS = (0.35, 0.6, 1.0, 1.7, 2.9, 5.0)
+#: Readings beyond which the gas evidence is tempered (``T = m / 100``): chosen on generated
+#: validation scenarios, ``python benchmarks/tune_phys_temperature.py``.
+DEFAULT_EFFECTIVE_READINGS = 100.0
 #: Inlet speed the opening proposals are solved at (map level), m/s.
 MAP_SPEED = 1.0
 #: Relative wind-noise levels averaged in the wind likelihood (Table I: up to 0.5 in speed, 15 deg).
@@ -172,6 +175,9 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             :func:`~dgse.physics.openings.potential_flow_proposals`).
         temperature: the gas evidence is divided by it (a power posterior: ``T > 1``
             absorbs model error by counting the readings as ``m / T`` independent ones).
+        effective_readings: beyond this many readings the evidence is tempered further,
+            ``T = max(temperature, m / effective_readings)``: readings of one plume are
+            not independent once the model's own error dominates the noise (None: off).
         flow_settings: SIMPLEC controls of the built-in solver.
         physics: physical constants.
     """
@@ -188,6 +194,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     conc_components: int = 32
     min_weight: float = 1e-4
     temperature: float = 1.0
+    effective_readings: float | None = DEFAULT_EFFECTIVE_READINGS
     map_proposals: int = 5
     flow_settings: FlowSettings | None = None
     physics: Physics = DEFAULT_PHYSICS
@@ -208,6 +215,12 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             raise InputDataError(f"wind_noise_floor must be positive, got {self.wind_noise_floor}")
         if not (self.temperature >= 1.0 and math.isfinite(self.temperature)):
             raise InputDataError(f"temperature must be >= 1, got {self.temperature}")
+        if self.effective_readings is not None and not (
+            self.effective_readings > 0 and math.isfinite(self.effective_readings)
+        ):
+            raise InputDataError(
+                f"effective_readings must be positive or None, got {self.effective_readings}"
+            )
         if int(self.conc_components) < 1:
             raise InputDataError(f"conc_components must be >= 1, got {self.conc_components}")
 
@@ -298,6 +311,9 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         free_scale = self.knowledge.level == "map"  # proposals are solved at one speed
         cells, z = obs.cells, obs.gas
         log_ev, details, log_prior, scales = [], [], [], []
+        temp = self.temperature
+        if self.effective_readings is not None:
+            temp = max(temp, len(obs) / self.effective_readings)
         for h in hyps:
             A = h.flow.responses(cells)
             logl, det = adjoint_log_evidence(
@@ -313,7 +329,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             scale = max(float((u * obs.wind).sum()) / uu, 0.0) if free_scale and uu > 0 else 1.0
             scales.append(scale)
             lw = wind_log_likelihood(scale * u, obs.wind, self.wind_noise_levels, self.wind_noise_floor)
-            log_ev.append(logl / self.temperature)
+            log_ev.append(logl / temp)
             details.append((A, det))
             log_prior.append(math.log(h.prior) + lw)
         post, hw = mix_posteriors(log_ev, log_prior)
@@ -367,6 +383,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
                 for h, w in zip(hyps, hw, strict=True)
             ],
             "best_hypothesis": hyps[best_h].label,
+            "temperature": temp,
             "noise_floor_ppm": sig,
             "response_model": model,
             "timings": {"preprocessing": t_flow},
