@@ -88,6 +88,13 @@ def test_map_level_proposes_openings_from_the_wind_readings(case):
     assert hyps[0]["label"] == "in west 1.0-2.0 m, out east 0.0-1.0 m"
     assert sum(h["weight"] for h in hyps) == pytest.approx(1.0)
     assert b.localization_error(tuple(case.source)) < 1.0
+    # more of the same readings keep the proposals; other readings get their own (no leak across trials)
+    first = est.hypotheses(obs)
+    more = obs.concat(draw_observations(case, 10, seed=5))
+    assert est.hypotheses(more) is first
+    other = draw_observations(case, 40, seed=6)
+    est.hypotheses(other)
+    assert np.array_equal(est._proposed_from[0], other.cells)
     with pytest.raises(InputDataError, match="give readings"):
         est.hypotheses(None)
 

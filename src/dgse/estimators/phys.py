@@ -201,6 +201,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     name: str = field(default="dgse-phys", init=False)
     _hypotheses: list[FlowHypothesis] | None = field(default=None, init=False, repr=False)
     _proposed_at: int = field(default=0, init=False, repr=False)
+    _proposed_from: tuple[np.ndarray, np.ndarray] | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         speeds = [float(v) for v in self.speeds]
@@ -232,11 +233,23 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         self._proposed_at = 0
 
     def _map_hypotheses(self, obs: Observations) -> list[FlowHypothesis]:
-        """Opening hypotheses from the wind readings (map level), proposed anew when the readings double."""
+        """Opening hypotheses from the wind readings (map level).
+
+        Kept while the readings extend those they were proposed from by less than
+        as many again; proposed anew otherwise (an estimate depends on its own
+        readings only).
+        """
         k = self.knowledge
         assert k is not None
-        if self._hypotheses is not None and len(obs) < 2 * self._proposed_at:
-            return self._hypotheses
+        n0 = self._proposed_at
+        if (
+            self._hypotheses is not None
+            and n0 <= len(obs) < 2 * n0
+            and self._proposed_from is not None
+            and np.array_equal(obs.cells[:n0], self._proposed_from[0])
+            and np.array_equal(obs.wind[:n0], self._proposed_from[1])
+        ):
+            return self._hypotheses  # the same readings and some more: keep the proposals
         proposals = potential_flow_proposals(
             k.occupancy, k.resolution, obs.cells, obs.wind, top=self.map_proposals
         )
@@ -250,6 +263,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             hyps.append(FlowHypothesis(prop.label(), fm, 1.0 / len(proposals)))
         self._hypotheses = hyps
         self._proposed_at = len(obs)
+        self._proposed_from = (obs.cells.copy(), obs.wind.copy())
         return hyps
 
     def hypotheses(self, observations: Observations | None = None) -> list[FlowHypothesis]:
