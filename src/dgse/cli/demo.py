@@ -4,8 +4,8 @@
    its flow and one gas release with the built-in solver;
 2. run one active search (paper Algorithm 1) with the method for the
    knowledge given (``--knowledge``; :data:`DEMO_METHODS`: the shipped DGSE-S
-   model on the map alone, the adjoint posterior when the openings are known,
-   the adjoint on the given flow at ``wind``) and the utility planner
+   model on the map alone, ``dgse-phys`` when the openings or a wind field are
+   known) and the utility planner
    (entropy test from the 5th reading on, the fewest the networks were
    trained with), the robot starting at least 2 m from the source, showing
    the step, the simulated clock, the entropy and the error as it goes;
@@ -35,9 +35,8 @@ if TYPE_CHECKING:
 __all__ = ["DEMO_METHODS", "demo_cmd", "register", "step_text"]
 
 #: The demo's method per knowledge level: the lowest source-localization error from random
-#: readings measured at that level (issue 12's table: the adjoint beats DGSE-S at every count
-#: once the openings are known).  ``dgse-phys`` replaces them when it lands.
-DEMO_METHODS = {"map": "dgse-s", "openings": "adjoint", "wind": "adjoint-oracle"}
+#: readings measured at that level (``python benchmarks/phys_gsl.py``).
+DEMO_METHODS = {"map": "dgse-s", "openings": "dgse-phys", "wind": "dgse-phys"}
 #: Entropy threshold of the shipped DGSE-S, tuned on the validation split (benchmarks/tune_eta.py).
 DGSE_S_ETA = 0.78
 
@@ -46,7 +45,7 @@ def _told(level: str) -> str:
     return {
         "map": "the map only",
         "openings": "the map, its inlets and outlets",
-        "wind": "the map, its openings and the mean wind field with its inlet speed",
+        "wind": "the map, its openings and the mean wind field (as from the user's CFD)",
     }[level]
 
 
