@@ -43,6 +43,8 @@ import json
 import logging
 import math
 import os
+import signal
+import threading
 import time
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
@@ -530,10 +532,13 @@ def _run(
         TimeElapsedColumn(),
         TimeRemainingColumn(),
     )
-    with Progress(*columns, console=Console(stderr=True), disable=not progress) as bar:
+    with (
+        Progress(*columns, console=Console(stderr=True), disable=not progress) as bar,
+        _stop_requests() as stop,
+    ):
         bar_task = bar.add_task("layouts", total=n_total, completed=n_total - len(todo), failed="")
         try:
-            for fut in as_completed(list(futures)):
+            for fut in _completed(as_completed(list(futures)), stop):
                 i = futures.pop(fut)
                 if report.first_result_s is None:
                     report.first_result_s = time.perf_counter() - t_start
@@ -582,6 +587,51 @@ def _run(
             for fut in futures:
                 fut.cancel()
             commit_pending(out)
+        if stop.is_set():
+            raise KeyboardInterrupt  # after the finished layouts were committed
+
+
+def _completed(pending: Any, stop: threading.Event, poll_s: float = 0.2) -> Iterator[Any]:
+    """The futures of a ``distributed.as_completed`` as they finish, until ``stop`` is set (polled)."""
+    while not pending.is_empty():
+        if stop.is_set():
+            return
+        batch = pending.next_batch(block=False)
+        if not batch:
+            time.sleep(poll_s)
+            continue
+        for fut in batch:
+            yield fut
+            if stop.is_set():
+                return
+
+
+@contextlib.contextmanager
+def _stop_requests() -> Iterator[threading.Event]:
+    """Ctrl-C (SIGINT) and SIGTERM set the yielded event instead of raising wherever Python runs.
+
+    Dask runs callbacks (weakref finalizers, its event loop) in the main
+    thread too; a ``KeyboardInterrupt`` raised inside one of them is printed as
+    "Exception ignored" and lost, so generation would go on.  The loop checks
+    the event after every finished layout, commits what it has and then
+    raises ``KeyboardInterrupt``.  A second Ctrl-C raises at once.
+    """
+    stop = threading.Event()
+    if threading.current_thread() is not threading.main_thread():
+        yield stop
+        return
+
+    def request(signum: int, frame: Any) -> None:
+        if stop.is_set():
+            raise KeyboardInterrupt
+        stop.set()
+
+    previous = {s: signal.signal(s, request) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield stop
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
 
 
 def splits_summary(report: GenerationReport) -> str:
