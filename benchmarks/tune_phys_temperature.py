@@ -26,7 +26,7 @@ from dgse.physics.scenario import random_cases
 SEEDS = range(900, 912)
 COUNTS = (20, 50, 150, 300)
 SETTINGS = {
-    **{f"T={t:g}": {"temperature": t, "effective_readings": None} for t in (1.0, 2.0, 4.0, 8.0)},
+    **{f"T={t:g}": {"temperature": t, "effective_readings": float("inf")} for t in (1.0, 2.0, 4.0, 8.0)},
     **{f"m_eff={m:g}": {"temperature": 1.0, "effective_readings": m} for m in (50.0, 100.0)},
 }
 

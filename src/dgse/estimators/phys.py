@@ -84,6 +84,9 @@ DEFAULT_SPEEDS = (0.35, 0.6, 1.0, 1.7, 2.9, 5.0)
 #: Readings beyond which the gas evidence is tempered (``T = m / 100``): chosen on generated
 #: validation scenarios, ``python benchmarks/tune_phys_temperature.py``.
 DEFAULT_EFFECTIVE_READINGS = 100.0
+#: The same at knowledge ``map``, where the flows of proposed openings err more: chosen on
+#: validation scenarios, ``python benchmarks/tune_phys_map.py``.
+MAP_EFFECTIVE_READINGS = 30.0
 #: Inlet speed the opening proposals are solved at (map level), m/s.
 MAP_SPEED = 1.0
 #: Relative wind-noise levels averaged in the wind likelihood (Table I: up to 0.5 in speed, 15 deg).
@@ -111,7 +114,9 @@ def _logsumexp(x: np.ndarray) -> float:
 
 
 def mix_posteriors(
-    log_evidence: Sequence[np.ndarray], log_prior: Sequence[float] | np.ndarray
+    log_evidence: Sequence[np.ndarray],
+    log_prior: Sequence[float] | np.ndarray,
+    hypothesis_temperature: float = 1.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(p(s | data), p(h | data))`` of a mixture over hypotheses ``h``.
 
@@ -120,6 +125,8 @@ def mix_posteriors(
             shared by all hypotheses.
         log_prior: ``(H,)`` log prior weights of the hypotheses (any data about ``h``
             besides the gas, e.g. the wind readings' log likelihood, added in).
+        hypothesis_temperature: the hypotheses' log weights ``log p(data, h)`` are divided
+            by it (``> 1``: approximate hypotheses are compared less sharply).
 
     With one hypothesis holding all the prior weight the result is that
     hypothesis's own posterior.
@@ -131,7 +138,7 @@ def mix_posteriors(
     lp = np.asarray(log_prior, dtype=np.float64)
     if lp.shape != (len(L),):
         raise InputDataError(f"{len(L)} hypotheses but {lp.size} prior weights")
-    log_z = np.array([_logsumexp(x) - math.log(n) for x in L]) + lp  # log p(data, h)
+    log_z = (np.array([_logsumexp(x) - math.log(n) for x in L]) + lp) / hypothesis_temperature
     hw = np.exp(log_z - _logsumexp(log_z))
     post = np.zeros(n)
     for w, x in zip(hw, L, strict=True):
@@ -171,13 +178,16 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             (:func:`~dgse.localization.adjoint.adjoint_log_evidence`).
         conc_components: most probable sources per hypothesis in the concentration estimate.
         min_weight: hypotheses below this posterior weight are left out of the predictive.
+        hypothesis_readings: beyond this many readings the flow hypotheses' weights are
+            tempered, ``T = m / hypothesis_readings`` (None: not tempered).
         map_proposals: opening hypotheses at knowledge ``map`` (the best pairs of
             :func:`~dgse.physics.openings.potential_flow_proposals`).
         temperature: the gas evidence is divided by it (a power posterior: ``T > 1``
             absorbs model error by counting the readings as ``m / T`` independent ones).
         effective_readings: beyond this many readings the evidence is tempered further,
             ``T = max(temperature, m / effective_readings)``: readings of one plume are
-            not independent once the model's own error dominates the noise (None: off).
+            not independent once the model's own error dominates the noise.  None: the
+            level's default (100; 30 at ``map``); ``inf``: off.
         flow_settings: SIMPLEC controls of the built-in solver.
         physics: physical constants.
     """
@@ -194,8 +204,9 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     conc_components: int = 32
     min_weight: float = 1e-4
     temperature: float = 1.0
-    effective_readings: float | None = DEFAULT_EFFECTIVE_READINGS
+    effective_readings: float | None = None
     map_proposals: int = 5
+    hypothesis_readings: float | None = None
     flow_settings: FlowSettings | None = None
     physics: Physics = DEFAULT_PHYSICS
     name: str = field(default="dgse-phys", init=False)
@@ -216,11 +227,9 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             raise InputDataError(f"wind_noise_floor must be positive, got {self.wind_noise_floor}")
         if not (self.temperature >= 1.0 and math.isfinite(self.temperature)):
             raise InputDataError(f"temperature must be >= 1, got {self.temperature}")
-        if self.effective_readings is not None and not (
-            self.effective_readings > 0 and math.isfinite(self.effective_readings)
-        ):
+        if self.effective_readings is not None and not (self.effective_readings > 0):
             raise InputDataError(
-                f"effective_readings must be positive or None, got {self.effective_readings}"
+                f"effective_readings must be positive (inf: off) or None, got {self.effective_readings}"
             )
         if int(self.conc_components) < 1:
             raise InputDataError(f"conc_components must be >= 1, got {self.conc_components}")
@@ -326,8 +335,10 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         cells, z = obs.cells, obs.gas
         log_ev, details, log_prior, scales = [], [], [], []
         temp = self.temperature
-        if self.effective_readings is not None:
-            temp = max(temp, len(obs) / self.effective_readings)
+        m_eff = self.effective_readings
+        if m_eff is None:
+            m_eff = MAP_EFFECTIVE_READINGS if self.knowledge.level == "map" else DEFAULT_EFFECTIVE_READINGS
+        temp = max(temp, len(obs) / m_eff)
         for h in hyps:
             A = h.flow.responses(cells)
             logl, det = adjoint_log_evidence(
@@ -346,7 +357,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             log_ev.append(logl / temp)
             details.append((A, det))
             log_prior.append(math.log(h.prior) + lw)
-        post, hw = mix_posteriors(log_ev, log_prior)
+        t_h = 1.0 if self.hypothesis_readings is None else max(1.0, len(obs) / self.hypothesis_readings)
+        post, hw = mix_posteriors(log_ev, log_prior, t_h)
         mesh = hyps[0].flow.mesh
         # wind: mixture mean and variance of the hypotheses' winds
         winds = np.stack([s * h.flow.wind for s, h in zip(scales, hyps, strict=True)])  # (H, 2, H, W)
