@@ -16,11 +16,11 @@ reading set and shared by every setting.
 from __future__ import annotations
 
 import argparse
-import json
 from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
+from tune_phys_temperature import write_rows  # this folder's
 
 from dgse.estimators.knowledge import Knowledge
 from dgse.estimators.registry import get_estimator
@@ -57,28 +57,7 @@ def main() -> None:
                 err[s, n].append(b.localization_error(tuple(case.source)))
                 ce[s, n].append(-float(np.log(max(b.source_probs[cell], 1e-12))))
         print(f"scenario {seed} done", flush=True)
-    rows = {
-        str(s): {
-            str(n): {
-                "sl_error_m_mean": float(np.mean(err[s, n])),
-                "sl_error_m_median": float(np.median(err[s, n])),
-                "ce_mean": float(np.mean(ce[s, n])),
-            }
-            for n in COUNTS
-        }
-        for s in SETTINGS
-    }
-    for s, by_n in rows.items():
-        print(
-            f"(hypothesis_readings, effective_readings) {s:12s} "
-            + " | ".join(
-                f"{n}: SL {v['sl_error_m_mean']:.2f}/{v['sl_error_m_median']:.2f} CE {v['ce_mean']:.2f}"
-                for n, v in by_n.items()
-            )
-        )
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"seeds": list(SEEDS), "trials": 1, "rows": rows}, indent=1))
-    print(f"wrote {args.out}")
+    write_rows(args.out, err, ce, list(SETTINGS), COUNTS, {"seeds": list(SEEDS), "trials": 1})
 
 
 if __name__ == "__main__":

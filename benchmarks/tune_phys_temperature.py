@@ -54,28 +54,36 @@ def main() -> None:
                     ce[name, n].append(-float(np.log(max(b.source_probs[cell], 1e-12))))
             hyps = est.hypotheses()
         print(f"scenario {seed} done", flush=True)
+    write_rows(args.out, err, ce, list(SETTINGS), COUNTS, {"seeds": list(SEEDS), "trials": 2})
+
+
+def write_rows(
+    out: Path, err: dict, ce: dict, settings: list, counts: tuple[int, ...], header: dict
+) -> dict[str, dict]:
+    """Mean/median SL error and mean CE per (setting, count): printed, and written to ``out`` as JSON."""
     rows = {
-        name: {
+        str(s): {
             str(n): {
-                "sl_error_m_mean": float(np.mean(err[name, n])),
-                "sl_error_m_median": float(np.median(err[name, n])),
-                "ce_mean": float(np.mean(ce[name, n])),
+                "sl_error_m_mean": float(np.mean(err[s, n])),
+                "sl_error_m_median": float(np.median(err[s, n])),
+                "ce_mean": float(np.mean(ce[s, n])),
             }
-            for n in COUNTS
+            for n in counts
         }
-        for name in SETTINGS
+        for s in settings
     }
     for name, by_n in rows.items():
         print(
-            f"{name:10s} "
+            f"{name:14s} "
             + " | ".join(
                 f"{n}: SL {v['sl_error_m_mean']:.2f}/{v['sl_error_m_median']:.2f} CE {v['ce_mean']:.2f}"
                 for n, v in by_n.items()
             )
         )
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"seeds": list(SEEDS), "trials": 2, "rows": rows}, indent=1))
-    print(f"wrote {args.out}")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({**header, "rows": rows}, indent=1))
+    print(f"wrote {out}")
+    return rows
 
 
 if __name__ == "__main__":

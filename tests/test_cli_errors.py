@@ -10,10 +10,10 @@ import time
 
 import pytest
 
-from dgse.cli.main import main
 from dgse.physics import engines as engines_mod
 from dgse.physics.scenario import solve_cases
 from tests.conftest import two_rooms
+from tests.test_cli import _assert_user_error, _run
 
 
 @pytest.fixture(scope="module")
@@ -21,21 +21,6 @@ def case_file(tmp_path_factory):
     d = tmp_path_factory.mktemp("cli-errors")
     case = solve_cases(two_rooms(), 1.0, [((2.05, 0.55), 0.8)])[0]
     return case.save(d / "two_rooms_src0.npz")
-
-
-def _run(capsys, *args) -> tuple[int, str, str]:
-    code = main([str(a) for a in args])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def _assert_one_line_error(code: int, out: str, err: str, *fragments: str) -> None:
-    assert code == 2, (out, err)
-    assert "Traceback" not in out + err
-    line = err.strip()
-    assert line.startswith("error: ") and "\n" not in line, err
-    for f in fragments:
-        assert f in line, (f, line)
 
 
 @pytest.mark.parametrize(
@@ -51,7 +36,7 @@ def _assert_one_line_error(code: int, out: str, err: str, *fragments: str) -> No
 )
 def test_estimate_bad_options(capsys, tmp_path, case_file, args, fragments):
     code, out, err = _run(capsys, "estimate", case_file, "-n", "5", "-o", tmp_path / "b.npz", *args)
-    _assert_one_line_error(code, out, err, *fragments)
+    _assert_user_error(code, out, err, *fragments)
     assert not (tmp_path / "b.npz").exists()
 
 
@@ -60,18 +45,18 @@ def test_outputs_are_checked_before_the_work(capsys, tmp_path, case_file):
     a_file.write_text("x")
     # a folder where a file goes; a file where a folder goes; a file in the way of a folder
     t0 = time.perf_counter()
-    _assert_one_line_error(*_run(capsys, "solve", case_file, "-o", tmp_path), "is a folder")
-    _assert_one_line_error(
+    _assert_user_error(*_run(capsys, "solve", case_file, "-o", tmp_path), "is a folder")
+    _assert_user_error(
         *_run(capsys, "scenario", "--seed", "1", "--out", a_file), "is a file, not a folder"
     )
-    _assert_one_line_error(
+    _assert_user_error(
         *_run(capsys, "generate", "--layouts", "2", "--out", a_file / "x.h5"), "is a file, not a folder"
     )
-    _assert_one_line_error(
+    _assert_user_error(
         *_run(capsys, "estimate", case_file, "-n", "5", "-o", tmp_path / "e.npz", "--plot", "fig.xyz"),
         "cannot write a figure as 'fig.xyz'",
     )
-    _assert_one_line_error(*_run(capsys, "plume", case_file, "-o", tmp_path), "is a folder")
+    _assert_user_error(*_run(capsys, "plume", case_file, "-o", tmp_path), "is a folder")
     assert time.perf_counter() - t0 < 30  # no solve, search or simulation ran first
 
 
@@ -96,9 +81,9 @@ def test_demo_out_file_fails_within_seconds(capsys, tmp_path):
     a_file = tmp_path / "taken"
     a_file.write_text("x")
     t0 = time.perf_counter()
-    _assert_one_line_error(*_run(capsys, "demo", "--out", a_file), "is a file, not a folder")
+    _assert_user_error(*_run(capsys, "demo", "--out", a_file), "is a file, not a folder")
     assert time.perf_counter() - t0 < 10
-    _assert_one_line_error(*_run(capsys, "demo", "--eta", "1.5", "--out", tmp_path / "d"), "--eta")
+    _assert_user_error(*_run(capsys, "demo", "--eta", "1.5", "--out", tmp_path / "d"), "--eta")
 
 
 @pytest.mark.parametrize(
@@ -114,7 +99,7 @@ def test_demo_out_file_fails_within_seconds(capsys, tmp_path):
 def test_search_bad_options(capsys, tmp_path, case_file, args, fragments):
     out = tmp_path / "s.json"
     code, o, err = _run(capsys, "search", case_file, "--trials", "1", "--json", out, "--no-progress", *args)
-    _assert_one_line_error(code, o, err, *fragments)
+    _assert_user_error(code, o, err, *fragments)
     assert not out.exists()
 
 
@@ -123,14 +108,14 @@ def test_knowledge_is_checked_and_recorded(capsys, tmp_path, case_file):
 
     import numpy as np
 
-    _assert_one_line_error(
+    _assert_user_error(
         *_run(capsys, "estimate", case_file, "-n", "5", "-o", tmp_path / "a.npz", "--method", "adjoint"),
         "adjoint works at knowledge level 'openings' or 'wind', not 'map': give --knowledge openings",
     )
-    _assert_one_line_error(
+    _assert_user_error(
         *_run(capsys, "demo", "--knowledge", "everything", "--out", tmp_path / "d"), "unknown knowledge level"
     )
-    _assert_one_line_error(
+    _assert_user_error(
         *_run(capsys, "search", case_file, "--method", "adjoint-oracle", "--knowledge", "openings"),
         "not 'openings': give --knowledge wind",
     )
