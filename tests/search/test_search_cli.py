@@ -10,9 +10,9 @@ import torch
 from PIL import Image
 
 from dgse.cli.main import main
-from dgse.cli.search import trial_seed
 from dgse.models.checkpoint import save_model
 from dgse.models.networks import create_model
+from dgse.search.campaign import trial_seed
 from dgse.world.layout_io import save_layout
 from tests.conftest import two_rooms
 from tests.search import PeakEstimator, corridor_case, solved_two_rooms

@@ -82,18 +82,14 @@ from dgse.cli.common import (
 from dgse.errors import InputDataError
 from dgse.estimators.knowledge import DEFAULT_LEVEL, check_level, require_level
 from dgse.journal import count_records, journal_path
-from dgse.search.campaign import json_safe, load_cases, trial_seed
-from dgse.search.metrics import format_mean_std
-from dgse.world.case import Case
 
 if TYPE_CHECKING:
     from dgse.search.episode import EpisodeResult, StepRecord
+    from dgse.world.case import Case
 
 __all__ = [
-    "load_cases",
     "register",
     "search_cmd",
-    "trial_seed",
 ]
 
 def _step_text(stem: str, trial: int, trials: int, rec: StepRecord, time_limit: float) -> str:
@@ -104,6 +100,8 @@ def _step_text(stem: str, trial: int, trials: int, rec: StepRecord, time_limit: 
 
 
 def _table(rows: list[tuple[str, dict[str, Any]]], title: str) -> Table:
+    from dgse.search.metrics import format_mean_std
+
     t = Table(title=title, title_justify="left", box=box.SIMPLE_HEAD)
     t.add_column("case", no_wrap=True)
     for col in ("trials", "SR [%]", "error [m]", "ST [s]", "TD [m]", "step [s]", "PER"):
@@ -126,6 +124,8 @@ def _table(rows: list[tuple[str, dict[str, Any]]], title: str) -> Table:
 
 
 def _write_json(path: Path, data: dict[str, Any]) -> Path:
+    from dgse.search.campaign import json_safe
+
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".part")
     tmp.write_text(json.dumps(json_safe(data), indent=1, allow_nan=False))
@@ -222,7 +222,7 @@ def search_cmd(
     file); after Ctrl-C or a kill, the same command resumes where it stopped.
     """
     from dgse.estimators.registry import get_estimator
-    from dgse.search.campaign import estimator_options, run_trials
+    from dgse.search.campaign import estimator_options, load_cases, run_trials
     from dgse.search.planners import get_planner
 
     level = check_level(knowledge)
