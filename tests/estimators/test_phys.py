@@ -99,6 +99,23 @@ def test_map_level_proposes_openings_from_the_wind_readings(case):
         est.hypotheses(None)
 
 
+def test_learned_belief_is_mixed_in_where_the_readings_are_few(case):
+    obs = draw_observations(case, 10, seed=7)
+    k = Knowledge.from_case(case, "map")
+    learned = get_estimator("dgse-s", seed=0, dtype="bf16", channels_last=True)
+    net = learned.estimate(case.occupancy, case.resolution, obs).source_probs
+    only_net = get_estimator("dgse-phys", knowledge=k, learned_weight=1.0, learned_readings=1e9)
+    b = only_net.estimate(case.occupancy, case.resolution, obs)
+    assert b.info["learned_weight"] == pytest.approx(1.0)
+    assert np.allclose(b.source_probs, net / net.sum(), atol=1e-7)
+    half = get_estimator("dgse-phys", knowledge=k, learned_weight=0.5, learned_readings=20.0)
+    assert half.estimate(case.occupancy, case.resolution, obs).info["learned_weight"] == pytest.approx(0.25)
+    # past learned_readings, or at a level not listed, the physics alone
+    assert half._learned_weight(25) == 0.0
+    half.set_knowledge(Knowledge.from_case(case, "openings"))
+    assert half._learned_weight(5) == 0.0
+
+
 def test_levels_and_bad_input(case):
     est = get_estimator("dgse-phys")
     with pytest.raises(InputDataError, match="needs knowledge"):

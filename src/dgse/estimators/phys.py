@@ -178,6 +178,10 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             (:func:`~dgse.localization.adjoint.adjoint_log_evidence`).
         conc_components: most probable sources per hypothesis in the concentration estimate.
         min_weight: hypotheses below this posterior weight are left out of the predictive.
+        learned_weight, learned_readings, learned_levels: at the knowledge levels
+            ``learned_levels`` the source posterior is mixed with DGSE-S's (the shipped
+            network), weight ``learned_weight * max(0, 1 - m / learned_readings)`` for
+            ``m`` readings: the network where the readings are few, the physics after.
         hypothesis_readings: beyond this many readings the flow hypotheses' weights are
             tempered, ``T = m / hypothesis_readings`` (None: not tempered).
         map_proposals: opening hypotheses at knowledge ``map`` (the best pairs of
@@ -206,6 +210,9 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     temperature: float = 1.0
     effective_readings: float | None = None
     map_proposals: int = 5
+    learned_weight: float = 0.0
+    learned_readings: float = 20.0
+    learned_levels: Sequence[str] = ("map",)
     hypothesis_readings: float | None = None
     flow_settings: FlowSettings | None = None
     physics: Physics = DEFAULT_PHYSICS
@@ -213,6 +220,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     _hypotheses: list[FlowHypothesis] | None = field(default=None, init=False, repr=False)
     _proposed_at: int = field(default=0, init=False, repr=False)
     _proposed_from: tuple[np.ndarray, np.ndarray] | None = field(default=None, init=False, repr=False)
+    _learned: Any = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         speeds = [float(v) for v in self.speeds]
@@ -231,6 +239,10 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             raise InputDataError(
                 f"effective_readings must be positive (inf: off) or None, got {self.effective_readings}"
             )
+        if not (0.0 <= self.learned_weight <= 1.0):
+            raise InputDataError(f"learned_weight must be in [0, 1], got {self.learned_weight}")
+        if not (self.learned_readings > 0 and math.isfinite(self.learned_readings)):
+            raise InputDataError(f"learned_readings must be positive, got {self.learned_readings}")
         if int(self.conc_components) < 1:
             raise InputDataError(f"conc_components must be >= 1, got {self.conc_components}")
 
@@ -315,6 +327,21 @@ class PhysicsGuidedEstimator(KnowledgeUser):
                 ]
         return self._hypotheses
 
+    # -- the learned source belief ---------------------------------------------------------------
+    def _learned_weight(self, m: int) -> float:
+        k = self.knowledge
+        if self.learned_weight <= 0 or k is None or k.level not in self.learned_levels:
+            return 0.0
+        return float(self.learned_weight * max(0.0, 1.0 - m / self.learned_readings))
+
+    def _learned_belief(self, occupancy: np.ndarray, resolution: float, obs: Observations) -> Belief:
+        """DGSE-S's belief from the same readings (the shipped network, built on first use)."""
+        if self._learned is None:
+            from dgse.estimators.registry import get_estimator
+
+            self._learned = get_estimator("dgse-s", seed=0, dtype="bf16", channels_last=True)
+        return self._learned.estimate(occupancy, resolution, obs)
+
     # -- estimate ---------------------------------------------------------------------------------
     def estimate(self, occupancy: np.ndarray, resolution: float, observations: Observations) -> Belief:
         """The mixture posterior and fields given the readings (module docstring).
@@ -360,6 +387,11 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         t_h = 1.0 if self.hypothesis_readings is None else max(1.0, len(obs) / self.hypothesis_readings)
         post, hw = mix_posteriors(log_ev, log_prior, t_h)
         mesh = hyps[0].flow.mesh
+        w_learned = self._learned_weight(len(obs))
+        if w_learned > 0:
+            net = self._learned_belief(occ, res, obs)
+            post = (1.0 - w_learned) * post + w_learned * mesh.values(net.source_probs)
+            post /= post.sum()
         # wind: mixture mean and variance of the hypotheses' winds
         winds = np.stack([s * h.flow.wind for s, h in zip(scales, hyps, strict=True)])  # (H, 2, H, W)
         wind_mean = np.tensordot(hw, winds, axes=1)
@@ -409,6 +441,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
                 for h, w in zip(hyps, hw, strict=True)
             ],
             "best_hypothesis": hyps[best_h].label,
+            "learned_weight": w_learned,
             "temperature": temp,
             "noise_floor_ppm": sig,
             "response_model": model,
