@@ -25,7 +25,9 @@ compare directly).  Flow hypotheses per knowledge level
   built-in RANS at one inlet speed (``MAP_SPEED``); the wind likelihood fits
   each flow's scale to the readings (the source posterior hardly depends on
   the speed: concentrations scale as ``q / v_in``).  Proposed again each time
-  the readings have doubled.
+  the readings have doubled.  With few readings the proposals are guesses, so
+  at ``map`` the source posterior is mixed with DGSE-S's, weight ``0.9 (1 -
+  m / 50)`` (none from 50 readings on).
 
 The wind likelihood ``p(w | h)`` treats every wind reading as the flow's
 wind plus isotropic Gaussian noise of standard deviation ``sqrt((r |u|)^2 +
@@ -87,6 +89,10 @@ DEFAULT_EFFECTIVE_READINGS = 100.0
 #: The same at knowledge ``map``, where the flows of proposed openings err more: chosen on
 #: validation scenarios, ``python benchmarks/tune_phys_map.py``.
 MAP_EFFECTIVE_READINGS = 30.0
+#: DGSE-S's weight in the source posterior at ``map``: ``0.9 (1 - m / 50)`` for ``m`` readings,
+#: chosen on validation scenarios (``python benchmarks/tune_phys_learned.py``).
+LEARNED_WEIGHT = 0.9
+LEARNED_READINGS = 50.0
 #: Inlet speed the opening proposals are solved at (map level), m/s.
 MAP_SPEED = 1.0
 #: Relative wind-noise levels averaged in the wind likelihood (Table I: up to 0.5 in speed, 15 deg).
@@ -210,8 +216,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     temperature: float = 1.0
     effective_readings: float | None = None
     map_proposals: int = 5
-    learned_weight: float = 0.0
-    learned_readings: float = 20.0
+    learned_weight: float = LEARNED_WEIGHT
+    learned_readings: float = LEARNED_READINGS
     learned_levels: Sequence[str] = ("map",)
     hypothesis_readings: float | None = None
     flow_settings: FlowSettings | None = None
