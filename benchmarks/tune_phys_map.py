@@ -16,16 +16,9 @@ reading set and shared by every setting.
 from __future__ import annotations
 
 import argparse
-from collections import defaultdict
 from pathlib import Path
 
-import numpy as np
-from tune_phys_temperature import write_rows  # this folder's
-
-from dgse.estimators.knowledge import Knowledge
-from dgse.estimators.registry import get_estimator
-from dgse.evaluation.evaluate import draw_observations
-from dgse.physics.scenario import random_cases
+from phys_tuning import sweep, write_rows  # this folder's
 
 SEEDS = range(900, 908)
 COUNTS = (20, 50, 150)
@@ -37,26 +30,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/phys_map_tuning.json"))
     args = ap.parse_args()
-    err: dict = defaultdict(list)
-    ce: dict = defaultdict(list)
-    for seed in SEEDS:
-        case = random_cases(seed, n_sources=1)[0]
-        k = Knowledge.from_case(case, "map")
-        cell = case.layout.grid.cell_of(*case.source)
-        for n in COUNTS:
-            obs = draw_observations(case, n, seed=0)
-            shared = None
-            for s in SETTINGS:
-                est = get_estimator(
-                    "dgse-phys", knowledge=k, hypothesis_readings=s[0], effective_readings=s[1]
-                )
-                if shared is not None:
-                    est._hypotheses, est._proposed_at, est._proposed_from = shared
-                b = est.estimate(case.occupancy, case.resolution, obs)
-                shared = (est._hypotheses, est._proposed_at, est._proposed_from)
-                err[s, n].append(b.localization_error(tuple(case.source)))
-                ce[s, n].append(-float(np.log(max(b.source_probs[cell], 1e-12))))
-        print(f"scenario {seed} done", flush=True)
+    err, ce = sweep(
+        "map", SETTINGS, lambda s: {"hypothesis_readings": s[0], "effective_readings": s[1]}, SEEDS, COUNTS
+    )
     write_rows(args.out, err, ce, list(SETTINGS), COUNTS, {"seeds": list(SEEDS), "trials": 1})
 
 

@@ -80,7 +80,7 @@ from dgse.cli.common import (
     user_errors,
 )
 from dgse.errors import InputDataError
-from dgse.estimators.knowledge import DEFAULT_LEVEL, check_level, require_level
+from dgse.estimators.knowledge import DEFAULT_LEVEL, check_level
 from dgse.journal import count_records, journal_path
 
 if TYPE_CHECKING:
@@ -246,8 +246,7 @@ def search_cmd(
     plan_kwargs = parse_params(planner_option, "--planner-option")
     if eta is not None:
         plan_kwargs["eta"] = eta
-    estimator = get_estimator(method, **est_kwargs)
-    require_level(estimator, method, level)
+    estimator = get_estimator(method, **est_kwargs)  # run_trials checks the knowledge level first
     plan = get_planner(planner, **plan_kwargs)
     names = (method, planner) if level == DEFAULT_LEVEL else (method, planner, level)
     out = json_out if json_out is not None else default_output("search", *names)

@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Literal
 import numpy as np
 
 from dgse.errors import InputDataError, UnsupportedError
+from dgse.world.case import WALL_WIND_TOLERANCE, wind_problem
 from dgse.world.layout import Layout, Opening
 
 if TYPE_CHECKING:
@@ -55,8 +56,6 @@ Level = Literal["map", "openings", "wind"]
 LEVELS: tuple[Level, ...] = ("map", "openings", "wind")
 #: The paper's setting, and the default of every command.
 DEFAULT_LEVEL: Level = "map"
-#: Largest wind speed (m/s) tolerated in a solid cell of a given wind field.
-WALL_WIND_TOLERANCE = 1e-6
 
 
 def check_level(level: str) -> Level:
@@ -158,19 +157,9 @@ class Knowledge:
     def check_wind(self, wind: np.ndarray) -> np.ndarray:
         """``wind`` as ``float64 (2, H, W)``, checked against this map (shape, finite, no flow in walls)."""
         w = np.asarray(wind, dtype=np.float64)
-        shape = (2, *self.occupancy.shape)
-        if w.shape != shape:
-            raise InputDataError(f"wind field has shape {w.shape}; the map needs {shape} (u_x, u_y per cell)")
-        if not np.isfinite(w).all():
-            raise InputDataError("wind field has NaN or infinite values")
-        solid = self.occupancy != 0
-        speed = np.hypot(w[0], w[1])
-        through = solid & (speed > WALL_WIND_TOLERANCE)
-        if through.any():
-            raise InputDataError(
-                f"wind field has flow through walls: {int(through.sum())} solid cells carry wind "
-                f"(up to {float(speed[through].max()):.3g} m/s); solid cells must be 0"
-            )
+        problem = wind_problem(self.occupancy, w, "wind field", WALL_WIND_TOLERANCE)
+        if problem:
+            raise InputDataError(problem)
         return w
 
     # -- constructors ------------------------------------------------------------------------

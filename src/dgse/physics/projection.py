@@ -56,6 +56,7 @@ from dgse.physics.constants import DEFAULT_PHYSICS, Physics
 from dgse.physics.fv import AXIS, INLET, INTERNAL, OUTLET, SIGN, WALL, Mesh, build_mesh
 from dgse.physics.rans import solve_turbulence
 from dgse.physics.transport import TransportSolver
+from dgse.world.case import WALL_WIND_TOLERANCE, wind_problem
 from dgse.world.layout import Layout
 
 __all__ = [
@@ -301,13 +302,10 @@ def project_wind(
     if not (res > 0 and math.isfinite(res)):
         raise InputDataError(f"resolution must be positive, got {resolution}")
     w = np.asarray(wind, dtype=np.float64)
-    if w.shape != (2, *occ.shape):
-        raise InputDataError(f"wind field has shape {w.shape}; the map needs {(2, *occ.shape)}")
-    if not np.isfinite(w).all():
-        raise InputDataError("wind field has NaN or infinite values")
+    problem = wind_problem(occ, w, "wind field", WALL_WIND_TOLERANCE)
+    if problem:
+        raise InputDataError(problem)
     solid = occ != 0
-    if (np.hypot(w[0], w[1])[solid] > 1e-6).any():
-        raise InputDataError("wind field has flow through walls: solid cells must carry no wind")
     if layout is not None:
         if layout.occupancy.shape != occ.shape or not np.array_equal(layout.occupancy != 0, solid):
             raise InputDataError("the layout's map differs from the wind's map")

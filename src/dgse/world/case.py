@@ -177,6 +177,32 @@ class Case:
             raise CaseFileError(f"{origin}: {e}") from None
 
 
+#: Largest wind speed (m/s) tolerated in a solid cell of a wind field given by a user (not a case file).
+WALL_WIND_TOLERANCE = 1e-6
+
+
+def wind_problem(
+    occ: np.ndarray, wind: np.ndarray, what: str = "wind", wall_tolerance: float = 0.0
+) -> str | None:
+    """The first problem of a ``(2, H, W)`` wind on map ``occ`` (shape, finite, no flow in walls), or None.
+
+    ``wall_tolerance``: the largest speed (m/s) a solid cell may carry.
+    """
+    H, W = np.asarray(occ).shape
+    if wind.shape != (2, H, W):
+        return f"{what} has shape {wind.shape}, expected (2, {H}, {W}) (u_x, u_y per cell)"
+    if not np.isfinite(wind).all():
+        return f"{what} has NaN or infinite values"
+    speed = np.hypot(wind[0], wind[1])
+    through = (np.asarray(occ) != 0) & (speed > wall_tolerance)
+    if through.any():
+        return (
+            f"{what} has flow through walls: {int(through.sum())} solid cells carry wind "
+            f"(up to {float(speed[through].max()):.3g} m/s); solid cells must be 0"
+        )
+    return None
+
+
 def validate_arrays(occ, wind, conc, source, resolution, meta, frames=None) -> list[str]:
     """Problems (human-readable) with a case's arrays; empty when valid."""
     p: list[str] = []
@@ -187,12 +213,9 @@ def validate_arrays(occ, wind, conc, source, resolution, meta, frames=None) -> l
         p.append("occupancy must contain only 0 (free) and 1 (solid)")
     if not (resolution > 0 and np.isfinite(resolution)):
         p.append(f"resolution must be positive, got {resolution}")
-    if wind.shape != (2, H, W):
-        p.append(f"wind has shape {wind.shape}, expected (2, {H}, {W})")
-    elif not np.isfinite(wind).all():
-        p.append("wind has non-finite values")
-    elif np.abs(wind[:, occ == 1]).max(initial=0) > 0:
-        p.append("wind is not 0 in solid cells")
+    problem = wind_problem(occ, wind)
+    if problem:
+        p.append(problem)
     if conc.shape != (H, W):
         p.append(f"concentration has shape {conc.shape}, expected ({H}, {W})")
     elif not np.isfinite(conc).all():

@@ -1,0 +1,74 @@
+"""How often the proposed openings include the true inlet and outlet (generated validation scenarios).
+
+For 16 generated scenarios (seeds 900-915) and 20, 50 and 150 random noisy wind
+readings: does a proposal pair an inlet and an outlet whose centres lie within
+1 m of the true ones (on the same side)?  Two proposers:
+
+* ``potential_flow``: :func:`dgse.physics.openings.potential_flow_proposals` from the
+  readings, the best 5 pairs (what ``dgse-phys --knowledge map`` uses);
+* ``dgse_s_wind``: :func:`dgse.physics.openings.propose_openings` on DGSE-S's mean
+  wind from the same readings (the shipped network; up to 5 x 5 pairs).
+
+    python benchmarks/opening_proposals.py -o benchmarks/results/opening_proposals.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from dgse.errors import InputDataError
+from dgse.estimators.registry import get_estimator
+from dgse.evaluation.evaluate import draw_observations
+from dgse.physics.openings import potential_flow_proposals, propose_openings
+from dgse.physics.scenario import random_cases
+
+SEEDS = range(900, 916)
+COUNTS = (20, 50, 150)
+
+
+def _near(proposed, true) -> bool:
+    c = 0.5 * (proposed.start_m + proposed.end_m)
+    return any(proposed.side == t.side and abs(c - 0.5 * (t.start_m + t.end_m)) <= 1.0 for t in true)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/opening_proposals.json"))
+    args = ap.parse_args()
+    net = get_estimator("dgse-s", seed=0, dtype="bf16", channels_last=True)
+    hits = {p: {n: 0 for n in COUNTS} for p in ("potential_flow", "dgse_s_wind")}
+    for seed in SEEDS:
+        case = random_cases(seed, n_sources=1)[0]
+        layout = case.layout
+        for n in COUNTS:
+            obs = draw_observations(case, n, seed=1)
+            wind = net.estimate(case.occupancy, case.resolution, obs).wind_mean.copy()
+            wind[:, obs.cells[:, 0], obs.cells[:, 1]] = obs.wind.T  # the readings where they were taken
+            found = {
+                "potential_flow": potential_flow_proposals(
+                    case.occupancy, case.resolution, obs.cells, obs.wind
+                )
+            }
+            try:
+                found["dgse_s_wind"] = propose_openings(
+                    case.occupancy, case.resolution, wind, min_fraction=0.1, max_inlets=5, max_outlets=5
+                )
+            except InputDataError:
+                found["dgse_s_wind"] = []
+            for name, props in found.items():
+                hits[name][n] += any(_near(p.inlets[0], layout.inlets) and _near(p.outlets[0], layout.outlets)
+                                     for p in props)  # fmt: skip
+        print(f"scenario {seed} done", flush=True)
+    for name, by_n in hits.items():
+        print(name, ", ".join(f"{n} readings: {k} of {len(SEEDS)}" for n, k in by_n.items()))
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(
+        json.dumps({"seeds": list(SEEDS), "scenarios": len(SEEDS), "true_pair_found": hits}, indent=1)
+    )
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
