@@ -145,8 +145,13 @@ def _split_run(rng, n: int, p: _Params) -> tuple[list[tuple[int, int]], list[tup
 
 
 def _fill_row(
-    rng, plan: _Plan, rows: tuple[int, int], front_high: bool, door_wall: tuple[int, int],
-    cols: tuple[int, int], p: _Params,
+    rng,
+    plan: _Plan,
+    rows: tuple[int, int],
+    front_high: bool,
+    door_wall: tuple[int, int],
+    cols: tuple[int, int],
+    p: _Params,
 ) -> None:
     """Rooms in rows ``[r0, r1)`` x columns ``cols``, with doors through ``door_wall``.
 
@@ -309,7 +314,9 @@ def random_office_floor_with_plan(
     _check_range(height_range, "height_range")
     corr = _int_range(n_corridors, "n_corridors", 1)
     if corr[1] > 2:
-        raise InputDataError(f"n_corridors must be 1 or 2 (or a range within them), got {n_corridors}")
+        raise InputDataError(
+            f"n_corridors must be 1 or 2 (or a range within them), got {n_corridors}"
+        )
     nin = _int_range(n_inlets, "n_inlets", 1)
     nout = _int_range(n_outlets, "n_outlets", 1)
     if not (min_opening_gap_m >= 0 and math.isfinite(min_opening_gap_m)):
@@ -317,16 +324,21 @@ def random_office_floor_with_plan(
     if max_attempts < 1:
         raise InputDataError(f"max_attempts must be at least 1, got {max_attempts}")
     p = _Params(
-        corridor=_cells_range(*_check_range(corridor_width_range, "corridor_width_range"), res,
-                              "corridor_width_range"),
-        room_width=_cells_range(*_check_range(room_width_range, "room_width_range"), res,
-                                "room_width_range"),
-        room_depth=_cells_range(*_check_range(room_depth_range, "room_depth_range"), res,
-                                "room_depth_range"),
-        thickness=_cells_range(*_check_range(wall_thickness_range, "wall_thickness_range"), res,
-                               "wall_thickness_range"),
-        door=_cells_range(*_check_range(door_width_range, "door_width_range"), res,
-                          "door_width_range"),
+        corridor=_cells_range(
+            *_check_range(corridor_width_range, "corridor_width_range"), res, "corridor_width_range"
+        ),
+        room_width=_cells_range(
+            *_check_range(room_width_range, "room_width_range"), res, "room_width_range"
+        ),
+        room_depth=_cells_range(
+            *_check_range(room_depth_range, "room_depth_range"), res, "room_depth_range"
+        ),
+        thickness=_cells_range(
+            *_check_range(wall_thickness_range, "wall_thickness_range"), res, "wall_thickness_range"
+        ),
+        door=_cells_range(
+            *_check_range(door_width_range, "door_width_range"), res, "door_width_range"
+        ),
         margin=max(1, math.ceil(0.3 / res - _EPS)),
         long_floor=math.ceil(30.0 / res - _EPS),
     )
@@ -359,8 +371,9 @@ def random_office_floor_with_plan(
         if openings is None:
             continue
         walls = tuple(_rects_m(occupancy_rectangles(occ), res))
-        layout = Layout(occ, openings[0], openings[1], res, walls,
-                        _seed_name("office", rng_or_seed, name))
+        layout = Layout(
+            occ, openings[0], openings[1], res, walls, _seed_name("office", rng_or_seed, name)
+        )
         if _connected(layout):
             parts = (plan.corridors, plan.rooms, plan.doors)
             office = OfficePlan(*(tuple(_rects_m(_transpose(x, flip), res)) for x in parts))
