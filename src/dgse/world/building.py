@@ -205,8 +205,11 @@ def _band_depths(rng, free: int, n_bands: int, lo: int) -> list[int] | None:
 def _connectors(rng, length: int, width: int, t: int, k: int, p: _Params) -> list[int] | None:
     """First columns of ``k`` connecting corridors, leaving runs of rooms >= the least width."""
     need = p.room_width[0]
+    lo, hi = need + t, length - need - t - width  # first column of a connector, inclusive
+    if hi < lo:
+        return None
     for _ in range(20):
-        xs = sorted(int(x) for x in rng.integers(need + t, length - need - t - width + 1, size=k))
+        xs = sorted(int(x) for x in rng.integers(lo, hi + 1, size=k))
         edges = [0] + [v for x in xs for v in (x - t, x + width + t)] + [length]
         if all(b - a >= need for a, b in zip(edges[::2], edges[1::2], strict=True)):
             return xs

@@ -25,6 +25,11 @@ solid, ``"all"`` only when all of it is.
 :func:`layout_from_floorplan` turns an occupancy map plus user-given inlets and
 outlets into a :class:`~dgse.world.layout.Layout`; its ``walls`` are an exact
 rectangle cover of the solid cells (:func:`occupancy_rectangles`).
+
+Writing: :func:`export_ros_map` writes a layout's occupancy as a ROS map_server
+map (YAML + PGM, one pixel per cell) that :func:`load_ros_map` reads back
+exactly.  The map_server format has no inlets or outlets: they are written as
+YAML comments only, and an import takes them from the user.
 """
 
 from __future__ import annotations
@@ -44,6 +49,7 @@ from dgse.world.layout import Layout, Opening
 
 __all__ = [
     "FloorPlan",
+    "export_ros_map",
     "layout_from_floorplan",
     "load_png_map",
     "load_ros_map",
@@ -544,3 +550,73 @@ def layout_from_floorplan(
         for r0, r1, c0, c1 in occupancy_rectangles(occ)
     )
     return Layout(occ, ins, outs, r, walls, name)
+
+
+# -- writing ----------------------------------------------------------------------------------
+#: Pixel values of an exported ROS map (the map_server conventions: dark is occupied).
+ROS_FREE, ROS_OCCUPIED = 254, 0
+
+
+def _opening_args(layout: Layout) -> list[str]:
+    def fmt(o: Opening) -> str:
+        return f"{o.side} {o.start_m:g} {o.end_m:g}"
+
+    return [
+        f"# inlets:  {'; '.join(fmt(o) for o in layout.inlets)}",
+        f"# outlets: {'; '.join(fmt(o) for o in layout.outlets)}",
+    ]
+
+
+def export_ros_map(layout: Layout, path: str | Path) -> tuple[Path, Path]:
+    """Write ``layout``'s occupancy as a ROS map_server map: ``<stem>.yaml`` and ``<stem>.pgm``.
+
+    The image has one pixel per cell (the YAML's ``resolution`` is the layout's,
+    in m), image row 0 the layout's top (north) row; free cells are 254 and solid
+    ones 0 (``mode: trinary``, ``negate: 0``, ``occupied_thresh: 0.65``,
+    ``free_thresh: 0.196``); ``origin: [0.0, 0.0, 0.0]`` puts the map frame's
+    origin at the layout's lower-left corner.  :func:`load_ros_map` at the
+    layout's resolution gives back the occupancy cell for cell.
+
+    The format has no place for inlets and outlets: they are written as YAML
+    comments (``# inlets: west 1.2 2.3; ...``), which readers ignore; give them
+    to :func:`layout_from_floorplan` (or ``dgse import-floorplan --inlet/--outlet``)
+    on import.
+
+    Args:
+        layout: the layout to write.
+        path: the YAML path (``.yaml``/``.yml``), the image path (``.pgm``) or
+            a stem; the image is written beside the YAML and named by it.
+
+    Returns:
+        ``(yaml_path, pgm_path)``.
+    """
+    path = Path(path)
+    stem = path.with_suffix("") if path.suffix.lower() in (".yaml", ".yml", ".pgm") else path
+    yaml_path = path if path.suffix.lower() in (".yaml", ".yml") else stem.with_name(stem.name + ".yaml")
+    pgm_path = stem.with_name(stem.name + ".pgm")
+    occ = np.flipud(layout.occupancy)  # image row 0 = north
+    pixels = np.where(occ == 1, ROS_OCCUPIED, ROS_FREE).astype(np.uint8)
+    H, W = pixels.shape
+    g = layout.grid
+    lines = [
+        f"# {layout.name}: {g.width_m:g} x {g.height_m:g} m, {W} x {H} cells, written by dgse",
+        "# ROS map_server maps carry no openings; these are the layout's (m along each side,",
+        "# from the lower-left corner), for dgse import-floorplan --inlet/--outlet SIDE START END:",
+        *_opening_args(layout),
+        f"image: {pgm_path.name}",
+        f"resolution: {float(layout.resolution)!r}",
+        "origin: [0.0, 0.0, 0.0]",
+        "negate: 0",
+        "occupied_thresh: 0.65",
+        "free_thresh: 0.196",
+        "mode: trinary",
+    ]
+    yaml_path.parent.mkdir(parents=True, exist_ok=True)
+    for target, data in (
+        (pgm_path, f"P5\n{W} {H}\n255\n".encode("ascii") + pixels.tobytes()),
+        (yaml_path, ("\n".join(lines) + "\n").encode("utf-8")),
+    ):
+        tmp = target.with_name(target.name + ".part")
+        tmp.write_bytes(data)
+        tmp.replace(target)
+    return yaml_path, pgm_path
