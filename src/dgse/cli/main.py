@@ -212,6 +212,13 @@ def layout_cmd(
         bool,
         typer.Option("--ood", help="Out-of-domain layout: up to 15 x 10 m, several openings, obstacles."),
     ] = False,
+    building: Annotated[
+        bool,
+        typer.Option(
+            "--building",
+            help="Office floor: 20-40 m per side, 1-2 corridors, rooms with doors, 2-4 inlets and outlets.",
+        ),
+    ] = False,
     out: Annotated[
         Path | None,
         typer.Option("--out", "-o", help="Layout file to write (default: ./<name>.npz)."),
@@ -222,13 +229,17 @@ def layout_cmd(
     ] = None,
 ) -> None:
     """Make a random multi-room layout and save it as a layout file (.npz)."""
+    from dgse.world.building import random_office_floor
     from dgse.world.generate import random_layout, random_ood_layout
     from dgse.world.layout_io import save_layout
 
+    if ood and building:
+        raise InputDataError("--ood and --building exclude each other: give one of them")
     _check_figure_out(plot)
     check_output_file(out, "layout file")
     seed = _new_seed() if seed is None else seed
-    layout = (random_ood_layout if ood else random_layout)(seed)
+    generator = random_office_floor if building else random_ood_layout if ood else random_layout
+    layout = generator(seed)
     path = save_layout(layout, out if out is not None else Path(f"{layout.name}.npz"))
     summary = escape(_layout_summary(layout))
     console.print(f"[bold]{escape(layout.name)}[/] (seed {seed}): {summary}")
