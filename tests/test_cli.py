@@ -152,6 +152,34 @@ def test_layout_command_writes_a_layout_and_figure(capsys, tmp_path):
     assert code == 0 and load_layout(tmp_path / "o.npz").name == "ood-3"
 
 
+def test_layout_building_writes_an_office_floor(capsys, tmp_path):
+    code, out, err = _run(capsys, "layout", "--seed", "3", "--building", "-o", tmp_path / "b.npz")
+    assert code == 0, err
+    lay = load_layout(tmp_path / "b.npz")
+    assert lay.name == "office-3" and "office-3" in out and "seed 3" in out
+    assert all(200 <= n <= 400 for n in lay.occupancy.shape)
+    assert 2 <= len(lay.inlets) <= 4 and 2 <= len(lay.outlets) <= 4
+    code, out, err = _run(capsys, "layout", "--building", "--ood", "-o", tmp_path / "x.npz")
+    _assert_user_error(code, out, err, "--ood and --building exclude each other")
+    assert not (tmp_path / "x.npz").exists()
+
+
+def test_import_floorplan_of_a_generated_office_floor(capsys, tmp_path):
+    """A building-scale ROS map (benchmarks/floorplans/) imports through the CLI cell for cell."""
+    from dgse.world.building import random_office_floor
+
+    floor = random_office_floor(3)
+    i, o = floor.inlets[0], floor.outlets[0]
+    yaml_path = Path(__file__).resolve().parents[1] / "benchmarks" / "floorplans" / "office-3.yaml"
+    args = ["--inlet", i.side, f"{i.start_m:g}", f"{i.end_m:g}"]
+    args += ["--outlet", o.side, f"{o.start_m:g}", f"{o.end_m:g}", "-o", tmp_path / "f.npz"]
+    code, _, err = _run(capsys, "import-floorplan", yaml_path, *args)
+    assert code == 0, err
+    lay = load_layout(tmp_path / "f.npz")
+    assert np.array_equal(lay.occupancy, floor.occupancy) and lay.name == "office-3"
+    assert (lay.inlets, lay.outlets) == ((i,), (o,))  # the CLI takes one inlet and one outlet
+
+
 def test_solve_layout_writes_a_valid_case(solved, capsys):
     case = Case.load(solved["case"])
     assert case.inlet_velocity == pytest.approx(1.0) and case.release_rate == pytest.approx(0.5)
