@@ -20,6 +20,7 @@ is :func:`solve_flow`.
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from collections.abc import Callable
@@ -131,9 +132,8 @@ class PressureSolver:
         if not self._uses_amg(A.shape[0]):
             if self._M is None or rebuild:
                 # symmetric positive definite: minimum degree on A^T + A, no pivoting
-                lu = spla.splu(
-                    A.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
-                )
+                opts = {"SymmetricMode": True}
+                lu = spla.splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options=opts)
                 self._M = spla.LinearOperator(A.shape, matvec=lu.solve)
                 self.factorizations += 1
             return self._M
@@ -145,7 +145,7 @@ class PressureSolver:
         else:  # same coarsening and interpolation, coarse operators of the current matrix
             levels = self._ml.levels
             levels[0].A = A
-            for fine, coarse in zip(levels[:-1], levels[1:], strict=True):
+            for fine, coarse in itertools.pairwise(levels):
                 coarse.A = (fine.R @ fine.A @ fine.P).tocsr()
             self._ml.coarse_solver = pyamg.multilevel.coarse_grid_solver("splu")
         return self._ml.aspreconditioner(cycle="V")
