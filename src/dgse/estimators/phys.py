@@ -68,6 +68,7 @@ from dgse.localization.adjoint import (
     AdjointResponseModel,
     FlowModel,
     adjoint_log_evidence,
+    censored_correction,
     flow_model,
     sigma_floor,
 )
@@ -154,6 +155,40 @@ def mix_posteriors(
     return post / post.sum(), hw
 
 
+#: A hypothesis whose evidence bound falls this many nats below the best one's evidence is
+#: not corrected for the zero readings (its weight is below ``exp(-HOPELESS)`` either way).
+HOPELESS_NATS = 30.0
+
+
+def _censor(
+    log_ev: list[np.ndarray], log_prior: Sequence[float], details: Sequence[dict[str, Any]], temp: float
+) -> list[np.ndarray]:
+    """Add the zero readings' factor to each hypothesis's evidence, skipping hopeless ones.
+
+    The factor is at most ``(1/2)`` per zero, so ``evidence + ceiling`` bounds a hypothesis
+    from above; hypotheses are corrected best bound first, and one whose bound lies
+    ``HOPELESS_NATS`` below the best corrected hypothesis is left at its bound.
+    """
+    out = list(log_ev)
+    pending = [i for i, d in enumerate(details) if "censor" in d]
+    if not pending:
+        return out
+    ceiling = -math.log(2.0) * int(details[pending[0]]["censored"])
+
+    def total(i: int, x: np.ndarray) -> float:
+        return log_prior[i] + _logsumexp(x / temp)
+
+    bounds = {i: total(i, log_ev[i] + ceiling) for i in pending}
+    best = -math.inf
+    for i in sorted(pending, key=lambda i: -bounds[i]):
+        if bounds[i] < best - HOPELESS_NATS:
+            out[i] = log_ev[i] + ceiling
+            continue
+        out[i] = log_ev[i] + censored_correction(logl=log_ev[i], **details[i]["censor"])
+        best = max(best, total(i, out[i]))
+    return out
+
+
 def wind_log_likelihood(
     predicted: np.ndarray, readings: np.ndarray, levels: Sequence[float], floor: float
 ) -> float:
@@ -198,6 +233,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             ``T = max(temperature, m / effective_readings)``: readings of one plume are
             not independent once the model's own error dominates the noise.  None: the
             level's default (100; 30 at ``map``); ``inf``: off.
+        censored: read zero readings as censored (the sensor clips negatives; see
+            :func:`~dgse.localization.adjoint.censored_correction`); False: as exact zeros.
         flow_settings: SIMPLEC controls of the built-in solver.
         physics: physical constants.
     """
@@ -215,6 +252,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     min_weight: float = 1e-4
     temperature: float = 1.0
     effective_readings: float | None = None
+    censored: bool = True
     map_proposals: int = 5
     learned_weight: float = LEARNED_WEIGHT
     learned_readings: float = LEARNED_READINGS
@@ -381,15 +419,17 @@ class PhysicsGuidedEstimator(KnowledgeUser):
                 kappas=self.kappas,
                 alpha0=self.alpha0,
                 sigma0_fraction=self.sigma0_fraction,
+                censored="deferred" if self.censored else False,
             )
             u = h.flow.wind[:, cells[:, 0], cells[:, 1]].T
             uu = float((u * u).sum())
             scale = max(float((u * obs.wind).sum()) / uu, 0.0) if free_scale and uu > 0 else 1.0
             scales.append(scale)
             lw = wind_log_likelihood(scale * u, obs.wind, self.wind_noise_levels, self.wind_noise_floor)
-            log_ev.append(logl / temp)
+            log_ev.append(logl)
             details.append((A, det))
             log_prior.append(math.log(h.prior) + lw)
+        log_ev = [x / temp for x in _censor(log_ev, log_prior, [d for _, d in details], temp)]
         t_h = 1.0 if self.hypothesis_readings is None else max(1.0, len(obs) / self.hypothesis_readings)
         post, hw = mix_posteriors(log_ev, log_prior, t_h)
         mesh = hyps[0].flow.mesh
