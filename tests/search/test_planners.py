@@ -140,6 +140,36 @@ def test_min_observations_delays_the_entropy_test():
             UtilityPlanner(min_observations=bad)
 
 
+def test_a_stop_needs_readings_near_the_mode():
+    """confirm_radius_m: a confident mode nobody measured at is visited before the stop."""
+    occ = np.zeros((10, 10), np.uint8)
+    peaked = np.zeros((10, 10))
+    peaked[5, 5] = 1.0
+    belief = _belief(occ, peaked, res=0.5)
+    g = FreeSpaceGraph(occ, 0.5)
+    planner = UtilityPlanner(confirm_radius_m=1.0, confirm_readings=2)
+    far = _history(g, [(0, 0), (0, 1), (9, 9)])
+    assert UtilityPlanner().should_stop(belief, far)  # the paper's rule stops from afar
+    assert not planner.should_stop(belief, far)
+    # the next goal is the mode itself (unmeasured), then the nearest unmeasured cell to it
+    assert planner.next_goal(belief, (0, 1), g.distances_from((0, 1)), far) == (5, 5)
+    one = _history(g, [(0, 0), (5, 5)])
+    assert not planner.should_stop(belief, one)
+    goal = planner.next_goal(belief, (5, 5), g.distances_from((5, 5)), one)
+    assert goal is not None and max(abs(goal[0] - 5), abs(goal[1] - 5)) == 1
+    two = _history(g, [(0, 0), (5, 5), (5, 7)])  # (5, 7) is 1.0 m from the mode
+    assert planner.should_stop(belief, two)
+    # without a confident belief the rule changes nothing
+    flat = _belief(occ, np.ones((10, 10)), res=0.5)
+    assert not planner.should_stop(flat, two)
+    assert planner.next_goal(flat, (0, 0), g.distances_from((0, 0)), far) == UtilityPlanner().next_goal(
+        flat, (0, 0), g.distances_from((0, 0)), far
+    )
+    for bad in ({"confirm_radius_m": 0.0}, {"confirm_radius_m": math.nan}, {"confirm_readings": 0}):
+        with pytest.raises(InputDataError, match="confirm"):
+            UtilityPlanner(**bad)
+
+
 def test_registry():
     assert "utility" in planner_names()
     p = get_planner("utility", eta=0.75)

@@ -420,7 +420,8 @@ def _censored_log_factor(
     qmax = np.inf if q_max is None else q_max
     qc = np.clip(qhat, 0.0, qmax)
     # mode of psi(t) = alpha_n t - beta_n e^t + sum log Phi(-qc B e^(t/2)) over t = log tau
-    t = np.log(alpha_n / beta_n)
+    t0 = np.log(alpha_n / beta_n)
+    t = t0.copy()
     qb = qc[None, :] * B  # (c, n)
     for _ in range(CENSORED_NEWTON_STEPS):
         x = qb * np.exp(0.5 * t)[None, :]
@@ -428,11 +429,13 @@ def _censored_log_factor(
         d1 = alpha_n - beta_n * np.exp(t) - 0.5 * (lam * x).sum(axis=0)
         d2 = -beta_n * np.exp(t) - 0.25 * ((lam * (lam - x) * x + lam) * x).sum(axis=0)
         d2 = np.minimum(d2, -1e-6)
-        t = t - np.clip(d1 / d2, -3.0, 3.0)
+        t = np.clip(t - np.clip(d1 / d2, -3.0, 3.0), t0 - 60.0, t0 + 20.0)
     x = qb * np.exp(0.5 * t)[None, :]
     lam = np.exp(-0.5 * x * x - special.log_ndtr(-x)) / math.sqrt(2.0 * math.pi)
     d2 = -beta_n * np.exp(t) - 0.25 * ((lam * (lam - x) * x + lam) * x).sum(axis=0)
-    width = 1.0 / np.sqrt(np.maximum(-d2, 1e-6))  # sd of the Laplace approximation in log tau
+    t = np.where(np.isfinite(t), t, t0)
+    width = np.clip(1.0 / np.sqrt(np.maximum(-d2, 1e-6)), 1e-3, 10.0)  # Laplace sd in log tau
+    width = np.where(np.isfinite(width), width, 1.0)
     xh, wh = special.roots_hermite(CENSORED_TAU_NODES)
     log_gamma_norm = alpha_n * np.log(beta_n) - special.gammaln(alpha_n)
     # every (tau, q) node: lambda = q sqrt(tau) enters the zeros' factor as
@@ -460,11 +463,20 @@ def _censored_log_factor(
         log_f = log_gamma_norm + alpha_n * tk - beta_n * tau + lmass + log_eq
         terms.append(math.log(wk) + log_f)
     T = np.stack(terms) + (xh**2)[:, None]
+    T = np.where(np.isnan(T), -np.inf, T)
     top = T.max(axis=0)
-    log_num = top + np.log(np.exp(T - top).sum(axis=0)) + np.log(math.sqrt(2.0) * width)
-    return np.minimum(log_num - log_mass, 0.0)
+    safe = np.isfinite(top)
+    top = np.where(safe, top, 0.0)
+    with np.errstate(divide="ignore"):
+        log_num = top + np.log(np.exp(T - top).sum(axis=0)) + np.log(math.sqrt(2.0) * width)
+    out = np.minimum(log_num - log_mass, 0.0)
+    # a candidate whose integrand vanished everywhere: the zeros rule it out (finite, so that
+    # a posterior of only such candidates stays defined)
+    return np.where(safe & np.isfinite(out), out, CENSORED_FLOOR)
 
 
+#: The zeros' factor (nats) of a candidate whose integrand underflows everywhere.
+CENSORED_FLOOR = -1e4
 #: Chebyshev points for the zeros' factor as a function of ``lambda = q sqrt(tau)``.
 CENSORED_CHEBYSHEV_POINTS = 16
 

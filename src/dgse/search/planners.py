@@ -48,6 +48,8 @@ what the paper leaves open:
   leaves nothing (a one-cell map), ``next_goal`` returns None;
 * ties (utilities equal to a relative ``1e-12``): the nearest cell by path
   length, then the lowest row-major index;
+* ``confirm_radius_m`` (default None, the paper's rule): see the class; issue 12's
+  searches stopped confidently on spots nobody had measured at;
 * ``min_observations`` (default 0, the paper's rule): the entropy test waits
   for that many readings.  A network trained on 5 to 300 readings (the
   paper's range, ``dgse.sensing.sensors.MIN_SENSORS``) has never seen fewer
@@ -164,6 +166,13 @@ class UtilityPlanner:
             belief's free cells.
         min_observations: the termination test waits for this many readings
             (0: from the first, as the paper).
+        confirm_radius_m: None (the paper's rule) or a radius, m: the search may stop only
+            once ``confirm_readings`` readings were taken within this distance of the
+            posterior's mode; while the entropy test passes without them, the next goal is
+            the unmeasured cell nearest the mode.  A mode nobody has measured at is a guess
+            from afar (clipped noise in clean air can make one); measured at, the estimator
+            keeps it only if the readings there agree.
+        confirm_readings: readings near the mode the stop needs (with ``confirm_radius_m``).
     """
 
     w_d: float = 0.1
@@ -175,6 +184,8 @@ class UtilityPlanner:
     exclude_measured: bool = True
     entropy_cells: int | None = None
     min_observations: int = 0
+    confirm_radius_m: float | None = None
+    confirm_readings: int = 2
     name: str = field(default="utility", init=False)
 
     def __post_init__(self) -> None:
@@ -194,6 +205,16 @@ class UtilityPlanner:
         if self.min_observations < 0:
             raise InputDataError(f"min_observations must be >= 0, got {self.min_observations}")
         self.min_observations = int(self.min_observations)
+        if self.confirm_radius_m is not None:
+            r = float(self.confirm_radius_m)
+            if not (math.isfinite(r) and r > 0):
+                raise InputDataError(f"confirm_radius_m must be a positive number of m or None, got {r}")
+            self.confirm_radius_m = r
+        if isinstance(self.confirm_readings, bool) or int(self.confirm_readings) != self.confirm_readings:
+            raise InputDataError(f"confirm_readings must be an integer, got {self.confirm_readings!r}")
+        if self.confirm_readings < 1:
+            raise InputDataError(f"confirm_readings must be >= 1, got {self.confirm_readings}")
+        self.confirm_readings = int(self.confirm_readings)
         if self.distance_unit not in ("m", "cell"):
             raise InputDataError(f"distance_unit must be 'm' or 'cell', got {self.distance_unit!r}")
 
@@ -207,8 +228,25 @@ class UtilityPlanner:
         """
         if history is not None and history.step < self.min_observations:
             return False
+        if not self._entropy_passes(belief):
+            return False
+        return history is None or self._unconfirmed_mode(belief, history) is None
+
+    def _entropy_passes(self, belief: Belief) -> bool:
         log_n = belief.max_entropy if self.entropy_cells is None else math.log(int(self.entropy_cells))
         return belief.entropy() <= self.eta * log_n
+
+    def _unconfirmed_mode(self, belief: Belief, history: SearchHistory) -> tuple[int, int] | None:
+        """The posterior's mode if fewer than ``confirm_readings`` readings lie near it, else None."""
+        if self.confirm_radius_m is None:
+            return None
+        mode = np.unravel_index(int(np.argmax(belief.source_probs)), belief.shape)
+        cells = history.observations.cells
+        if len(cells):
+            d = np.hypot(cells[:, 0] - mode[0], cells[:, 1] - mode[1]) * belief.resolution
+            if int((d <= self.confirm_radius_m + 1e-9).sum()) >= self.confirm_readings:
+                return None
+        return int(mode[0]), int(mode[1])
 
     def utility(self, belief: Belief, distances: np.ndarray) -> np.ndarray:
         """``float64 (H, W)`` utility ``U_i``; ``-inf`` on walls and unreachable cells."""
@@ -233,7 +271,16 @@ class UtilityPlanner:
         distances: np.ndarray,
         history: SearchHistory | None = None,
     ) -> Cell | None:
-        """``argmax_i U_i`` over the candidate cells (see the module docstring), or None if none."""
+        """``argmax_i U_i`` over the candidate cells (see the module docstring), or None if none.
+
+        With ``confirm_radius_m``, while the entropy test passes but the mode is unconfirmed:
+        the reachable unmeasured cell nearest the mode within that radius (the mode's own
+        cell first), if there is one.
+        """
+        if history is not None and self.confirm_radius_m is not None and self._entropy_passes(belief):
+            goal = self._confirming_goal(belief, robot_cell, distances, history)
+            if goal is not None:
+                return goal
         u = self.utility(belief, distances)
         i0, j0 = int(robot_cell[0]), int(robot_cell[1])
         u[i0, j0] = -np.inf
@@ -253,6 +300,28 @@ class UtilityPlanner:
             ties = ties[np.lexsort((ties, d))]
         k = int(ties[0])
         W = u.shape[1]
+        return (k // W, k % W)
+
+
+    def _confirming_goal(
+        self, belief: Belief, robot_cell: Cell, distances: np.ndarray, history: SearchHistory
+    ) -> Cell | None:
+        mode = self._unconfirmed_mode(belief, history)
+        if mode is None:
+            return None
+        H, W = belief.shape
+        ii, jj = np.mgrid[0:H, 0:W]
+        near = np.hypot(ii - mode[0], jj - mode[1]) * belief.resolution
+        ok = (
+            belief.free
+            & np.isfinite(np.asarray(distances, dtype=np.float64))
+            & (near <= self.confirm_radius_m + 1e-9)
+            & ~history.measured
+        )
+        ok[int(robot_cell[0]), int(robot_cell[1])] = False
+        if not ok.any():
+            return None
+        k = int(np.argmin(np.where(ok, near, np.inf)))
         return (k // W, k % W)
 
 
