@@ -1,0 +1,101 @@
+"""Active search with dgse-phys (issue 12, part 5): success, error, stops that mean something.
+
+Runs the utility planner on generated scenarios with a method at a knowledge
+level and a stop rule, and writes the search metrics plus the share of
+entropy stops within 2 m of the source (``stops_within_2m``: a stop must mean
+something).  Case sets (made once, into ignored ``_cases_<set>/`` folders):
+
+* ``validation``: seeds 900-907 (the range the dgse-phys parameters were tuned on);
+* ``test``: seeds 2000-2019 (never used for tuning).
+
+Stop rules (``--rule``):
+
+* ``paper``: the entropy test from the 5th reading (``min_observations=5``);
+* ``confirm``: the same, and a stop needs 2 readings within 1 m of the posterior's
+  mode (``confirm_radius_m=1``, ``confirm_readings=2``).
+
+Every finished episode is journaled beside the JSON, so an interrupted run resumes::
+
+    python benchmarks/phys_search.py --set validation --rule confirm --knowledge openings
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from dgse.search.campaign import json_safe, run_trials
+
+SETS = {"validation": range(900, 908), "test": range(2000, 2020)}
+RULES: dict[str, dict[str, Any]] = {
+    "paper": {"min_observations": 5},
+    "confirm": {"min_observations": 5, "confirm_radius_m": 1.0, "confirm_readings": 2},
+}
+
+
+def cases_dir(out: Path, name: str) -> Path:
+    """The generated scenarios of a set as case files (made once)."""
+    from dgse.physics.scenario import random_cases
+
+    d = out / f"_cases_{name}"
+    d.mkdir(parents=True, exist_ok=True)
+    for seed in SETS[name]:
+        path = d / f"{name}{seed}_src0.npz"
+        if not path.exists():
+            random_cases(seed, n_sources=1)[0].save(path)
+    return d
+
+
+def stop_quality(result: dict[str, Any]) -> dict[str, Any]:
+    """Entropy stops (episodes that terminated) and the share of them within 2 m of the source."""
+    rows = [t for c in result["per_case"] for t in c["trials"]]
+    stops = [t for t in rows if t.get("terminated")]
+    near = [t for t in stops if t["error_m"] <= 2.0]
+    return {
+        "episodes": len(rows),
+        "entropy_stops": len(stops),
+        "stops_within_2m": len(near),
+        "stops_within_2m_share": (len(near) / len(stops)) if stops else None,
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--set", choices=sorted(SETS), default="validation")
+    ap.add_argument("--rule", choices=sorted(RULES), default="confirm")
+    ap.add_argument("--method", default="dgse-phys")
+    ap.add_argument("--knowledge", default="openings", choices=["map", "openings", "wind"])
+    ap.add_argument("--trials", type=int, default=1)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/phys_search"))
+    args = ap.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    stem = f"{args.set}_{args.method}_{args.knowledge}_{args.rule}"
+    result = run_trials(
+        cases_dir(args.out, args.set),
+        args.method,
+        "utility",
+        trials=args.trials,
+        seed=args.seed,
+        planner_options=RULES[args.rule],
+        knowledge=args.knowledge,
+        journal=args.out / f"{stem}.journal.jsonl",
+    )
+    result["stops"] = stop_quality(result)
+    result["settings"]["rule"] = args.rule
+    result["settings"]["set"] = args.set
+    path = args.out / f"{stem}.json"
+    path.write_text(json.dumps(json_safe(result), indent=1))
+    agg = result["aggregate"]
+    print(
+        f"{stem}: success {agg['success_rate']:.2f}, error mean {agg['error_m_mean']:.2f} m "
+        f"(median {agg['error_m_median']:.2f}), ST {agg['search_time_s_mean']:.0f} s, "
+        f"step median {agg['step_seconds_median']:.3f} s, stops {result['stops']}"
+    )
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
