@@ -1,15 +1,17 @@
-"""Built-in solver against OpenFOAM, side by side on the same layouts.
+"""Built-in solver against OpenFOAM, side by side on the same layouts; the built-in one at building scale.
 
 Every solve runs in a fresh Python process (``--worker``), so the wall times
 count process start-up and imports, for both engines.  Layouts: the three
 OpenFOAM reference layouts (accuracy against the reference files) and
 random training-distribution layouts (accuracy of the built-in solver
-against OpenFOAM's solution of the same layout); then a size sweep from
-50 x 50 to 200 x 200 cells; then the time it takes to report a flow that
-does not converge.
+against OpenFOAM's solution of the same layout); then a size sweep of
+square random layouts from 100 x 100 to 400 x 400 cells and multi-room
+floors (``random_layout_with_rooms``); then warm starts (the same map at
+another inlet speed); then the time it takes to report a flow that does not
+converge.
 
-    python benchmarks/solver_speed.py                  # full run, ~10 min
-    python benchmarks/solver_speed.py --random 1 --sizes 50 100   # quick look
+    python benchmarks/solver_speed.py                  # full run, ~30 min on 2 cores
+    python benchmarks/solver_speed.py --random 1 --sizes 10 20 --floors   # quick look
 
 Writes ``benchmarks/results/solver_speed.json`` and ``solver_speed.md``.
 """
@@ -42,6 +44,9 @@ def worker(args: argparse.Namespace) -> None:
     from dgse.physics.rans import FlowSettings
 
     layout, v_in, sources = _scenario(args.scenario)
+    if args.warm:
+        json.dump(warm_start(layout, v_in, args.warm), open(args.out + ".json", "w"))
+        return
     if args.engine == "builtin":
         settings = FlowSettings(tolerance=args.tolerance) if args.tolerance else None
         engine = BuiltinEngine(settings=settings)
@@ -57,6 +62,8 @@ def worker(args: argparse.Namespace) -> None:
                 "error": str(e),
                 "seconds": time.perf_counter() - t,
                 "iterations": e.info.get("iterations"),
+                "cells": int(layout.free.sum()),
+                **_flow_facts(e.info),
             },
             open(args.out + ".json", "w"),
         )
@@ -67,20 +74,93 @@ def worker(args: argparse.Namespace) -> None:
         "seconds": time.perf_counter() - t,
         "outlet_flux_ratio": sol.outlet_flux_ratio,
         "iterations": sol.info.get("flow_iterations", sol.flow.info.get("iterations")),
+        "cells": int(layout.free.sum()),
+        "flow_s": sol.info.get("wall_clock_s", {}).get("flow"),
+        **_flow_facts(sol.flow.info),
     }
     json.dump(info, open(args.out + ".json", "w"))
 
 
+def _flow_facts(info: dict) -> dict:
+    """The built-in flow solve's start, coarse solves and pressure work (empty for OpenFOAM)."""
+    if "attempts" not in info:
+        return {}
+    coarse, c = [], info.get("coarse")
+    while c:
+        coarse.append({"iterations": c["iterations"], "seconds": c["seconds"]})
+        c = c.get("coarse")
+    return {
+        "start": info.get("start"),
+        "coarse": coarse,
+        "attempts": [
+            {k: a[k] for k in ("iterations", "converged", "stalled", "seconds")} for a in info["attempts"]
+        ],
+        "pressure_factorizations": info.get("pressure_factorizations"),
+        "pressure_cg_iterations": info.get("pressure_cg_iterations"),
+        "gauss_seidel_sweeps": info.get("gauss_seidel_sweeps"),
+    }
+
+
+def warm_start(layout, v_in: float, factors: list[float]) -> dict:
+    """Flow alone at ``v_in``, then at ``f * v_in`` for each factor, cold and warm from ``v_in``'s."""
+    from dgse.physics.builtin import flow_and_transport
+
+    t = time.perf_counter()
+    base, _ = flow_and_transport(layout, v_in)
+    out = {
+        "v": v_in,
+        "cells": int(layout.free.sum()),
+        "base": _run_facts(base, time.perf_counter() - t),
+        "runs": [],
+    }
+    for f in factors:
+        row: dict = {"v": f * v_in}
+        for mode in ("cold", "warm"):
+            t = time.perf_counter()
+            flow, _ = flow_and_transport(layout, f * v_in, warm_start=base if mode == "warm" else None)
+            row[mode] = _run_facts(flow, time.perf_counter() - t)
+            row[mode + "_wind"] = flow.wind
+        d = row.pop("warm_wind") - row.pop("cold_wind")
+        row["wind_rel_diff"] = float(np.linalg.norm(d) / np.linalg.norm(base.wind * f))
+        out["runs"].append(row)
+    return out
+
+
+def _run_facts(flow, seconds: float) -> dict:
+    i = flow.info
+    return {
+        "seconds": seconds,
+        "iterations": i["iterations"],
+        "converged": i["converged"],
+        "start": i["start"],
+    }
+
+
 def _scenario(spec: str):
-    """``ref:<layout>`` (a reference layout, its sources) or ``rand:<seed>[:<side_m>]``."""
+    """``ref:<layout>`` (a reference layout, its sources), ``rand:<seed>[:<side_m>]`` or
+    ``rooms:<seed>:<side_m>:<rooms>`` (a square floor of that many rooms)."""
     from dgse.world.case import Case
-    from dgse.world.generate import as_generator, random_inlet_velocity, random_layout, random_sources
+    from dgse.world.generate import (
+        as_generator,
+        random_inlet_velocity,
+        random_layout,
+        random_layout_with_rooms,
+        random_sources,
+    )
 
     kind, _, rest = spec.partition(":")
     if kind == "ref":
         cases = [Case.load(p) for p in sorted(REFERENCE.glob(f"{rest}_src*.npz"))]
         sources = [((float(c.source[0]), float(c.source[1])), c.release_rate) for c in cases]
         return cases[0].layout, cases[0].inlet_velocity, sources
+    if kind == "rooms":
+        seed, side, rooms = rest.split(":")
+        rng = as_generator(int(seed))
+        r = (float(side), float(side))
+        layout, _ = random_layout_with_rooms(
+            rng, width_range=r, height_range=r, n_rooms=int(rooms), min_room_m=3.0
+        )
+        return layout, random_inlet_velocity(rng), random_sources(layout, rng, n=4)
     seed, _, side = rest.partition(":")
     rng = as_generator(int(seed))
     kw = {}
@@ -92,17 +172,21 @@ def _scenario(spec: str):
 
 
 # ------------------------------------------------------------------------------ driver
-def run(engine: str, scenario: str, tmp: Path, tolerance: float | None = None) -> dict:
-    out = str(tmp / f"{engine}_{scenario.replace(':', '_')}")
+def run(
+    engine: str, scenario: str, tmp: Path, tolerance: float | None = None, warm: list[float] | None = None
+) -> dict:
+    out = str(tmp / f"{engine}_{scenario.replace(':', '_')}{'_warm' if warm else ''}")
     cmd = [sys.executable, __file__, "--worker", "--engine", engine, "--scenario", scenario, "--out", out]
     if tolerance:
         cmd += ["--tolerance", str(tolerance)]
+    if warm:
+        cmd += ["--warm", *map(str, warm)]
     t = time.perf_counter()
     subprocess.run(cmd, check=True, cwd=REPO)
     wall = time.perf_counter() - t
     info = json.load(open(out + ".json"))
     info["wall_s"] = wall  # process start-up, imports, solve and writing
-    if info["converged"]:
+    if info.get("converged"):
         with np.load(out + ".npz") as d:
             info["_wind"], info["_conc"] = d["wind"], d["conc"]
     return info
@@ -123,7 +207,10 @@ def main() -> None:
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results"))
     ap.add_argument("--tolerance", type=float, default=None)
     ap.add_argument("--random", type=int, default=3, help="random training layouts (both engines)")
-    ap.add_argument("--sizes", type=float, nargs="*", default=[5, 7.5, 10, 15, 20], help="square sides, m")
+    ap.add_argument("--sizes", type=float, nargs="*", default=[10, 20, 30, 40], help="square sides, m")
+    ap.add_argument("--floors", action="store_true", help="multi-room floors 20 x 20 and 30 x 30 m too")
+    ap.add_argument("--warm", type=float, nargs="*", default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--shared", default="", help="a note on other work running on the machine meanwhile")
     ap.add_argument("--no-openfoam", action="store_true")
     args = ap.parse_args()
     if args.worker:
@@ -141,8 +228,11 @@ def main() -> None:
             "python": platform.python_version(),
         },
         "openfoam": use_foam,
+        "shared": args.shared,
         "layouts": [],
         "sizes": [],
+        "floors": [],
+        "warm_start": None,
         "non_converging": None,
     }
     with tempfile.TemporaryDirectory() as tmp_s:
@@ -178,11 +268,25 @@ def main() -> None:
                 row = {
                     "side_m": side,
                     "seed": seed,
-                    "cells": round(side / 0.1) ** 2,
+                    "grid": round(side / 0.1) ** 2,
                     "builtin": {k: v for k, v in b.items() if not k.startswith("_")},
                 }
                 results["sizes"].append(row)
                 print(json.dumps(row, default=float), flush=True)
+        for side, rooms in ((20, 6), (30, 9)) if args.floors else ():
+            sc = f"rooms:11:{side}:{rooms}"
+            b = run("builtin", sc, tmp)
+            row = {
+                "scenario": sc,
+                "grid": round(side / 0.1) ** 2,
+                "builtin": {k: v for k, v in b.items() if not k.startswith("_")},
+            }
+            results["floors"].append(row)
+            print(json.dumps(row, default=float), flush=True)
+        if args.sizes:
+            side = max(s for s in args.sizes if s <= 20)
+            results["warm_start"] = run("builtin", f"rand:7:{side:g}", tmp, warm=[0.5, 0.8, 1.25])
+            print(json.dumps(results["warm_start"], default=float), flush=True)
         nc = run("builtin", "rand:25", tmp)  # an oscillating flow (see solver_robustness)
         results["non_converging"] = {k: v for k, v in nc.items() if not k.startswith("_")}
         print(json.dumps(results["non_converging"], default=float), flush=True)
@@ -217,26 +321,64 @@ def markdown(r: dict) -> str:
         lines.append(f"\nMedian speed-up {statistics.median(sp):.1f}x (min {min(sp):.1f}x).")
     lines += [
         "",
-        "Growth with the map size (square random layouts, built-in solver, two seeds each):",
+        "Growth with the map size (square random layouts, built-in flow alone is the `flow s` column; "
+        "`fine it` are the SIMPLEC iterations on the map's own grid, `coarse it` those of the coarse "
+        "start on grids 2x, 4x, ... coarser, when used):",
         "",
-        "| cells | seed | wall s (incl. start-up) | solve s | iterations | ms per iteration | converged |",
-        "|---|---|---|---|---|---|---|",
+        "| grid | free cells | seed | wall s (incl. start-up, gas) | flow s | fine it | coarse it | "
+        "ms per fine iteration | pressure CG its | converged |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for row in r["sizes"]:
-        b = row["builtin"]
-        its = b.get("iterations") or 0
-        per_it = 1e3 * b["seconds"] / its if its else float("nan")
-        lines.append(
-            f"| {row['cells']} | {row['seed']} | {b['wall_s']:.2f} | {b['seconds']:.2f} | {its} | "
-            f"{per_it:.1f} | {b['converged']} |"
-        )
+    for row in r["sizes"] + r.get("floors", []):
+        lines.append(_size_row(row))
+    w = r.get("warm_start")
+    if w:
+        b0 = w["base"]
+        lines += [
+            "",
+            f"Warm start: one {w['cells']} free-cell map (random layout, seed 7) solved at "
+            f"{w['v']:.2f} m/s ({b0['iterations']} iterations, {b0['seconds']:.1f} s), then at other "
+            "inlet speeds from rest (cold) and from that solution scaled (warm, "
+            "`flow_and_transport(..., warm_start=flow)`):",
+            "",
+            "| inlet m/s | cold it | cold s | warm it | warm s | saved | wind rel. diff warm vs cold |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for x in w["runs"]:
+            c, h = x["cold"], x["warm"]
+            lines.append(
+                f"| {x['v']:.2f} | {c['iterations']} | {c['seconds']:.1f} | {h['iterations']} | "
+                f"{h['seconds']:.1f} | {1 - h['seconds'] / c['seconds']:.0%} | {x['wind_rel_diff']:.1e} |"
+            )
     nc = r.get("non_converging")
     if nc:
         lines.append(
             f"\nNon-converging flow (random layout, seed 25, an oscillating flow): reported after "
             f"{nc['wall_s']:.1f} s, {nc.get('iterations')} iterations: {nc.get('error', '')}"
         )
+    if r.get("shared"):
+        lines.append(f"\nMachine: {r['machine']['cpu_count']} cores, shared: {r['shared']}.")
+    lines.append("\n" + DIAGNOSIS)
     return "\n".join(lines) + "\n"
+
+
+def _size_row(row: dict) -> str:
+    b = row["builtin"]
+    its = b.get("iterations") or 0
+    flow_s = b.get("flow_s") or b["seconds"]
+    fine_s = sum(a["seconds"] for a in b.get("attempts", [])) or flow_s
+    per_it = 1e3 * fine_s / its if its else float("nan")
+    coarse = "+".join(str(c["iterations"]) for c in b.get("coarse", [])) or "-"
+    name = row.get("scenario") or row["seed"]
+    side = round(row["grid"] ** 0.5)
+    return (
+        f"| {side}x{side} | {b.get('cells', '')} | {name} | {b['wall_s']:.1f} | {flow_s:.1f} | {its} | "
+        f"{coarse} | {per_it:.0f} | {b.get('pressure_cg_iterations', '')} | {b['converged']} |"
+    )
+
+
+#: what was measured to choose the solver strategy (issue 14); the commands are in the commit messages
+DIAGNOSIS = """TODO"""
 
 
 if __name__ == "__main__":

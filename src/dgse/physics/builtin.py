@@ -15,8 +15,8 @@ import numpy as np
 from dgse.errors import ConvergenceError, InputDataError
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
 from dgse.physics.engines import FlowField, Solution, Source, register_engine
-from dgse.physics.fv import build_mesh
-from dgse.physics.rans import FlowSettings, solve_flow
+from dgse.physics.fv import Mesh, build_mesh
+from dgse.physics.rans import FlowSettings, FlowState, face_fluxes, scale_state, solve_flow
 from dgse.physics.transport import TransportSolver
 from dgse.world.layout import Layout
 
@@ -34,11 +34,19 @@ def flow_and_transport(
     physics: Physics = DEFAULT_PHYSICS,
     settings: FlowSettings | None = None,
     progress: Callable[[int, dict], None] | None = None,
+    warm_start: FlowField | None = None,
 ) -> tuple[FlowField, TransportSolver]:
-    """Solve the flow and build the (lazily factorized) transport operator on it."""
+    """Solve the flow and build the (lazily factorized) transport operator on it.
+
+    ``warm_start``: a flow of the same layout solved by this function at any
+    inlet speed (its ``info["inlet_velocity"]``); the iteration starts from it,
+    scaled to ``inlet_velocity`` (:func:`dgse.physics.rans.scale_state`), and
+    converges to the same residual criteria as a cold start.
+    """
     v = check_inlet_velocity(inlet_velocity)
     mesh = build_mesh(layout)
-    st, info = solve_flow(layout, mesh, v, physics, settings, progress)
+    initial = None if warm_start is None else _warm_state(mesh, warm_start, v)
+    st, info = solve_flow(layout, mesh, v, physics, settings, progress, initial=initial)
     info.pop("history", None)
     flow = FlowField(
         wind=mesh.field(np.stack([st.ux, st.uy])),
@@ -49,6 +57,21 @@ def flow_and_transport(
         info=info,
     )
     return flow, TransportSolver.build(mesh, st.F, st.nut, physics)
+
+
+def _warm_state(mesh: Mesh, flow: FlowField, inlet_velocity: float) -> FlowState:
+    """The :class:`FlowState` of a solved ``flow`` on ``mesh``, scaled to ``inlet_velocity`` m/s."""
+    v0 = flow.info.get("inlet_velocity")
+    if v0 is None or not v0 > 0:
+        raise InputDataError("warm_start needs a flow solved by the built-in solver (info['inlet_velocity'])")
+    if flow.wind.shape[1:] != mesh.shape or np.any(flow.wind[:, ~mesh.free] != 0):
+        raise InputDataError(f"warm_start flow of shape {flow.wind.shape[1:]} is not on this layout")
+    ux, uy = mesh.values(flow.wind[0]), mesh.values(flow.wind[1])
+    state = FlowState(
+        ux=ux, uy=uy, p=mesh.values(flow.pressure), k=mesh.values(flow.k), eps=mesh.values(flow.epsilon),
+        nut=mesh.values(flow.nut), F=face_fluxes(mesh, ux, uy, float(v0)),
+    )  # fmt: skip
+    return scale_state(state, inlet_velocity / float(v0))
 
 
 @dataclass

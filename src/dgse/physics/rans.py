@@ -28,12 +28,15 @@ from dataclasses import dataclass, replace
 
 import numba
 import numpy as np
+import scipy.ndimage as ndi
 import scipy.sparse.linalg as spla
 
+from dgse.errors import InputDataError
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
 from dgse.physics.fv import (
     AXIS,
     INLET,
+    INTERNAL,
     OUTLET,
     SIGN,
     WALL,
@@ -41,6 +44,7 @@ from dgse.physics.fv import (
     StencilMatrix,
     assemble,
     bound,
+    build_mesh,
     gauss_seidel,
     gradient,
     ho_source,
@@ -74,12 +78,32 @@ class FlowSettings:
     pressure_solver: str = "auto"
     lu_cells: int = 12000
     max_seconds: float = math.inf  #: give up (not converged) after this wall time
-    stall_window: int = 200  #: give up when the worst residual has not halved over this many iterations
+    #: give up when the worst residual has not halved over this many iterations and, at its
+    #: rate over them, would not reach the tolerance within ``max_iterations``
+    stall_window: int = 200
     #: the pressure residual measures how much the Rhie-Chow fluxes still change between
     #: iterations; it can level off at a small value once the fields no longer move
     p_tolerance_factor: float = 10.0
     #: (alpha_u, alpha_turb) of a second attempt after a stalled or diverged first one
     retry_relaxation: tuple[float, float] | None = (0.7, 0.7)
+    #: maps with more free cells than this start from their solution on a grid twice as
+    #: coarse (recursively); 0 never does
+    coarse_cells: int = 12000
+    #: residual tolerance of that coarse solution (it only has to be a good start)
+    coarse_tolerance: float = 1e-3
+    #: switched evolution relaxation (SER) of the turbulence on maps with more free cells
+    #: than this (0: never): the pseudo-time step ``alpha / (1 - alpha)`` of the k and epsilon
+    #: equations grows as ``ser_reference / r`` (``r``: the worst residual of the last five
+    #: iterations) from that of ``alpha_turb`` up to that of ``alpha_turb_max``; a rising
+    #: residual takes it back.  Large rooms converge slowly otherwise: the turbulence of their
+    #: big eddies moves by a small pseudo-time step per iteration.  The converged solution does
+    #: not depend on it (the momentum relaxation would: it enters the Rhie-Chow fluxes)
+    ser_cells: int = 12000
+    ser_reference: float = 1.0
+    alpha_turb_max: float = 0.99
+    #: Gauss-Seidel sweeps at most per transport solve while SER is on (the systems of a large
+    #: pseudo-time step are less diagonally dominant; the outer iteration does not need them solved)
+    ser_max_sweeps: int = 20
 
 
 @dataclass
@@ -93,6 +117,81 @@ class FlowState:
     eps: np.ndarray
     nut: np.ndarray
     F: np.ndarray
+
+    def copy(self) -> FlowState:
+        return FlowState(*(np.array(getattr(self, f)) for f in ("ux", "uy", "p", "k", "eps", "nut", "F")))
+
+
+def scale_state(state: FlowState, factor: float) -> FlowState:
+    """The state of the same map at ``factor`` times the inlet speed, by high-Reynolds similarity.
+
+    Velocities and fluxes scale with the speed, kinematic pressure and ``k``
+    with its square, ``epsilon`` with its cube, ``nu_t`` with the speed: the
+    exact solution where the molecular viscosity does not matter, and a start
+    a few iterations from the solution otherwise.
+    """
+    f = float(factor)
+    return FlowState(
+        ux=state.ux * f, uy=state.uy * f, p=state.p * f**2, k=state.k * f**2,
+        eps=state.eps * f**3, nut=state.nut * f, F=state.F * f,
+    )  # fmt: skip
+
+
+def face_fluxes(mesh: Mesh, ux: np.ndarray, uy: np.ndarray, inlet_velocity: float) -> np.ndarray:
+    """Outward face fluxes ``(n, 4)`` (m^2/s per m of depth) interpolated from cell velocities (m/s).
+
+    Internal faces take the mean of their two cells, outlets the cell's
+    velocity, inlets ``-inlet_velocity * h``, walls 0.  Not conservative: a
+    start for :func:`solve_flow`, whose first pressure solve makes it so.
+    """
+    u = np.stack([ux, uy], axis=1)[:, AXIS]  # (n, 4): the velocity component normal to each face
+    internal = mesh.ft == INTERNAL
+    u_nb = u[np.where(internal, mesh.nb, 0), np.arange(4)]
+    F = np.where(internal, 0.5 * (u + u_nb), 0.0)
+    F = np.where(mesh.ft == OUTLET, u, F) * SIGN * mesh.h
+    return np.where(mesh.ft == INLET, -inlet_velocity * mesh.h, F)
+
+
+def coarsen_layout(layout: Layout) -> Layout | None:
+    """``layout`` on a grid twice as coarse, or ``None`` where that loses an opening's way out.
+
+    A coarse cell is solid when any of its (up to four) fine cells is: walls
+    never leak, a gap one fine cell wide closes.  Free regions that touch no
+    opening become solid; a region with inlets but no outlet gives ``None``.
+    Odd sides repeat their last row or column.
+    """
+    occ = layout.occupancy
+    H, W = occ.shape
+    if min(H, W) < 8:
+        return None
+    pad = np.pad(occ, ((0, H % 2), (0, W % 2)), mode="edge")
+    coarse = pad.reshape(pad.shape[0] // 2, 2, pad.shape[1] // 2, 2).max(axis=(1, 3))
+    try:
+        lay = Layout(coarse, layout.inlets, layout.outlets, 2 * layout.resolution, name=layout.name)
+        labels, _ = ndi.label(lay.free)
+        with_in = set(np.unique(labels[lay.opening_mask("inlet")])) - {0}
+        with_out = set(np.unique(labels[lay.opening_mask("outlet")])) - {0}
+        if with_in - with_out:
+            return None
+        keep = np.isin(labels, sorted(with_in | with_out))
+        return Layout(
+            (~keep).astype(np.uint8), layout.inlets, layout.outlets, lay.resolution, name=layout.name
+        )
+    except InputDataError:  # an opening lost all its free cells
+        return None
+
+
+def prolong_state(coarse: Mesh, state: FlowState, fine: Mesh, inlet_velocity: float) -> FlowState:
+    """A state on ``fine`` from one on ``coarse`` (cells twice the size): each fine cell takes
+    its coarse cell's values, or those of the nearest free coarse cell; fluxes by :func:`face_fluxes`."""
+    _, (ni, nj) = ndi.distance_transform_edt(~coarse.free, return_indices=True)
+    i, j = fine.cells[:, 0] // 2, fine.cells[:, 1] // 2
+    idx = coarse.index[ni[i, j], nj[i, j]]
+    ux, uy = state.ux[idx], state.uy[idx]
+    return FlowState(
+        ux=ux, uy=uy, p=state.p[idx], k=state.k[idx], eps=state.eps[idx], nut=state.nut[idx],
+        F=face_fluxes(fine, ux, uy, inlet_velocity),
+    )  # fmt: skip
 
 
 class PressureSolver:
@@ -455,26 +554,53 @@ def solve_flow(
     physics: Physics = DEFAULT_PHYSICS,
     settings: FlowSettings | None = None,
     progress: Callable[[int, dict], None] | None = None,
+    initial: FlowState | None = None,
 ) -> tuple[FlowState, dict]:
     """Solve the steady RANS flow; returns the final state and an info dict.
 
-    A run that stalls or diverges is tried again from rest with the stronger
-    under-relaxation ``settings.retry_relaxation`` (as one would by hand in
-    OpenFOAM).  ``info`` holds ``iterations`` (all attempts), ``converged``,
-    ``stalled``, ``diverged``, the last normalised initial residuals per
-    equation, ``seconds``, the residual ``history`` and one summary per attempt.
+    The iteration starts from ``initial`` when given (a warm start: e.g. the
+    solution of the same map at another inlet speed, scaled by
+    :func:`scale_state`), else on a map with more than
+    ``settings.coarse_cells`` free cells from the solution on a grid twice as
+    coarse (:func:`coarsen_layout`, solved the same way to
+    ``settings.coarse_tolerance``), else from rest.  The start changes the
+    path, not the converged solution.  A run that stalls or diverges is
+    tried again with the stronger under-relaxation ``settings.retry_relaxation``
+    from the same start (as one would by hand in OpenFOAM).  ``info`` holds
+    ``iterations`` (all attempts on this grid), ``converged``, ``stalled``,
+    ``diverged``, the last normalised initial residuals per equation,
+    ``seconds`` (coarse solves included), the residual ``history``, one summary
+    per attempt, ``start`` (``"initial"``, ``"coarse"`` or ``"rest"``) and, after a
+    coarse start, ``coarse``: the coarse solve's info (without its history).
     """
     s = settings or FlowSettings()
     t0 = time.perf_counter()
-    st, info = _simplec(layout, mesh, inlet_velocity, physics, s, progress)
+    start = "rest" if initial is None else "initial"
+    coarse_info = None
+    if initial is None and 0 < s.coarse_cells < mesh.n:
+        coarse_layout = coarsen_layout(layout)
+        if coarse_layout is not None:
+            cmesh = build_mesh(coarse_layout)
+            cs = replace(s, tolerance=max(s.tolerance, s.coarse_tolerance))
+            cst, coarse_info = solve_flow(coarse_layout, cmesh, inlet_velocity, physics, cs)
+            coarse_info.pop("history", None)
+            if np.isfinite(cst.ux).all() and not coarse_info["diverged"]:
+                initial, start = prolong_state(cmesh, cst, mesh, inlet_velocity), "coarse"
+    s_fine = replace(s, max_seconds=s.max_seconds - (time.perf_counter() - t0))
+    st, info = _simplec(layout, mesh, inlet_velocity, physics, s_fine, progress, initial)
     attempts = [_summary(info, s)]
     if (info["stalled"] or info["diverged"]) and s.retry_relaxation is not None:
         a_u, a_t = s.retry_relaxation
-        s2 = replace(s, alpha_u=a_u, alpha_turb=a_t, max_seconds=s.max_seconds - info["seconds"])
-        st, info = _simplec(layout, mesh, inlet_velocity, physics, s2, progress)
+        left = s.max_seconds - (time.perf_counter() - t0)
+        s2 = replace(s, alpha_u=a_u, alpha_turb=a_t, max_seconds=left, ser_cells=0)
+        st, info = _simplec(layout, mesh, inlet_velocity, physics, s2, progress, initial)
         attempts.append(_summary(info, s2))
     info["attempts"] = attempts
     info["iterations"] = sum(a["iterations"] for a in attempts)
+    info["start"] = start
+    if coarse_info is not None:
+        info["coarse"] = coarse_info
+    info["inlet_velocity"] = float(inlet_velocity)
     info["seconds"] = time.perf_counter() - t0
     return st, info
 
@@ -487,7 +613,44 @@ def _converged(residuals: dict[str, float], s: FlowSettings) -> bool:
 
 def _summary(info: dict, s: FlowSettings) -> dict:
     keys = ("iterations", "converged", "stalled", "diverged", "residuals", "seconds")
-    return {**{k: info[k] for k in keys}, "alpha_u": s.alpha_u, "alpha_turb": s.alpha_turb}
+    return {
+        **{k: info[k] for k in keys},
+        "alpha_u": s.alpha_u,
+        "alpha_turb": s.alpha_turb,
+        "ser": info["ser"],
+    }
+
+
+def _worst(residuals: dict[str, float], s: FlowSettings) -> float:
+    """The largest residual, the pressure one divided by ``p_tolerance_factor`` (as :func:`_converged`)."""
+    return max(v / s.p_tolerance_factor if k == "p" else v for k, v in residuals.items())
+
+
+def _stalled(worst: list[float], window: int, tolerance: float, iterations_left: int) -> bool:
+    """The worst residual did not halve over the last ``window`` iterations and, falling at
+    its rate over them, would not reach ``tolerance`` in ``iterations_left`` (an oscillating
+    or stuck iteration; a slow but steady one goes on)."""
+    recent, before = min(worst[-window:]), min(worst[:-window])
+    if recent <= 0.5 * before:
+        return False
+    rate = math.log(before / recent) / window if recent > 0 else math.inf
+    return rate <= 0 or math.log(recent / tolerance) / rate > iterations_left
+
+
+def _pseudo_step_factor(worst: list[float], s: FlowSettings) -> float:
+    """SER growth of the pseudo-time step: ``ser_reference / r``, at least 1 (see :class:`FlowSettings`)."""
+    if not worst:
+        return 1.0
+    r = max(worst[-5:])
+    return max(1.0, s.ser_reference / r) if r > 0 else math.inf
+
+
+def _relaxation(alpha: float, alpha_max: float, factor: float) -> float:
+    """``alpha`` with its pseudo-time step ``alpha / (1 - alpha)`` times ``factor``, at most ``alpha_max``."""
+    if alpha >= alpha_max:
+        return alpha
+    w = min(alpha / (1.0 - alpha) * factor, alpha_max / (1.0 - alpha_max))
+    return w / (1.0 + w)
 
 
 def _simplec(
@@ -497,8 +660,9 @@ def _simplec(
     physics: Physics,
     s: FlowSettings,
     progress: Callable[[int, dict], None] | None,
+    initial: FlowState | None = None,
 ) -> tuple[FlowState, dict]:
-    """One SIMPLEC run from rest (see :func:`solve_flow`)."""
+    """One SIMPLEC run from ``initial`` or from rest (see :func:`solve_flow`)."""
     t0 = time.perf_counter()
     nb, ft, h = mesh.nb, mesh.ft, mesh.h
     n = mesh.n
@@ -520,15 +684,23 @@ def _simplec(
     stencil = StencilMatrix(mesh)
     psolver = PressureSolver(s.max_krylov, s.pressure_solver, s.lu_cells)
 
-    st = FlowState(
-        ux=np.zeros(n),
-        uy=np.zeros(n),
-        p=np.zeros(n),
-        k=np.full(n, k_in),
-        eps=np.full(n, eps_in),
-        nut=np.full(n, Cmu * k_in**2 / eps_in),
-        F=np.where(inlet, -inlet_velocity * h, 0.0),
-    )
+    if initial is None:
+        st = FlowState(
+            ux=np.zeros(n),
+            uy=np.zeros(n),
+            p=np.zeros(n),
+            k=np.full(n, k_in),
+            eps=np.full(n, eps_in),
+            nut=np.full(n, Cmu * k_in**2 / eps_in),
+            F=np.where(inlet, -inlet_velocity * h, 0.0),
+        )
+    else:
+        if initial.ux.shape != (n,) or initial.F.shape != (n, 4):
+            raise InputDataError(f"initial state has {initial.ux.shape[0]} cells, the mesh {n}")
+        st = initial.copy()
+        st.F = np.where(inlet, -inlet_velocity * h, st.F)
+        st.k = np.maximum(st.k, 1e-15)
+        st.eps = np.maximum(st.eps, 1e-15)
     residuals: dict[str, float] = {}
     history: list[dict[str, float]] = []
     converged = False
@@ -536,9 +708,14 @@ def _simplec(
     worst: list[float] = []
     n_limited = 0
     sweeps = {"U": 0, "k": 0, "epsilon": 0}
+    ser = 0 < s.ser_cells < n
+    s_it = s
     it = 0
     for it in range(1, s.max_iterations + 1):
         F = st.F
+        if ser:
+            a_t = _relaxation(s.alpha_turb, s.alpha_turb_max, _pseudo_step_factor(worst, s))
+            s_it = replace(s, alpha_turb=a_t, max_sweeps=min(s.max_sweeps, s.ser_max_sweeps))
         nueff = nu + st.nut
         yplus, nutw = turb.wall_functions(st.k)
         # ---- momentum predictor ---------------------------------------------------------
@@ -554,14 +731,14 @@ def _simplec(
         if s.high_order:
             bx += ho_source(st.ux, gradient(st.ux, ubx, fixed_u, nb, ft, h, True), F, nb, ft, h)
             by += ho_source(st.uy, gradient(st.uy, uby, fixed_u, nb, ft, h, True), F, nb, ft, h)
-        aPr, bx = relax(aP, a, bx, st.ux, s.alpha_u)
+        aPr, bx = relax(aP, a, bx, st.ux, s_it.alpha_u)
         by = by + (aPr - aP) * st.uy
         gp = gradient(st.p, zero4, outlet, nb, ft, h, False)
         rhs_x = bx - gp[:, 0] * V
         rhs_y = by - gp[:, 1] * V
         u_star = np.stack([st.ux, st.uy], axis=1)
         n_sw, res = gauss_seidel(
-            aPr, a, np.stack([rhs_x, rhs_y], axis=1), nb, u_star, s.rel_tol, s.max_sweeps
+            aPr, a, np.stack([rhs_x, rhs_y], axis=1), nb, u_star, s.rel_tol, s_it.max_sweeps
         )
         sweeps["U"] += n_sw
         residuals["Ux"], residuals["Uy"] = float(res[0]), float(res[1])
@@ -586,7 +763,7 @@ def _simplec(
         st.uy = hbyay - rAtU * gp[:, 1]
 
         # ---- k-epsilon ---------------------------------------------------------------------
-        n_limited = turb.step(st, s, yplus, nutw, residuals, sweeps)
+        n_limited = turb.step(st, s_it, yplus, nutw, residuals, sweeps)
 
         history.append(dict(residuals))
         if progress is not None:
@@ -595,9 +772,9 @@ def _simplec(
         if finite and _converged(residuals, s):
             converged = True
             break
-        worst.append(max(residuals.values()))
+        worst.append(_worst(residuals, s))
         w = s.stall_window
-        if it > 2 * w and min(worst[-w:]) > 0.5 * min(worst[:-w]):
+        if it > 2 * w and _stalled(worst, w, s.tolerance, s.max_iterations - it):
             stalled = True  # an oscillating or stuck iteration: report it, don't burn time
             break
         if not finite or time.perf_counter() - t0 > s.max_seconds:
@@ -612,6 +789,8 @@ def _simplec(
         "length_scale_limited_cells": n_limited,
         "pressure_factorizations": psolver.factorizations,
         "pressure_cg_iterations": psolver.krylov_iterations,
+        "ser": ser,
+        "final_relaxation": (s_it.alpha_u, s_it.alpha_turb),
         "gauss_seidel_sweeps": sweeps,
         "history": history,
     }

@@ -1,0 +1,159 @@
+"""The RANS solver at building scale: AMG pressure, coarse start, SER relaxation, warm starts.
+
+How the equations are solved must not change what they converge to: every
+strategy is checked against the plain iteration on a small map, and a
+200 x 200 multi-room map (slow) against the residual criteria and continuity.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from dgse.physics.builtin import flow_and_transport
+from dgse.physics.fv import INLET, OUTLET, build_mesh
+from dgse.physics.rans import (
+    FlowSettings,
+    PressureSolver,
+    coarsen_layout,
+    face_fluxes,
+    prolong_state,
+    scale_state,
+    solve_flow,
+)
+from dgse.world.generate import random_layout_with_rooms
+from tests.conftest import two_rooms
+
+TIGHT = FlowSettings(tolerance=1e-5)
+#: every large-map strategy off: the iteration of the paper-size maps
+PLAIN = FlowSettings(tolerance=1e-5, coarse_cells=0, ser_cells=0, pressure_solver="lu")
+
+
+def _rel(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.linalg.norm(a - b) / np.linalg.norm(b))
+
+
+@pytest.fixture(scope="module")
+def plain():
+    layout = two_rooms(40, 30)
+    mesh = build_mesh(layout)
+    st, info = solve_flow(layout, mesh, 1.5, settings=PLAIN)
+    assert info["converged"] and info["start"] == "rest"
+    return layout, mesh, st, info
+
+
+def test_pressure_solvers_agree():
+    """AMG- and LU-preconditioned CG solve a Poisson problem to the asked tolerance."""
+    n = 60
+    lap1 = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(n, n))
+    A = (sp.kron(lap1, sp.identity(n)) + sp.kron(sp.identity(n), lap1)).tocsr()
+    b = np.random.default_rng(0).normal(size=n * n)
+    x0 = np.zeros(n * n)
+    for method in ("amg", "lu"):
+        ps = PressureSolver(max_krylov=20, method=method)
+        for _ in range(2):  # the second solve reuses the preconditioner
+            x = ps.solve(A * 1.01, b, x0, 1e-8)
+            assert np.linalg.norm(b - A * 1.01 @ x) <= 1e-8 * np.linalg.norm(b)
+        assert ps.factorizations == 1
+    with pytest.raises(ValueError, match="unknown pressure solver"):
+        PressureSolver(8, "gmg")
+
+
+@pytest.mark.parametrize(
+    "settings",
+    [
+        FlowSettings(tolerance=1e-5, coarse_cells=0, ser_cells=0, pressure_solver="amg"),
+        FlowSettings(tolerance=1e-5, coarse_cells=0, ser_cells=1, pressure_solver="lu"),
+        FlowSettings(tolerance=1e-5, coarse_cells=1, ser_cells=0, pressure_solver="lu"),
+    ],
+    ids=["amg", "ser", "coarse-start"],
+)
+def test_strategies_converge_to_the_same_flow(plain, settings):
+    layout, mesh, st0, _ = plain
+    st, info = solve_flow(layout, mesh, 1.5, settings=settings)
+    assert info["converged"]
+    assert _rel(np.stack([st.ux, st.uy]), np.stack([st0.ux, st0.uy])) < 2e-3
+    assert _rel(st.k, st0.k) < 1e-2
+    if settings.coarse_cells:
+        assert info["start"] == "coarse" and info["coarse"]["iterations"] > 0
+
+
+def test_default_settings_leave_paper_size_maps_alone(plain):
+    """Under 12k cells the defaults are the plain iteration: the same flow, bit for bit."""
+    layout, mesh, st0, info0 = plain
+    st, info = solve_flow(layout, mesh, 1.5, settings=TIGHT)
+    assert info["start"] == "rest" and not info["ser"]
+    assert info["iterations"] == info0["iterations"]
+    assert np.array_equal(st.ux, st0.ux) and np.array_equal(st.k, st0.k)
+
+
+def test_coarsen_layout_keeps_walls_and_openings():
+    layout = two_rooms(41, 30)  # odd width
+    coarse = coarsen_layout(layout)
+    assert coarse is not None
+    assert coarse.occupancy.shape == (15, 21) and coarse.resolution == pytest.approx(0.2)
+    assert coarse.occupancy[:, 10].sum() >= 13  # the wall stays, its door stays open
+    assert coarse.opening_mask("inlet").any() and coarse.opening_mask("outlet").any()
+    # a room reachable through a one-cell gap only is cut off: it becomes solid
+    occ = layout.occupancy.copy()
+    occ[:, 20] = 1
+    occ[14, 20] = 0
+    from dgse.world.layout import Layout
+
+    cut = Layout(occ, layout.inlets, layout.outlets)
+    assert coarsen_layout(cut) is None  # the inlet's air could not reach the outlet
+
+
+def test_prolongation_and_scaling(plain):
+    layout, mesh, st, _ = plain
+    coarse = coarsen_layout(layout)
+    cmesh = build_mesh(coarse)
+    cst, info = solve_flow(coarse, cmesh, 1.5, settings=FlowSettings(tolerance=1e-3))
+    fine = prolong_state(cmesh, cst, mesh, 1.5)
+    assert fine.ux.shape == (mesh.n,) and fine.F.shape == (mesh.n, 4)
+    assert np.all(fine.k > 0) and np.all(fine.eps > 0)
+    assert _rel(np.stack([fine.ux, fine.uy]), np.stack([st.ux, st.uy])) < 0.5  # a start, not the answer
+    assert fine.F[mesh.ft == INLET].sum() == pytest.approx(-1.5 * 0.1 * (mesh.ft == INLET).sum())
+    # interpolated fluxes of the solution are close to its conservative (Rhie-Chow) ones
+    assert _rel(face_fluxes(mesh, st.ux, st.uy, 1.5), st.F) < 0.1
+    s2 = scale_state(st, 2.0)
+    assert np.allclose(s2.ux, 2 * st.ux) and np.allclose(s2.k, 4 * st.k) and np.allclose(s2.eps, 8 * st.eps)
+
+
+def test_warm_start_equals_cold_start():
+    layout = two_rooms(40, 30)
+    cold, ts_cold = flow_and_transport(layout, 2.0, settings=TIGHT)
+    prev, _ = flow_and_transport(layout, 1.2, settings=TIGHT)
+    warm, ts_warm = flow_and_transport(layout, 2.0, settings=TIGHT, warm_start=prev)
+    assert cold.info["converged"] and warm.info["converged"]
+    assert warm.info["start"] == "initial"
+    assert warm.info["iterations"] < 0.8 * cold.info["iterations"]
+    assert _rel(warm.wind, cold.wind) < 2e-3
+    assert _rel(warm.k, cold.k) < 1e-2
+    assert np.abs(ts_warm.F.sum(axis=1)).max() < 1e-4 * 2.0 * 0.9
+
+
+def test_warm_start_from_another_layout_is_rejected():
+    prev, _ = flow_and_transport(two_rooms(40, 30), 1.2, settings=FlowSettings(max_iterations=2))
+    with pytest.raises(ValueError, match="not on this layout"):
+        flow_and_transport(two_rooms(30, 20), 2.0, warm_start=prev)
+
+
+@pytest.mark.slow
+def test_multi_room_200x200_converges_and_conserves_mass():
+    layout, rooms = random_layout_with_rooms(3, width_range=(20.0, 20.0), height_range=(20.0, 20.0))
+    assert layout.occupancy.shape == (200, 200) and len(rooms) >= 2
+    v = 2.0
+    mesh = build_mesh(layout)
+    st, info = solve_flow(layout, mesh, v)
+    assert info["converged"], info["attempts"]
+    assert info["start"] == "coarse"
+    assert info["iterations"] <= 600  # fine-grid iterations (was: not converged after 1000)
+    r = info["residuals"]
+    s = FlowSettings()
+    assert max(v for k, v in r.items() if k != "p") < s.tolerance and r["p"] < s.tolerance * s.p_tolerance_factor
+    inflow = -st.F[mesh.ft == INLET].sum()
+    assert inflow == pytest.approx(v * sum(o.width_m for o in layout.inlets), rel=0.1)
+    assert np.abs(st.F.sum(axis=1)).max() < 1e-3 * inflow  # every cell's net face flux ~ 0
+    assert st.F[mesh.ft == OUTLET].sum() == pytest.approx(inflow, rel=1e-3)
