@@ -78,6 +78,7 @@ from dgse.physics.openings import potential_flow_proposals
 from dgse.physics.projection import project_wind, transport_from_wind
 from dgse.physics.rans import FlowSettings
 from dgse.sensing.sensors import Observations
+from dgse.threads import with_one_blas_thread
 from dgse.world.layout import Layout
 
 __all__ = ["DEFAULT_SPEEDS", "FlowHypothesis", "PhysicsGuidedEstimator", "make_dgse_phys", "mix_posteriors"]
@@ -387,6 +388,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         return self._learned.estimate(occupancy, resolution, obs)
 
     # -- estimate ---------------------------------------------------------------------------------
+    @with_one_blas_thread
     def estimate(self, occupancy: np.ndarray, resolution: float, observations: Observations) -> Belief:
         """The mixture posterior and fields given the readings (module docstring).
 
