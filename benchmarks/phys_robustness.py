@@ -14,7 +14,8 @@ one way at a time:
 The wind perturbations change only what the estimator is told, never the
 readings.  Methods: DGSE-S at ``map`` and ``dgse-phys`` at ``map``,
 ``openings`` and ``wind`` (the perturbations touch only the last).  Mean and
-median SL error (m) and mean source CE (nats) per variant, method and count;
+median SL error (m), mean source CE (nats) and the credible sets' calibration
+error per variant, method and count;
 every estimate is journaled, so an interrupted run resumes::
 
     python benchmarks/phys_robustness.py --trials 2
@@ -34,6 +35,7 @@ from scipy import ndimage
 
 from dgse.estimators.knowledge import Knowledge
 from dgse.estimators.registry import get_estimator
+from dgse.evaluation.calibration import calibration_error, credible_level
 from dgse.evaluation.evaluate import draw_observations, summarize
 from dgse.evaluation.metrics import source_cross_entropy, source_localization_error
 from dgse.world.case import Case
@@ -124,6 +126,7 @@ def main() -> None:
                                 "trial": trial,
                                 "sl_m": source_localization_error(b, base.source),
                                 "ce": source_cross_entropy(b, base.source_cell),
+                                "credible_level": credible_level(b.source_probs, base.source_cell),
                             }
                             jf.write(json.dumps(rec) + "\n")
                             jf.flush()
@@ -134,7 +137,9 @@ def main() -> None:
         "# dgse-phys where the physics is wrong",
         "",
         "`python benchmarks/phys_robustness.py` (test scenarios 2000-2007, "
-        f"{args.trials} trials): SL error mean / median (m), source CE mean (nats).",
+        f"{args.trials} trials): SL error mean / median (m), source CE mean (nats), and the "
+        "calibration error of the source posterior's highest-density credible sets "
+        "(mean |coverage - level|, `dgse.evaluation.calibration`).",
         "",
     ]
     for variant in VARIANTS:
@@ -151,11 +156,13 @@ def main() -> None:
                     cells.append("-")
                     continue
                 sl, ce = summarize(r["sl_m"] for r in rr), summarize(r["ce"] for r in rr)
+                ece = calibration_error([r["credible_level"] for r in rr])
                 summary.setdefault(variant, {}).setdefault(f"{method}@{level}", {})[str(n)] = {
                     "sl_m": sl,
                     "ce": ce,
+                    "credible_set_calibration_error": ece,
                 }
-                cells.append(f"{sl['mean']:.2f} / {sl['median']:.2f} / {ce['mean']:.1f}")
+                cells.append(f"{sl['mean']:.2f} / {sl['median']:.2f} / {ce['mean']:.1f} / {ece:.2f}")
             if any(c != "-" for c in cells):
                 lines.append(f"| {method}@{level} | " + " | ".join(cells) + " |")
         lines.append("")
