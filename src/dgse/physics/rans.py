@@ -93,13 +93,13 @@ class FlowSettings:
     coarse_tolerance: float = 1e-3
     #: switched evolution relaxation (SER) of the turbulence on maps with more free cells
     #: than this (0: never): the pseudo-time step ``alpha / (1 - alpha)`` of the k and epsilon
-    #: equations grows as ``ser_reference / r`` (``r``: the worst residual of the last five
-    #: iterations) from that of ``alpha_turb`` up to that of ``alpha_turb_max``; a rising
-    #: residual takes it back.  Large rooms converge slowly otherwise: the turbulence of their
-    #: big eddies moves by a small pseudo-time step per iteration.  The converged solution does
-    #: not depend on it (the momentum relaxation would: it enters the Rhie-Chow fluxes)
+    #: equations grows as ``r0 / r`` (``r``: the worst residual of the last five iterations,
+    #: ``r0``: of the first five) from that of ``alpha_turb`` up to that of ``alpha_turb_max``;
+    #: a rising residual takes it back.  Large rooms converge slowly otherwise: the turbulence
+    #: of their big eddies moves by a small pseudo-time step per iteration.  The converged
+    #: solution does not depend on it (the momentum relaxation would: it enters the Rhie-Chow
+    #: fluxes)
     ser_cells: int = 12000
-    ser_reference: float = 1.0
     alpha_turb_max: float = 0.99
 
 
@@ -655,12 +655,12 @@ def _stalled(worst: list[float], window: int, tolerance: float, iterations_left:
     return rate <= 0 or math.log(recent / tolerance) / rate > iterations_left
 
 
-def _pseudo_step_factor(worst: list[float], s: FlowSettings) -> float:
-    """SER growth of the pseudo-time step: ``ser_reference / r``, at least 1 (see :class:`FlowSettings`)."""
+def _pseudo_step_factor(worst: list[float]) -> float:
+    """SER growth of the pseudo-time step: ``r0 / r``, at least 1 (see :class:`FlowSettings`)."""
     if not worst:
         return 1.0
     r = max(worst[-5:])
-    return max(1.0, s.ser_reference / r) if r > 0 else math.inf
+    return max(1.0, max(worst[:5]) / r) if r > 0 else math.inf
 
 
 def _relaxation(alpha: float, alpha_max: float, factor: float) -> float:
@@ -732,7 +732,7 @@ def _simplec(
     for it in range(1, s.max_iterations + 1):
         F = st.F
         if ser:
-            a_t = _relaxation(s.alpha_turb, s.alpha_turb_max, _pseudo_step_factor(worst, s))
+            a_t = _relaxation(s.alpha_turb, s.alpha_turb_max, _pseudo_step_factor(worst))
             s_it = replace(s, alpha_turb=a_t)
         nueff = nu + st.nut
         yplus, nutw = turb.wall_functions(st.k)
