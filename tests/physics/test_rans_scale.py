@@ -109,7 +109,7 @@ def test_prolongation_and_scaling(plain):
     layout, mesh, st, _ = plain
     coarse = coarsen_layout(layout)
     cmesh = build_mesh(coarse)
-    cst, info = solve_flow(coarse, cmesh, 1.5, settings=FlowSettings(tolerance=1e-3))
+    cst, _ = solve_flow(coarse, cmesh, 1.5, settings=FlowSettings(tolerance=1e-3))
     fine = prolong_state(cmesh, cst, mesh, 1.5)
     assert fine.ux.shape == (mesh.n,) and fine.F.shape == (mesh.n, 4)
     assert np.all(fine.k > 0) and np.all(fine.eps > 0)
@@ -123,7 +123,7 @@ def test_prolongation_and_scaling(plain):
 
 def test_warm_start_equals_cold_start():
     layout = two_rooms(40, 30)
-    cold, ts_cold = flow_and_transport(layout, 2.0, settings=TIGHT)
+    cold, _ = flow_and_transport(layout, 2.0, settings=TIGHT)
     prev, _ = flow_and_transport(layout, 1.2, settings=TIGHT)
     warm, ts_warm = flow_and_transport(layout, 2.0, settings=TIGHT, warm_start=prev)
     assert cold.info["converged"] and warm.info["converged"]
@@ -149,10 +149,14 @@ def test_multi_room_200x200_converges_and_conserves_mass():
     st, info = solve_flow(layout, mesh, v)
     assert info["converged"], info["attempts"]
     assert info["start"] == "coarse"
-    assert info["iterations"] <= 600  # fine-grid iterations (was: not converged after 1000)
+    # fine-grid iterations of both attempts: on this map the first (SER) one oscillates and
+    # stalls at ~400, the retry at relaxation 0.7 from the same coarse start converges (1121
+    # in all); before issue 14 the solver reported it not converged
+    assert info["iterations"] <= 1400
     r = info["residuals"]
     s = FlowSettings()
-    assert max(v for k, v in r.items() if k != "p") < s.tolerance and r["p"] < s.tolerance * s.p_tolerance_factor
+    assert max(v for k, v in r.items() if k != "p") < s.tolerance
+    assert r["p"] < s.tolerance * s.p_tolerance_factor
     inflow = -st.F[mesh.ft == INLET].sum()
     assert inflow == pytest.approx(v * sum(o.width_m for o in layout.inlets), rel=0.1)
     assert np.abs(st.F.sum(axis=1)).max() < 1e-3 * inflow  # every cell's net face flux ~ 0
