@@ -12,7 +12,9 @@ Stop rules (``--rule``):
 
 * ``paper``: the entropy test from the 5th reading (``min_observations=5``);
 * ``confirm``: the same, and a stop needs 2 readings within 1 m of the posterior's
-  mode (``confirm_radius_m=1``, ``confirm_readings=2``).
+  mode (``confirm_radius_m=1``, ``confirm_readings=2``);
+* ``mass1m90`` / ``mass2m95``: instead of the entropy test, stop once the posterior
+  holds 90 % within 1 m (95 % within 2 m) of its mode (``mass_radius_m``, ``mass_level``).
 
 Every finished episode is journaled beside the JSON, so an interrupted run resumes::
 
@@ -32,6 +34,8 @@ SETS = {"validation": range(900, 908), "test": range(2000, 2020)}
 RULES: dict[str, dict[str, Any]] = {
     "paper": {"min_observations": 5},
     "confirm": {"min_observations": 5, "confirm_radius_m": 1.0, "confirm_readings": 2},
+    "mass1m90": {"min_observations": 5, "mass_radius_m": 1.0, "mass_level": 0.9},
+    "mass2m95": {"min_observations": 5, "mass_radius_m": 2.0, "mass_level": 0.95},
 }
 
 

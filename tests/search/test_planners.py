@@ -15,6 +15,7 @@ from dgse.search.planners import (
     SearchHistory,
     UtilityPlanner,
     get_planner,
+    mass_near_mode,
     planner_names,
     register_planner,
 )
@@ -167,6 +168,24 @@ def test_a_stop_needs_readings_near_the_mode():
     )
     for bad in ({"confirm_radius_m": 0.0}, {"confirm_radius_m": math.nan}, {"confirm_readings": 0}):
         with pytest.raises(InputDataError, match="confirm"):
+            UtilityPlanner(**bad)
+
+
+def test_mass_near_the_mode_stop_rule():
+    """mass_radius_m: stop once the posterior holds mass_level within the radius of its mode."""
+    occ = np.zeros((20, 20), np.uint8)
+    p = np.full((20, 20), 1e-6)
+    p[10, 10] = 0.5
+    p[10, 11] = p[10, 9] = 0.2  # 0.9 within 0.1 m of the mode (cells of 0.1 m)
+    p[2, 2] = 0.1  # 0.1 far away
+    belief = _belief(occ, p, res=0.1)
+    assert mass_near_mode(belief, 0.1) == pytest.approx(0.9, abs=1e-3)
+    assert mass_near_mode(belief, 0.05) == pytest.approx(0.5, abs=1e-3)
+    assert UtilityPlanner(mass_radius_m=0.1, mass_level=0.85).should_stop(belief, None)
+    assert not UtilityPlanner(mass_radius_m=0.1, mass_level=0.95).should_stop(belief, None)
+    assert not UtilityPlanner(mass_radius_m=0.05, mass_level=0.85).should_stop(belief, None)
+    for bad in ({"mass_radius_m": -1.0}, {"mass_level": 0.0}, {"mass_level": 1.5}):
+        with pytest.raises(InputDataError, match="mass_"):
             UtilityPlanner(**bad)
 
 

@@ -81,6 +81,7 @@ __all__ = [
     "SearchHistory",
     "UtilityPlanner",
     "get_planner",
+    "mass_near_mode",
     "planner_names",
     "register_planner",
 ]
@@ -150,6 +151,16 @@ class Planner(Protocol):
         ...
 
 
+def mass_near_mode(belief: Belief, radius_m: float) -> float:
+    """Source posterior mass within ``radius_m`` of the posterior's mode (cell centres)."""
+    p = belief.source_probs
+    i, j = np.unravel_index(int(np.argmax(p)), p.shape)
+    H, W = p.shape
+    ii, jj = np.ogrid[0:H, 0:W]
+    near = np.hypot(ii - i, jj - j) * belief.resolution <= radius_m + 1e-9
+    return float(p[near].sum() / max(float(p.sum()), 1e-300))
+
+
 @dataclass
 class UtilityPlanner:
     """The paper's utility planner with entropy termination (see the module docstring).
@@ -173,6 +184,11 @@ class UtilityPlanner:
             from afar (clipped noise in clean air can make one); measured at, the estimator
             keeps it only if the readings there agree.
         confirm_readings: readings near the mode the stop needs (with ``confirm_radius_m``).
+        mass_radius_m: None (the entropy test) or a radius, m: the stop test becomes "the
+            posterior holds at least ``mass_level`` within this distance of its mode"; with
+            a calibrated posterior, that share of the stops lies within the radius of the
+            source, whatever the map's size (the entropy test's meaning depends on it).
+        mass_level: the posterior mass the stop needs within ``mass_radius_m``.
     """
 
     w_d: float = 0.1
@@ -186,6 +202,8 @@ class UtilityPlanner:
     min_observations: int = 0
     confirm_radius_m: float | None = None
     confirm_readings: int = 2
+    mass_radius_m: float | None = None
+    mass_level: float = 0.9
     name: str = field(default="utility", init=False)
 
     def __post_init__(self) -> None:
@@ -215,6 +233,14 @@ class UtilityPlanner:
         if self.confirm_readings < 1:
             raise InputDataError(f"confirm_readings must be >= 1, got {self.confirm_readings}")
         self.confirm_readings = int(self.confirm_readings)
+        if self.mass_radius_m is not None:
+            r = float(self.mass_radius_m)
+            if not (math.isfinite(r) and r > 0):
+                raise InputDataError(f"mass_radius_m must be a positive number of m or None, got {r}")
+            self.mass_radius_m = r
+        if not (0.0 < float(self.mass_level) <= 1.0):
+            raise InputDataError(f"mass_level must lie in (0, 1], got {self.mass_level}")
+        self.mass_level = float(self.mass_level)
         if self.distance_unit not in ("m", "cell"):
             raise InputDataError(f"distance_unit must be 'm' or 'cell', got {self.distance_unit!r}")
 
@@ -233,6 +259,9 @@ class UtilityPlanner:
         return history is None or self._unconfirmed_mode(belief, history) is None
 
     def _entropy_passes(self, belief: Belief) -> bool:
+        """The stop test without its minimum and confirmation: entropy, or mass near the mode."""
+        if self.mass_radius_m is not None:
+            return mass_near_mode(belief, self.mass_radius_m) >= self.mass_level
         log_n = belief.max_entropy if self.entropy_cells is None else math.log(int(self.entropy_cells))
         return belief.entropy() <= self.eta * log_n
 
