@@ -156,6 +156,10 @@ def mix_posteriors(
     return post / post.sum(), hw
 
 
+#: A flow whose wind likelihood falls this many nats below the best flow's is not given the gas
+#: evidence (its weight would need the gas readings to favour it by as much; between inlet
+#: speeds of one layout they differ by a few nats, since concentrations scale as ``q / v_in``).
+WIND_HOPELESS_NATS = 50.0
 #: A hypothesis whose evidence bound falls this many nats below the best one's evidence is
 #: not corrected for the zero readings (its weight is below ``exp(-HOPELESS)`` either way).
 HOPELESS_NATS = 30.0
@@ -413,6 +417,19 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             m_eff = MAP_EFFECTIVE_READINGS if self.knowledge.level == "map" else DEFAULT_EFFECTIVE_READINGS
         temp = max(temp, len(obs) / m_eff)
         for h in hyps:
+            u = h.flow.wind[:, cells[:, 0], cells[:, 1]].T
+            uu = float((u * u).sum())
+            scale = max(float((u * obs.wind).sum()) / uu, 0.0) if free_scale and uu > 0 else 1.0
+            scales.append(scale)
+            lw = wind_log_likelihood(scale * u, obs.wind, self.wind_noise_levels, self.wind_noise_floor)
+            log_prior.append(math.log(h.prior) + lw)
+        # flows the wind readings rule out (WIND_HOPELESS_NATS below the best) get no gas evidence
+        lp_best = max(log_prior)
+        for h, lp in zip(hyps, log_prior, strict=True):
+            if lp < lp_best - WIND_HOPELESS_NATS:
+                log_ev.append(np.full(h.flow.mesh.n, -np.inf))
+                details.append((None, {}))
+                continue
             A = h.flow.responses(cells)
             logl, det = adjoint_log_evidence(
                 A,
@@ -423,14 +440,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
                 sigma0_fraction=self.sigma0_fraction,
                 censored="deferred" if self.censored else False,
             )
-            u = h.flow.wind[:, cells[:, 0], cells[:, 1]].T
-            uu = float((u * u).sum())
-            scale = max(float((u * obs.wind).sum()) / uu, 0.0) if free_scale and uu > 0 else 1.0
-            scales.append(scale)
-            lw = wind_log_likelihood(scale * u, obs.wind, self.wind_noise_levels, self.wind_noise_floor)
             log_ev.append(logl)
             details.append((A, det))
-            log_prior.append(math.log(h.prior) + lw)
         log_ev = [x / temp for x in _censor(log_ev, log_prior, [d for _, d in details], temp)]
         t_h = 1.0 if self.hypothesis_readings is None else max(1.0, len(obs) / self.hypothesis_readings)
         post, hw = mix_posteriors(log_ev, log_prior, t_h)
