@@ -428,6 +428,22 @@ inlet 4.07 m/s, unless stated.
   residual on a floor at 1.1e-4 at 300 x 300 (stalled); with the usual 50 it
   converged.  At alpha_turb 0.99 the k solve takes most of the 50 sweeps: the
   largest remaining cost per iteration.
+* **Multi-room 20 x 20 m** (`random_layout_with_rooms(3)`, 39,620 free cells, the
+  slow test): the SER attempt oscillates (k residual 1.7e-3 -> 1.8e-2 -> 1.4e-3)
+  and stalls at 401 iterations; the retry (relaxation 0.7, no SER, same coarse
+  start) converges: 1121 fine iterations in all.  A stronger SER back-off (step
+  cut by (r_min / r)^2) did not stop the oscillation.
+
+Before this work (commit 6088505, same machine, not shared then as far as known):
+
+| grid | seed | solve s | iterations | converged |
+|---|---|---|---|---|
+| 100x100 | 7 | 4.87 | 567 | True |
+| 100x100 | 8 | 5.31 | 580 | True |
+| 150x150 | 7 | 16.29 | 877 | False |
+| 150x150 | 8 | 18.33 | 833 | False |
+| 200x200 | 7 | 45.23 | 1069 | False |
+| 200x200 | 8 | 40.82 | 937 | False |
 """
 
 
