@@ -39,13 +39,14 @@ RULES: dict[str, dict[str, Any]] = {
 }
 
 
-def cases_dir(out: Path, name: str) -> Path:
-    """The generated scenarios of a set as case files (made once)."""
+def cases_dir(out: Path, name: str, limit: int | None = None) -> Path:
+    """The generated scenarios of a set (the first ``limit``) as case files (made once)."""
     from dgse.physics.scenario import random_cases
 
-    d = out / f"_cases_{name}"
+    seeds = list(SETS[name])[:limit]
+    d = out / (f"_cases_{name}" if limit is None else f"_cases_{name}_{len(seeds)}")
     d.mkdir(parents=True, exist_ok=True)
-    for seed in SETS[name]:
+    for seed in seeds:
         path = d / f"{name}{seed}_src0.npz"
         if not path.exists():
             random_cases(seed, n_sources=1)[0].save(path)
@@ -73,12 +74,14 @@ def main() -> None:
     ap.add_argument("--knowledge", default="openings", choices=["map", "openings", "wind"])
     ap.add_argument("--trials", type=int, default=1)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--cases", type=int, default=None, help="only the first N scenarios of the set")
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/phys_search"))
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    stem = f"{args.set}_{args.method}_{args.knowledge}_{args.rule}"
+    set_name = args.set if args.cases is None else f"{args.set}{args.cases}"
+    stem = f"{set_name}_{args.method}_{args.knowledge}_{args.rule}"
     result = run_trials(
-        cases_dir(args.out, args.set),
+        cases_dir(args.out, args.set, args.cases),
         args.method,
         "utility",
         trials=args.trials,
