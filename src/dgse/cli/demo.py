@@ -49,11 +49,15 @@ def _told(level: str) -> str:
     }[level]
 
 
-def step_text(rec: StepRecord, time_limit: float, eta: float) -> str:
-    """The search status line after step ``rec``: step, simulated clock, entropy, error."""
+def step_text(rec: StepRecord, time_limit: float, eta: float | str) -> str:
+    """The search status line after step ``rec``: step, simulated clock, entropy, error.
+
+    ``eta``: the entropy test's threshold, or a text saying what the stop test is instead.
+    """
+    stop = f"stops at {eta:g}" if isinstance(eta, float | int) else f"stops when {eta}"
     return (
         f"searching: step {rec.step}, {rec.time_s:.0f} of {time_limit:g} s simulated, "
-        f"entropy {rec.normalized_entropy:.2f} of log N (stops at {eta:g}), error {rec.error_m:.2f} m"
+        f"entropy {rec.normalized_entropy:.2f} of log N ({stop}), error {rec.error_m:.2f} m"
     )
 
 
@@ -118,8 +122,18 @@ def demo_cmd(
         kwargs.update(dtype="bf16", channels_last=True)
     estimator = get_estimator(method, **kwargs)
     require_level(estimator, method, level)
-    planner = get_planner("utility", min_observations=MIN_SENSORS, **({} if eta is None else {"eta": eta}))
-    stop_at = float(planner.eta)
+    if eta is None and method == "dgse-phys":
+        from dgse.estimators.phys import SEARCH_STOP
+
+        planner = get_planner("utility", min_observations=MIN_SENSORS, **SEARCH_STOP)
+        stop_at: float | str = (
+            f"{planner.mass_level:.0%} of the source posterior lies "
+            f"within {planner.mass_radius_m:g} m of its mode"
+        )
+    else:
+        options = {} if eta is None else {"eta": eta}
+        planner = get_planner("utility", min_observations=MIN_SENSORS, **options)
+        stop_at = float(planner.eta)
     with console.status("solving a random multi-room scenario (built-in RANS + gas transport)"):
         case = random_cases(seed, n_sources=1)[0]
     t_solve = time.perf_counter() - t0
