@@ -39,7 +39,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -306,8 +306,39 @@ def random_office_floor_with_plan(
 ) -> tuple[Layout, OfficePlan]:
     """A random office floor (see :func:`random_office_floor`) and its plan.
 
-    Same arguments and draws as :func:`random_office_floor`; also returns the
-    :class:`OfficePlan`: the corridors, rooms and doorways as rectangles in m.
+    :func:`random_office_floor` returns the same layout without the plan: the
+    :class:`OfficePlan`, the corridors, rooms and doorways as rectangles in m.
+
+    Args:
+        rng_or_seed: a seed or a numpy Generator (which is advanced).
+        width_range, height_range: floor sides in m, drawn uniformly and snapped
+            to whole cells (200-400 cells at 0.1 m by default).
+        resolution: cell size in m.
+        n_corridors: 1 or 2 corridors (``(low, high)`` drawn uniformly, or one
+            int); they run along the longer side, boundary to boundary.
+        corridor_width_range: corridor (and connector) width in m, whole cells.
+        room_width_range: room width along its corridor in m; the high end must
+            hold two rooms of the low end and a wall.
+        room_depth_range: least depth of a band of rooms and greatest depth of
+            one room, in m; deeper bands get back rooms behind the front rooms.
+        wall_thickness_range: wall thickness in m, whole cells (1-2 at 0.1 m).
+        door_width_range: doorway width in m, whole cells; stubs beside a
+            doorway are absent or at least 0.3 m long.
+        opening_length_range: inlet/outlet length in m, whole cells.
+        min_opening_gap_m: least gap in m between any two openings.
+        n_inlets, n_outlets: how many, ``(low, high)`` drawn uniformly, or one int.
+        max_attempts: redraws before giving up with :class:`InputDataError`.
+        name: layout name; default ``"office-<seed>"`` (``"office"`` for a Generator).
+
+    Returns:
+        ``(layout, plan)``; the :class:`Layout`: ``occupancy`` ``uint8 (H, W)``, the inlets and
+        outlets on free boundary cells, ``walls`` an exact rectangle cover of
+        the solid cells in m.  The free cells are one 4-connected region
+        holding every opening.
+
+    Raises:
+        InputDataError: bad ranges or counts, rooms too small for a doorway,
+            or no valid floor in ``max_attempts`` draws.
     """
     rng = as_generator(rng_or_seed)
     res = float(resolution)
@@ -317,9 +348,7 @@ def random_office_floor_with_plan(
     _check_range(height_range, "height_range")
     corr = _int_range(n_corridors, "n_corridors", 1)
     if corr[1] > 2:
-        raise InputDataError(
-            f"n_corridors must be 1 or 2 (or a range within them), got {n_corridors}"
-        )
+        raise InputDataError(f"n_corridors must be 1 or 2 (or a range within them), got {n_corridors}")
     nin = _int_range(n_inlets, "n_inlets", 1)
     nout = _int_range(n_outlets, "n_outlets", 1)
     if not (min_opening_gap_m >= 0 and math.isfinite(min_opening_gap_m)):
@@ -330,18 +359,12 @@ def random_office_floor_with_plan(
         corridor=_cells_range(
             *_check_range(corridor_width_range, "corridor_width_range"), res, "corridor_width_range"
         ),
-        room_width=_cells_range(
-            *_check_range(room_width_range, "room_width_range"), res, "room_width_range"
-        ),
-        room_depth=_cells_range(
-            *_check_range(room_depth_range, "room_depth_range"), res, "room_depth_range"
-        ),
+        room_width=_cells_range(*_check_range(room_width_range, "room_width_range"), res, "room_width_range"),
+        room_depth=_cells_range(*_check_range(room_depth_range, "room_depth_range"), res, "room_depth_range"),
         thickness=_cells_range(
             *_check_range(wall_thickness_range, "wall_thickness_range"), res, "wall_thickness_range"
         ),
-        door=_cells_range(
-            *_check_range(door_width_range, "door_width_range"), res, "door_width_range"
-        ),
+        door=_cells_range(*_check_range(door_width_range, "door_width_range"), res, "door_width_range"),
         margin=max(1, math.ceil(0.3 / res - _EPS)),
         long_floor=math.ceil(30.0 / res - _EPS),
     )
@@ -374,9 +397,7 @@ def random_office_floor_with_plan(
         if openings is None:
             continue
         walls = tuple(_rects_m(occupancy_rectangles(occ), res))
-        layout = Layout(
-            occ, openings[0], openings[1], res, walls, _seed_name("office", rng_or_seed, name)
-        )
+        layout = Layout(occ, openings[0], openings[1], res, walls, _seed_name("office", rng_or_seed, name))
         if _connected(layout):
             parts = (plan.corridors, plan.rooms, plan.doors)
             office = OfficePlan(*(tuple(_rects_m(_transpose(x, flip), res)) for x in parts))
@@ -389,79 +410,15 @@ def random_office_floor_with_plan(
     )
 
 
-def random_office_floor(
-    rng_or_seed: RngLike = None,
-    *,
-    width_range: tuple[float, float] = (20.0, 40.0),
-    height_range: tuple[float, float] = (20.0, 40.0),
-    resolution: float = DEFAULT_RESOLUTION,
-    n_corridors: int | tuple[int, int] = (1, 2),
-    corridor_width_range: tuple[float, float] = (1.5, 2.5),
-    room_width_range: tuple[float, float] = (2.5, 6.0),
-    room_depth_range: tuple[float, float] = (3.0, 8.0),
-    wall_thickness_range: tuple[float, float] = (0.1, 0.2),
-    door_width_range: tuple[float, float] = (0.8, 1.2),
-    opening_length_range: tuple[float, float] = (0.6, 1.5),
-    min_opening_gap_m: float = 2.0,
-    n_inlets: int | tuple[int, int] = (2, 4),
-    n_outlets: int | tuple[int, int] = (2, 4),
-    max_attempts: int = 50,
-    name: str | None = None,
-) -> Layout:
+def random_office_floor(rng_or_seed: RngLike = None, **options: Any) -> Layout:
     """A random office floor: corridors, rooms on both sides with doors, several openings.
 
-    Args:
-        rng_or_seed: a seed or a numpy Generator (which is advanced).
-        width_range, height_range: floor sides in m, drawn uniformly and snapped
-            to whole cells (200-400 cells at 0.1 m by default).
-        resolution: cell size in m.
-        n_corridors: 1 or 2 corridors (``(low, high)`` drawn uniformly, or one
-            int); they run along the longer side, boundary to boundary.
-        corridor_width_range: corridor (and connector) width in m, whole cells.
-        room_width_range: room width along its corridor in m; the high end must
-            hold two rooms of the low end and a wall.
-        room_depth_range: least depth of a band of rooms and greatest depth of
-            one room, in m; deeper bands get back rooms behind the front rooms.
-        wall_thickness_range: wall thickness in m, whole cells (1-2 at 0.1 m).
-        door_width_range: doorway width in m, whole cells; stubs beside a
-            doorway are absent or at least 0.3 m long.
-        opening_length_range: inlet/outlet length in m, whole cells.
-        min_opening_gap_m: least gap in m between any two openings.
-        n_inlets, n_outlets: how many, ``(low, high)`` drawn uniformly, or one int.
-        max_attempts: redraws before giving up with :class:`InputDataError`.
-        name: layout name; default ``"office-<seed>"`` (``"office"`` for a Generator).
-
-    Returns:
-        A :class:`Layout`: ``occupancy`` ``uint8 (H, W)``, the inlets and
-        outlets on free boundary cells, ``walls`` an exact rectangle cover of
-        the solid cells in m.  The free cells are one 4-connected region
-        holding every opening.
-
-    Raises:
-        InputDataError: bad ranges or counts, rooms too small for a doorway,
-            or no valid floor in ``max_attempts`` draws.
+    ``options`` are the keyword arguments of :func:`random_office_floor_with_plan`
+    (floor size, corridors, rooms, walls, doors, openings); this returns its layout only.
 
     Example:
         >>> lay = random_office_floor(1)
         >>> 200 <= min(lay.occupancy.shape) and max(lay.occupancy.shape) <= 400
         True
     """
-    layout, _ = random_office_floor_with_plan(
-        rng_or_seed,
-        width_range=width_range,
-        height_range=height_range,
-        resolution=resolution,
-        n_corridors=n_corridors,
-        corridor_width_range=corridor_width_range,
-        room_width_range=room_width_range,
-        room_depth_range=room_depth_range,
-        wall_thickness_range=wall_thickness_range,
-        door_width_range=door_width_range,
-        opening_length_range=opening_length_range,
-        min_opening_gap_m=min_opening_gap_m,
-        n_inlets=n_inlets,
-        n_outlets=n_outlets,
-        max_attempts=max_attempts,
-        name=name,
-    )
-    return layout
+    return random_office_floor_with_plan(rng_or_seed, **options)[0]
