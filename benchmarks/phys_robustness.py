@@ -79,6 +79,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trials", type=int, default=2)
     ap.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
+    names = [f"{m}@{k}" for m, k in METHODS]
+    ap.add_argument("--methods", nargs="+", default=names, choices=names, help="method@knowledge")
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/phys_robustness"))
     args = ap.parse_args()
     from dgse.physics.scenario import random_cases
@@ -106,6 +108,8 @@ def main() -> None:
                     for trial in range(args.trials):
                         obs = draw_observations(truth, n, seed=0, case_id=f"test{seed}", trial=trial)
                         for method, level in METHODS:
+                            if f"{method}@{level}" not in args.methods:
+                                continue
                             if variant.startswith("wind_") and level != "wind":
                                 continue  # only the wind level reads the perturbed field
                             key = (variant, method, level, f"test{seed}", n, trial)
