@@ -63,11 +63,11 @@ def perturbed_wind(case: Case, variant: str) -> np.ndarray:
     return np.where(free[None], out, 0.0)
 
 
-def variant_case(case: Case, variant: str, cache: Path) -> Case:
-    """The scenario the readings come from (filament frames made once, cached)."""
+def variant_case(case: Case, variant: str, cache: Path, tag: str) -> Case:
+    """The scenario the readings come from (filament frames made once, cached as ``<tag>_filament``)."""
     if variant != "filament":
         return case
-    path = cache / f"{case.name}_filament.npz"
+    path = cache / f"{tag}_filament.npz"
     if not path.exists():
         from dgse.physics.filament import FilamentSettings, make_filament_case
 
@@ -102,7 +102,7 @@ def main() -> None:
                 random_cases(seed, n_sources=1)[0].save(path)
             base = Case.load(path)
             for variant in args.variants:
-                truth = variant_case(base, variant, cache)
+                truth = variant_case(base, variant, cache, f"test{seed}")
                 told = replace(base, wind=perturbed_wind(base, variant))
                 for n in COUNTS:
                     for trial in range(args.trials):
