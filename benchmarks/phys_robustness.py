@@ -35,7 +35,7 @@ from scipy import ndimage
 
 from dgse.estimators.knowledge import Knowledge
 from dgse.estimators.registry import get_estimator
-from dgse.evaluation.calibration import calibration_error, credible_level
+from dgse.evaluation.calibration import calibration_error, coverage_curve, credible_level
 from dgse.evaluation.evaluate import draw_observations, summarize
 from dgse.evaluation.metrics import source_cross_entropy, source_localization_error
 from dgse.world.case import Case
@@ -75,6 +75,51 @@ def variant_case(case: Case, variant: str, cache: Path, tag: str) -> Case:
     return Case.load(path)
 
 
+def write_summary(out: Path, trials: int) -> None:
+    """``summary.md`` / ``summary.json`` from the journal (whatever it holds so far)."""
+    journal = out / "journal.jsonl"
+    rows = [json.loads(line) for line in journal.read_text().splitlines()]
+    summary: dict[str, Any] = {}
+    lines = [
+        "# dgse-phys where the physics is wrong",
+        "",
+        "`python benchmarks/phys_robustness.py` (test scenarios 2000-2007, "
+        f"{trials} trials): SL error mean / median (m), source CE mean (nats), and the "
+        "calibration error of the source posterior's highest-density credible sets "
+        "(mean |coverage - level|, `dgse.evaluation.calibration`); in brackets the number of estimates.",
+        "",
+    ]
+    for variant in VARIANTS:
+        vr = [r for r in rows if r["variant"] == variant]
+        if not vr:
+            continue
+        lines += [f"## {variant}", "", "| method@knowledge | " + " | ".join(map(str, COUNTS)) + " |"]
+        lines.append("|---" * (len(COUNTS) + 1) + "|")
+        for method, level in METHODS:
+            cells = []
+            for n in COUNTS:
+                rr = [r for r in vr if r["method"] == method and r["knowledge"] == level and r["n"] == n]
+                if not rr:
+                    cells.append("-")
+                    continue
+                sl, ce = summarize(r["sl_m"] for r in rr), summarize(r["ce"] for r in rr)
+                ece = calibration_error(coverage_curve([r["credible_level"] for r in rr]))
+                summary.setdefault(variant, {}).setdefault(f"{method}@{level}", {})[str(n)] = {
+                    "sl_m": sl,
+                    "ce": ce,
+                    "credible_set_calibration_error": ece,
+                }
+                cell = f"{sl['mean']:.2f} / {sl['median']:.2f} / {ce['mean']:.1f} / {ece:.2f}"
+                cells.append(f"{cell} ({len(rr)})")
+            if any(c != "-" for c in cells):
+                lines.append(f"| {method}@{level} | " + " | ".join(cells) + " |")
+        lines.append("")
+    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    (out / "summary.md").write_text("\n".join(lines))
+    print("\n".join(lines))
+
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trials", type=int, default=2)
@@ -82,7 +127,11 @@ def main() -> None:
     names = [f"{m}@{k}" for m, k in METHODS]
     ap.add_argument("--methods", nargs="+", default=names, choices=names, help="method@knowledge")
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/phys_robustness"))
+    ap.add_argument("--summary-only", action="store_true", help="summarize the journal, estimate nothing")
     args = ap.parse_args()
+    if args.summary_only:
+        write_summary(args.out, args.trials)
+        return
     from dgse.physics.scenario import random_cases
 
     args.out.mkdir(parents=True, exist_ok=True)
@@ -135,45 +184,7 @@ def main() -> None:
                             jf.write(json.dumps(rec) + "\n")
                             jf.flush()
                             print(json.dumps(rec), flush=True)
-    rows = [json.loads(line) for line in journal.read_text().splitlines()]
-    summary: dict[str, Any] = {}
-    lines = [
-        "# dgse-phys where the physics is wrong",
-        "",
-        "`python benchmarks/phys_robustness.py` (test scenarios 2000-2007, "
-        f"{args.trials} trials): SL error mean / median (m), source CE mean (nats), and the "
-        "calibration error of the source posterior's highest-density credible sets "
-        "(mean |coverage - level|, `dgse.evaluation.calibration`).",
-        "",
-    ]
-    for variant in VARIANTS:
-        vr = [r for r in rows if r["variant"] == variant]
-        if not vr:
-            continue
-        lines += [f"## {variant}", "", "| method@knowledge | " + " | ".join(map(str, COUNTS)) + " |"]
-        lines.append("|---" * (len(COUNTS) + 1) + "|")
-        for method, level in METHODS:
-            cells = []
-            for n in COUNTS:
-                rr = [r for r in vr if r["method"] == method and r["knowledge"] == level and r["n"] == n]
-                if not rr:
-                    cells.append("-")
-                    continue
-                sl, ce = summarize(r["sl_m"] for r in rr), summarize(r["ce"] for r in rr)
-                ece = calibration_error([r["credible_level"] for r in rr])
-                summary.setdefault(variant, {}).setdefault(f"{method}@{level}", {})[str(n)] = {
-                    "sl_m": sl,
-                    "ce": ce,
-                    "credible_set_calibration_error": ece,
-                }
-                cells.append(f"{sl['mean']:.2f} / {sl['median']:.2f} / {ce['mean']:.1f} / {ece:.2f}")
-            if any(c != "-" for c in cells):
-                lines.append(f"| {method}@{level} | " + " | ".join(cells) + " |")
-        lines.append("")
-    (args.out / "summary.json").write_text(json.dumps(summary, indent=1))
-    (args.out / "summary.md").write_text("\n".join(lines))
-    print("\n".join(lines))
-
+    write_summary(args.out, args.trials)
 
 if __name__ == "__main__":
     main()
