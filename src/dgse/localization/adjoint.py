@@ -443,16 +443,19 @@ def _censored_log_factor(
     t0 = np.log(alpha_n / beta_n)
     t = t0.copy()
     qb = qc[None, :] * B  # (c, n)
-    for _ in range(CENSORED_NEWTON_STEPS):
+
+    def derivatives(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(psi'(t), psi''(t))``."""
         x = qb * np.exp(0.5 * t)[None, :]
         lam = np.exp(-0.5 * x * x - special.log_ndtr(-x)) / math.sqrt(2.0 * math.pi)  # phi / Phi(-x)
         d1 = alpha_n - beta_n * np.exp(t) - 0.5 * (lam * x).sum(axis=0)
         d2 = -beta_n * np.exp(t) - 0.25 * ((lam * (lam - x) * x + lam) * x).sum(axis=0)
-        d2 = np.minimum(d2, -1e-6)
-        t = np.clip(t - np.clip(d1 / d2, -3.0, 3.0), t0 - 60.0, t0 + 20.0)
-    x = qb * np.exp(0.5 * t)[None, :]
-    lam = np.exp(-0.5 * x * x - special.log_ndtr(-x)) / math.sqrt(2.0 * math.pi)
-    d2 = -beta_n * np.exp(t) - 0.25 * ((lam * (lam - x) * x + lam) * x).sum(axis=0)
+        return d1, d2
+
+    for _ in range(CENSORED_NEWTON_STEPS):
+        d1, d2 = derivatives(t)
+        t = np.clip(t - np.clip(d1 / np.minimum(d2, -1e-6), -3.0, 3.0), t0 - 60.0, t0 + 20.0)
+    _, d2 = derivatives(t)
     t = np.where(np.isfinite(t), t, t0)
     width = np.clip(1.0 / np.sqrt(np.maximum(-d2, 1e-6)), 1e-3, 10.0)  # Laplace sd in log tau
     width = np.where(np.isfinite(width), width, 1.0)
@@ -523,8 +526,7 @@ def _chebyshev_sum_log_ndtr(B: np.ndarray, x: np.ndarray, lam_max: np.ndarray) -
     diff = x[..., None, :] - cheb.reshape((1,) * (x.ndim - 1) + (k, 1))  # (..., k, n)
     diff = np.where(np.abs(diff) < 1e-13, 1e-13, diff)  # on a point: that point's weight dominates
     c = bw.reshape((1,) * (x.ndim - 1) + (k, 1)) / diff
-    out = (c * vals).sum(axis=-2) / c.sum(axis=-2)
-    return out
+    return (c * vals).sum(axis=-2) / c.sum(axis=-2)
 
 
 def _log_t_interval_normal(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

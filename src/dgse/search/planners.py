@@ -151,6 +151,16 @@ class Planner(Protocol):
         ...
 
 
+def _radius_or_none(name: str, value: float | None) -> float | None:
+    """A planner option that is None or a positive, finite number of m."""
+    if value is None:
+        return None
+    r = float(value)
+    if not (math.isfinite(r) and r > 0):
+        raise InputDataError(f"{name} must be a positive number of m or None, got {r}")
+    return r
+
+
 def mass_near_mode(belief: Belief, radius_m: float) -> float:
     """Source posterior mass within ``radius_m`` of the posterior's mode (cell centres)."""
     p = belief.source_probs
@@ -223,21 +233,13 @@ class UtilityPlanner:
         if self.min_observations < 0:
             raise InputDataError(f"min_observations must be >= 0, got {self.min_observations}")
         self.min_observations = int(self.min_observations)
-        if self.confirm_radius_m is not None:
-            r = float(self.confirm_radius_m)
-            if not (math.isfinite(r) and r > 0):
-                raise InputDataError(f"confirm_radius_m must be a positive number of m or None, got {r}")
-            self.confirm_radius_m = r
+        self.confirm_radius_m = _radius_or_none("confirm_radius_m", self.confirm_radius_m)
         if isinstance(self.confirm_readings, bool) or int(self.confirm_readings) != self.confirm_readings:
             raise InputDataError(f"confirm_readings must be an integer, got {self.confirm_readings!r}")
         if self.confirm_readings < 1:
             raise InputDataError(f"confirm_readings must be >= 1, got {self.confirm_readings}")
         self.confirm_readings = int(self.confirm_readings)
-        if self.mass_radius_m is not None:
-            r = float(self.mass_radius_m)
-            if not (math.isfinite(r) and r > 0):
-                raise InputDataError(f"mass_radius_m must be a positive number of m or None, got {r}")
-            self.mass_radius_m = r
+        self.mass_radius_m = _radius_or_none("mass_radius_m", self.mass_radius_m)
         if not (0.0 < float(self.mass_level) <= 1.0):
             raise InputDataError(f"mass_level must lie in (0, 1], got {self.mass_level}")
         self.mass_level = float(self.mass_level)

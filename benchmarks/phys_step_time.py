@@ -1,0 +1,63 @@
+"""Search step cost of dgse-phys (issue 12, part 4): the first estimate and the median step.
+
+Runs one search episode per scenario (the first test scenarios of
+``benchmarks/phys_search.py``, knowledge ``openings``, the stop test
+``SEARCH_STOP``) and writes the computation seconds of every step: the first
+(which solves the flows) and the median and 90th percentile of the rest.
+Run it on an otherwise idle machine; the number of cores it had is recorded::
+
+    python benchmarks/phys_step_time.py --cases 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+from phys_search import cases_dir
+
+from dgse.estimators.phys import SEARCH_STOP
+from dgse.search.campaign import run_trials
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cases", type=int, default=2)
+    ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/phys_search"))
+    args = ap.parse_args()
+    d = cases_dir(args.out, "test", args.cases)
+    rows = []
+    for path in sorted(d.glob("*.npz")):
+        res = run_trials(
+            path,
+            "dgse-phys",
+            "utility",
+            trials=1,
+            planner_options={"min_observations": 5, **SEARCH_STOP},
+            knowledge="openings",
+            steps=True,
+        )
+        trial = res["per_case"][0]["trials"][0]
+        s = np.array([st["compute_s"] for st in trial["steps"]])
+        rows.append(
+            {
+                "case": path.stem,
+                "steps": int(s.size),
+                "first_s": float(s[0]),
+                "median_s": float(np.median(s[1:])),
+                "p90_s": float(np.percentile(s[1:], 90)),
+                "error_m": trial["error_m"],
+            }
+        )
+        print(json.dumps(rows[-1]), flush=True)
+    out = {"cores": os.cpu_count(), "load_average_at_end": os.getloadavg(), "episodes": rows}
+    path = args.out / "step_time.json"
+    path.write_text(json.dumps(out, indent=1))
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
