@@ -14,7 +14,9 @@ Stop rules (``--rule``):
 * ``confirm``: the same, and a stop needs 2 readings within 1 m of the posterior's
   mode (``confirm_radius_m=1``, ``confirm_readings=2``);
 * ``mass1m90`` / ``mass2m95``: instead of the entropy test, stop once the posterior
-  holds 90 % within 1 m (95 % within 2 m) of its mode (``mass_radius_m``, ``mass_level``).
+  holds 90 % within 1 m (95 % within 2 m) of its mode (``mass_radius_m``, ``mass_level``);
+* ``mass1m90-disk1m`` / ``mass1m90-disk0.5m``: ``mass1m90``, and the utility's source term
+  is the posterior mass within 1 m (0.5 m) of a cell (``source_radius_m``), not the cell's own.
 
 Every finished episode is journaled beside the JSON, so an interrupted run resumes::
 
@@ -36,6 +38,12 @@ RULES: dict[str, dict[str, Any]] = {
     "confirm": {"min_observations": 5, "confirm_radius_m": 1.0, "confirm_readings": 2},
     "mass1m90": {"min_observations": 5, "mass_radius_m": 1.0, "mass_level": 0.9},
     "mass2m95": {"min_observations": 5, "mass_radius_m": 2.0, "mass_level": 0.95},
+    "mass1m90-disk1m": {
+        "min_observations": 5, "mass_radius_m": 1.0, "mass_level": 0.9, "source_radius_m": 1.0,
+    },
+    "mass1m90-disk0.5m": {
+        "min_observations": 5, "mass_radius_m": 1.0, "mass_level": 0.9, "source_radius_m": 0.5,
+    },
 }
 
 
@@ -75,11 +83,22 @@ def main() -> None:
     ap.add_argument("--trials", type=int, default=1)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--cases", type=int, default=None, help="only the first N scenarios of the set")
+    ap.add_argument(
+        "-E", "--estimator-option", action="append", default=[], metavar="KEY=JSON",
+        help="an estimator option, e.g. -E refine_speeds=0 (repeatable)",
+    )
+    ap.add_argument("--tag", default="", help="appended to the output names (a variant's own files)")
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/phys_search"))
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     set_name = args.set if args.cases is None else f"{args.set}{args.cases}"
-    stem = f"{set_name}_{args.method}_{args.knowledge}_{args.rule}"
+    stem = f"{set_name}_{args.method}_{args.knowledge}_{args.rule}" + (f"_{args.tag}" if args.tag else "")
+    est_opts = {}
+    for item in args.estimator_option:
+        key, sep, value = item.partition("=")
+        if not sep:
+            ap.error(f"-E takes KEY=JSON, got {item!r}")
+        est_opts[key] = json.loads(value)
     result = run_trials(
         cases_dir(args.out, args.set, args.cases),
         args.method,
@@ -87,12 +106,14 @@ def main() -> None:
         trials=args.trials,
         seed=args.seed,
         planner_options=RULES[args.rule],
+        estimator_options=est_opts,
         knowledge=args.knowledge,
         journal=args.out / f"{stem}.journal.jsonl",
     )
     result["stops"] = stop_quality(result)
     result["settings"]["rule"] = args.rule
     result["settings"]["set"] = args.set
+    result["settings"]["estimator_options"] = est_opts
     path = args.out / f"{stem}.json"
     path.write_text(json.dumps(json_safe(result), indent=1))
     agg = result["aggregate"]

@@ -7,7 +7,13 @@ import pytest
 
 from dgse.errors import InputDataError
 from dgse.estimators.knowledge import Knowledge
-from dgse.estimators.phys import FlowHypothesis, PhysicsGuidedEstimator, mix_posteriors, wind_log_likelihood
+from dgse.estimators.phys import (
+    FlowHypothesis,
+    PhysicsGuidedEstimator,
+    mix_posteriors,
+    predictive_sources,
+    wind_log_likelihood,
+)
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.evaluate import draw_observations
 from dgse.localization.adjoint import adjoint_log_evidence, flow_model
@@ -114,6 +120,50 @@ def test_learned_belief_is_mixed_in_where_the_readings_are_few(case):
     assert half._learned_weight(25) == 0.0
     half.set_knowledge(Knowledge.from_case(case, "openings"))
     assert half._learned_weight(5) == 0.0
+
+
+def test_predictive_sources_stand_for_the_whole_posterior():
+    """Systematic draws: a thin broad region holding most of the mass gets most of the draws."""
+    p = np.zeros(1000)
+    p[:10] = 0.3 / 10  # a sharp peak, 30 %
+    p[200:] = 0.7 / 800  # a broad region, 70 %
+    idx, w = predictive_sources(p, 20)
+    assert w.sum() == pytest.approx(1.0)
+    assert w[idx >= 200].sum() == pytest.approx(0.7, abs=0.05)
+    idx2, w2 = predictive_sources(p, 20)
+    assert np.array_equal(idx, idx2) and np.array_equal(w, w2)  # deterministic
+    one = np.zeros(50)
+    one[7] = 1.0
+    idx, w = predictive_sources(one, 8)
+    assert idx.tolist() == [7] and w.tolist() == [1.0]
+
+
+def test_inlet_speed_is_refined_between_the_candidates(case):
+    """The true speed (1.2 m/s) lies between the candidates 0.4 and 3.6: refinement adds it."""
+    k = Knowledge.from_case(case, "openings")
+    est = get_estimator("dgse-phys", knowledge=k, speeds=(0.4, 3.6), refine_speeds=2, refine_readings=10)
+    priors = [h.prior for h in est.hypotheses()]
+    assert priors == pytest.approx([0.5, 0.5])
+    obs = draw_observations(case, 40, seed=2)
+    est.estimate(case.occupancy, case.resolution, draw_observations(case, 5, seed=2))
+    assert len(est.hypotheses()) == 2  # too few readings to weigh the speeds
+    est.estimate(case.occupancy, case.resolution, obs)
+    speeds = [h.flow.inlet_velocity for h in est.hypotheses()]
+    assert speeds == pytest.approx([0.4, 1.2, 3.6])  # the geometric mean of the two
+    assert sum(h.prior for h in est.hypotheses()) == pytest.approx(1.0)
+    b = est.estimate(case.occupancy, case.resolution, obs)
+    w = {round(h["inlet_velocity"], 6): h["weight"] for h in b.info["hypotheses"]}
+    assert w[1.2] > 0.9
+    est.estimate(case.occupancy, case.resolution, obs)
+    est.estimate(case.occupancy, case.resolution, obs)
+    assert len(est.hypotheses()) == 4  # refine_speeds caps the additions
+    fixed = get_estimator("dgse-phys", knowledge=k, speeds=(0.4, 3.6), refine_speeds=0)
+    fixed.estimate(case.occupancy, case.resolution, obs)
+    assert len(fixed.hypotheses()) == 2
+    with pytest.raises(InputDataError, match="refine_ratio"):
+        get_estimator("dgse-phys", refine_ratio=1.0)
+    with pytest.raises(InputDataError, match="refine_speeds"):
+        get_estimator("dgse-phys", refine_speeds=-1)
 
 
 def test_levels_and_bad_input(case):

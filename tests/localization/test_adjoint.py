@@ -179,6 +179,23 @@ def test_estimated_wind_fits_the_inlet_speed() -> None:
     assert b.method == "adjoint"
 
 
+def test_flow_model_warm_start_matches_the_cold_solve() -> None:
+    """A flow started from another speed's converges to the cold-start flow (solver tolerance)."""
+    from dgse.localization.adjoint import clear_flow_cache
+
+    layout = channel_case().layout
+    clear_flow_cache()
+    base = flow_model(layout, 0.7)
+    warm = flow_model(layout, 1.3, warm_start=base)
+    assert warm.info["warm_start"] == pytest.approx(0.7)
+    clear_flow_cache()
+    cold = flow_model(layout, 1.3)
+    assert cold.info["warm_start"] is None and cold is not warm
+    rel = np.linalg.norm(warm.wind - cold.wind) / np.linalg.norm(cold.wind)
+    assert rel < 0.02
+    clear_flow_cache()
+
+
 def test_heteroscedastic_noise_average() -> None:
     case = channel_case()
     obs = dense_readings(case, 40, seed=4)

@@ -16,6 +16,7 @@ from dgse.search.planners import (
     UtilityPlanner,
     get_planner,
     mass_near_mode,
+    mass_within,
     planner_names,
     register_planner,
 )
@@ -187,6 +188,40 @@ def test_mass_near_the_mode_stop_rule():
     for bad in ({"mass_radius_m": -1.0}, {"mass_level": 0.0}, {"mass_level": 1.5}):
         with pytest.raises(InputDataError, match="mass_"):
             UtilityPlanner(**bad)
+
+
+def test_mass_within_is_the_disk_sum():
+    rng = np.random.default_rng(3)
+    p = rng.random((15, 12))
+    got = mass_within(p, 0.1, 0.25)
+    ii, jj = np.mgrid[0:15, 0:12]
+    for i, j in [(0, 0), (7, 5), (14, 11), (3, 9)]:
+        disk = np.hypot(ii - i, jj - j) * 0.1 <= 0.25 + 1e-9
+        assert got[i, j] == pytest.approx(p[disk].sum(), rel=1e-9, abs=1e-12)
+
+
+def test_disk_source_term_visits_a_broad_region():
+    """source_radius_m: a room the posterior covers thinly beats a peak already measured beside.
+
+    Issue 12's timeouts: the posterior held 97 % in a room nobody had measured in, a few
+    1e-4 per cell, while the robot kept measuring beside a mode of 0.5 % per cell.
+    """
+    occ = np.zeros((30, 60), np.uint8)
+    p = np.zeros((30, 60))
+    p[:, 35:] = 0.9 / (30 * 25)  # a thin, broad region on the right
+    p[15, 10] = 0.05  # a sharp peak on the left, 5 % of the mass
+    p[14:17, 9:12] += 0.05 / 9
+    belief = _belief(occ, p, res=0.1)
+    graph = FreeSpaceGraph(occ, 0.1)
+    robot = (15, 12)
+    d = graph.distances_from(robot)
+    h = _history(graph, [(15, 12)])
+    paper = UtilityPlanner(w_w=0.0, w_c=0.0).next_goal(belief, robot, d, h)
+    disk = UtilityPlanner(w_w=0.0, w_c=0.0, source_radius_m=1.0).next_goal(belief, robot, d, h)
+    assert paper[1] < 20  # the paper's term: the peak
+    assert disk[1] >= 35  # the disk's mass: the broad region
+    with pytest.raises(InputDataError, match="source_radius_m"):
+        UtilityPlanner(source_radius_m=0.0)
 
 
 def test_registry():

@@ -88,6 +88,7 @@ __all__ = [
     "PhysicsGuidedEstimator",
     "make_dgse_phys",
     "mix_posteriors",
+    "predictive_sources",
 ]
 
 #: Candidate inlet speeds at knowledge ``openings``, m/s (log-spaced over the training range).
@@ -126,6 +127,29 @@ class FlowHypothesis:
     label: str
     flow: FlowModel
     prior: float = 1.0
+
+
+def _speed_label(v: float) -> str:
+    return f"v_in {v:.3g} m/s"
+
+
+def _log_speed_priors(hyps: list[FlowHypothesis]) -> list[FlowHypothesis]:
+    """The hypotheses sorted by inlet speed, with a log-uniform prior over the speed.
+
+    Each speed stands for the stretch of ``log v`` nearer to it than to the others (the
+    end points' stretches reach half as far out as their inner neighbour), so adding
+    speeds refines the quadrature of one prior instead of piling up weight where they
+    were added.
+    """
+    hs = sorted(hyps, key=lambda h: h.flow.inlet_velocity)
+    if len(hs) == 1:
+        return [FlowHypothesis(hs[0].label, hs[0].flow, 1.0)]
+    x = np.log([h.flow.inlet_velocity for h in hs])
+    mid = 0.5 * (x[1:] + x[:-1])
+    edges = np.concatenate([[x[0] - (mid[0] - x[0])], mid, [x[-1] + (x[-1] - mid[-1])]])
+    width = np.diff(edges)
+    width = width / width.sum()
+    return [FlowHypothesis(h.label, h.flow, float(w)) for h, w in zip(hs, width, strict=True)]
 
 
 def _logsumexp(x: np.ndarray) -> float:
@@ -224,6 +248,24 @@ def wind_log_likelihood(
     return _logsumexp(np.array(vals)) - math.log(len(vals))
 
 
+def predictive_sources(probs: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Up to ``k`` source cells (mesh indices) and weights that stand for the posterior ``probs``.
+
+    Systematic sampling, deterministic: the quantiles ``(i + 1/2) / k`` of the
+    posterior's cumulative sum in cell order; a cell drawn several times gets that
+    many shares.  Every part of the posterior that holds ``1/k`` of the mass is
+    represented, however flat it is, so the predictive's variance is the whole
+    posterior's (the ``k`` most probable cells alone would all sit at the mode and
+    hide a broad second region the planner should go and look at).
+    """
+    p = np.asarray(probs, dtype=np.float64)
+    k = max(1, int(k))
+    cdf = np.cumsum(p)
+    picks = np.searchsorted(cdf, (np.arange(k) + 0.5) / k * cdf[-1])
+    idx, counts = np.unique(np.minimum(picks, p.size - 1), return_counts=True)
+    return idx, counts / counts.sum()
+
+
 @dataclass(eq=False)
 class PhysicsGuidedEstimator(KnowledgeUser):
     """``dgse-phys``: the adjoint posterior mixed over flow hypotheses (module docstring).
@@ -234,7 +276,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         wind_noise_floor: absolute wind noise (and model error) floor, m/s.
         q_max, kappas, alpha0, sigma0_fraction: the gas evidence's priors
             (:func:`~dgse.localization.adjoint.adjoint_log_evidence`).
-        conc_components: most probable sources per hypothesis in the concentration estimate.
+        conc_components: sources per hypothesis in the concentration estimate (drawn from
+            its source posterior by :func:`predictive_sources`).
         min_weight: hypotheses below this posterior weight are left out of the predictive.
         learned_weight, learned_readings, learned_levels: at the knowledge levels
             ``learned_levels`` the source posterior is mixed with DGSE-S's (the shipped
@@ -242,6 +285,10 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             ``m`` readings: the network where the readings are few, the physics after.
         hypothesis_readings: beyond this many readings the flow hypotheses' weights are
             tempered, ``T = m / hypothesis_readings`` (None: not tempered).
+        refine_speeds, refine_readings, refine_ratio: at knowledge ``openings``, up to
+            ``refine_speeds`` inlet speeds are added between the candidates once
+            ``refine_readings`` readings weigh them (see ``_refine_speed``); 0: the
+            candidates only.
         map_proposals: opening hypotheses at knowledge ``map`` (the best pairs of
             :func:`~dgse.physics.openings.potential_flow_proposals`).
         temperature: the gas evidence is divided by it (a power posterior: ``T > 1``
@@ -275,6 +322,9 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     learned_readings: float = LEARNED_READINGS
     learned_levels: Sequence[str] = ("map",)
     hypothesis_readings: float | None = None
+    refine_speeds: int = 4
+    refine_readings: int = 10
+    refine_ratio: float = 1.08
     flow_settings: FlowSettings | None = None
     physics: Physics = DEFAULT_PHYSICS
     name: str = field(default="dgse-phys", init=False)
@@ -304,6 +354,11 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             raise InputDataError(f"learned_weight must be in [0, 1], got {self.learned_weight}")
         if not (self.learned_readings > 0 and math.isfinite(self.learned_readings)):
             raise InputDataError(f"learned_readings must be positive, got {self.learned_readings}")
+        rs = self.refine_speeds
+        if isinstance(rs, bool) or int(rs) != rs or rs < 0:
+            raise InputDataError(f"refine_speeds must be an integer >= 0, got {self.refine_speeds!r}")
+        if not (self.refine_ratio > 1.0 and math.isfinite(self.refine_ratio)):
+            raise InputDataError(f"refine_ratio must be a number > 1, got {self.refine_ratio}")
         if int(self.conc_components) < 1:
             raise InputDataError(f"conc_components must be >= 1, got {self.conc_components}")
 
@@ -379,14 +434,47 @@ class PhysicsGuidedEstimator(KnowledgeUser):
                 )
                 self._hypotheses = [FlowHypothesis("given wind", fm, 1.0)]
             else:
-                p = 1.0 / len(self.speeds)
-                self._hypotheses = [
-                    FlowHypothesis(
-                        f"v_in {v:g} m/s", flow_model(k.layout, v, self.physics, self.flow_settings), p
-                    )
-                    for v in self.speeds
-                ]
+                # in order of speed, each solve starts from the one before (scaled)
+                hyps: list[FlowHypothesis] = []
+                for v in sorted(self.speeds):
+                    prev = hyps[-1].flow if hyps else None
+                    fm = flow_model(k.layout, v, self.physics, self.flow_settings, warm_start=prev)
+                    hyps.append(FlowHypothesis(_speed_label(v), fm))
+                self._hypotheses = _log_speed_priors(hyps)
         return self._hypotheses
+
+    def _refine_speed(self, hyps: list[FlowHypothesis], weights: np.ndarray, n_obs: int) -> None:
+        """Add one inlet speed between the most probable one and its heavier neighbour.
+
+        The true speed is continuous, the candidates a grid: a plume solved at a speed
+        between two candidates differs from both, most near the source, where a search
+        measures most.  So once ``refine_readings`` readings weigh the speeds, each
+        estimate may bisect (in log speed) the interval between the best speed and its
+        heavier neighbour while they are more than ``refine_ratio`` apart, at most
+        ``refine_speeds`` times per map; the new flow starts from the best one's.  It is
+        weighed from the next estimate on.
+        """
+        k = self.knowledge
+        if (
+            k is None
+            or k.level != "openings"
+            or n_obs < self.refine_readings
+            or len(hyps) >= len(self.speeds) + self.refine_speeds
+        ):
+            return
+        order = sorted(range(len(hyps)), key=lambda i: hyps[i].flow.inlet_velocity)
+        pos = order.index(int(np.argmax(weights)))
+        sides = [order[j] for j in (pos - 1, pos + 1) if 0 <= j < len(order)]
+        if not sides:
+            return
+        other = max(sides, key=lambda i: weights[i])
+        best = order[pos]
+        v0, v1 = hyps[best].flow.inlet_velocity, hyps[other].flow.inlet_velocity
+        if max(v0, v1) / min(v0, v1) <= self.refine_ratio:
+            return
+        v = math.sqrt(v0 * v1)
+        fm = flow_model(k.layout, v, self.physics, self.flow_settings, warm_start=hyps[best].flow)
+        self._hypotheses = _log_speed_priors([*hyps, FlowHypothesis(_speed_label(v), fm)])
 
     # -- the learned source belief ---------------------------------------------------------------
     def _learned_weight(self, m: int) -> float:
@@ -457,6 +545,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         log_ev = [x / temp for x in _censor(log_ev, log_prior, [d for _, d in details], temp)]
         t_h = 1.0 if self.hypothesis_readings is None else max(1.0, len(obs) / self.hypothesis_readings)
         post, hw = mix_posteriors(log_ev, log_prior, t_h)
+        self._refine_speed(hyps, hw, len(obs))
         mesh = hyps[0].flow.mesh
         w_learned = self._learned_weight(len(obs))
         if w_learned > 0:
@@ -475,11 +564,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             if w < self.min_weight:
                 continue
             ph = np.exp(logl - logl.max())
-            ph /= ph.sum()
-            order = np.argsort(ph)[::-1]
-            kk = int(np.searchsorted(np.cumsum(ph[order]), 0.99)) + 1
-            top = order[: max(1, min(kk, int(self.conc_components)))]
-            wts = ph[top] / ph[top].sum()
+            top, wts = predictive_sources(ph / ph.sum(), int(self.conc_components))
             qmap = np.clip(det["qhat"], 0.0, qmax)
             fields = h.flow.forward(mesh.cells[top], qmap[top])
             mean += w * (wts @ fields)

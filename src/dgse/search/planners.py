@@ -82,6 +82,7 @@ __all__ = [
     "UtilityPlanner",
     "get_planner",
     "mass_near_mode",
+    "mass_within",
     "planner_names",
     "register_planner",
 ]
@@ -171,6 +172,17 @@ def mass_near_mode(belief: Belief, radius_m: float) -> float:
     return float(p[near].sum() / max(float(p.sum()), 1e-300))
 
 
+def mass_within(probs: np.ndarray, resolution: float, radius_m: float) -> np.ndarray:
+    """``float64 (H, W)``: the mass of ``probs`` within ``radius_m`` of each cell's centre (walls ignored)."""
+    from scipy.signal import fftconvolve
+
+    r = math.floor(radius_m / resolution + 1e-9)
+    ii, jj = np.mgrid[-r : r + 1, -r : r + 1]
+    disk = (np.hypot(ii, jj) * resolution <= radius_m + 1e-9).astype(np.float64)
+    out = fftconvolve(np.asarray(probs, dtype=np.float64), disk, mode="same")
+    return np.maximum(out, 0.0)
+
+
 @dataclass
 class UtilityPlanner:
     """The paper's utility planner with entropy termination (see the module docstring).
@@ -199,6 +211,12 @@ class UtilityPlanner:
             a calibrated posterior, that share of the stops lies within the radius of the
             source, whatever the map's size (the entropy test's meaning depends on it).
         mass_level: the posterior mass the stop needs within ``mass_radius_m``.
+        source_radius_m: None (the paper's term ``w_s pi_s,i``) or a radius, m: the source
+            term becomes ``w_s`` times the posterior mass within this distance of cell ``i``
+            (:func:`mass_within`).  A reading tests the sources around it, not one cell: a
+            posterior spread thinly over a whole room holds little per cell but much per
+            disk, and the paper's term leaves such a room unvisited while the robot keeps
+            measuring beside a mode it has already measured at.
     """
 
     w_d: float = 0.1
@@ -214,6 +232,7 @@ class UtilityPlanner:
     confirm_readings: int = 2
     mass_radius_m: float | None = None
     mass_level: float = 0.9
+    source_radius_m: float | None = None
     name: str = field(default="utility", init=False)
 
     def __post_init__(self) -> None:
@@ -243,6 +262,7 @@ class UtilityPlanner:
         if not (0.0 < float(self.mass_level) <= 1.0):
             raise InputDataError(f"mass_level must lie in (0, 1], got {self.mass_level}")
         self.mass_level = float(self.mass_level)
+        self.source_radius_m = _radius_or_none("source_radius_m", self.source_radius_m)
         if self.distance_unit not in ("m", "cell"):
             raise InputDataError(f"distance_unit must be 'm' or 'cell', got {self.distance_unit!r}")
 
@@ -284,7 +304,10 @@ class UtilityPlanner:
         d = np.asarray(distances, dtype=np.float64)
         if d.shape != belief.shape:
             raise InputDataError(f"distances have shape {d.shape}, the belief {belief.shape}")
-        gain = self.w_s * belief.source_probs
+        if self.source_radius_m is None:
+            gain = self.w_s * belief.source_probs
+        else:
+            gain = self.w_s * mass_within(belief.source_probs, belief.resolution, self.source_radius_m)
         if belief.wind_var is not None and self.w_w:
             gain = gain + self.w_w * belief.wind_var.sum(axis=0)
         if belief.log_conc_var is not None and self.w_c:
