@@ -39,10 +39,16 @@ RULES: dict[str, dict[str, Any]] = {
     "mass1m90": {"min_observations": 5, "mass_radius_m": 1.0, "mass_level": 0.9},
     "mass2m95": {"min_observations": 5, "mass_radius_m": 2.0, "mass_level": 0.95},
     "mass1m90-disk1m": {
-        "min_observations": 5, "mass_radius_m": 1.0, "mass_level": 0.9, "source_radius_m": 1.0,
+        "min_observations": 5,
+        "mass_radius_m": 1.0,
+        "mass_level": 0.9,
+        "source_radius_m": 1.0,
     },
     "mass1m90-disk0.5m": {
-        "min_observations": 5, "mass_radius_m": 1.0, "mass_level": 0.9, "source_radius_m": 0.5,
+        "min_observations": 5,
+        "mass_radius_m": 1.0,
+        "mass_level": 0.9,
+        "source_radius_m": 0.5,
     },
 }
 
@@ -84,7 +90,11 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--cases", type=int, default=None, help="only the first N scenarios of the set")
     ap.add_argument(
-        "-E", "--estimator-option", action="append", default=[], metavar="KEY=JSON",
+        "-E",
+        "--estimator-option",
+        action="append",
+        default=[],
+        metavar="KEY=JSON",
         help="an estimator option, e.g. -E refine_speeds=0 (repeatable)",
     )
     ap.add_argument("--tag", default="", help="appended to the output names (a variant's own files)")

@@ -1,8 +1,8 @@
 """Search step cost of dgse-phys (issue 12, part 4): the first estimate and the median step.
 
 Runs one search episode per scenario (the first test scenarios of
-``benchmarks/phys_search.py``, knowledge ``openings``, the stop test
-``SEARCH_STOP``) and writes the computation seconds of every step: the first
+``benchmarks/phys_search.py``, knowledge ``openings``, the planner
+settings ``SEARCH_PLANNER``) and writes the computation seconds of every step: the first
 (which solves the flows) and the median and 90th percentile of the rest.
 Run it on an otherwise idle machine; the number of cores it had is recorded::
 
@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 from phys_search import cases_dir
 
-from dgse.estimators.phys import SEARCH_STOP
+from dgse.estimators.phys import SEARCH_PLANNER
 from dgse.search.campaign import run_trials
 
 
@@ -36,7 +36,7 @@ def main() -> None:
             "dgse-phys",
             "utility",
             trials=1,
-            planner_options={"min_observations": 5, **SEARCH_STOP},
+            planner_options={"min_observations": 5, **SEARCH_PLANNER},
             knowledge="openings",
             steps=True,
         )

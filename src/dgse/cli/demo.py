@@ -123,9 +123,9 @@ def demo_cmd(
     estimator = get_estimator(method, **kwargs)
     require_level(estimator, method, level)
     if eta is None and method == "dgse-phys":
-        from dgse.estimators.phys import SEARCH_STOP
+        from dgse.estimators.phys import SEARCH_PLANNER
 
-        planner = get_planner("utility", min_observations=MIN_SENSORS, **SEARCH_STOP)
+        planner = get_planner("utility", min_observations=MIN_SENSORS, **SEARCH_PLANNER)
         stop_at: float | str = (
             f"{planner.mass_level:.0%} of the source posterior lies "
             f"within {planner.mass_radius_m:g} m of its mode"

@@ -124,9 +124,11 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import os
 import time
 from collections import OrderedDict
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -599,21 +601,49 @@ def censored_correction(
     order = np.argsort(key)[::-1]
     top = float(key[order[0]])
     rest = np.cumsum(np.exp(key[order] - top)[::-1])[::-1]  # plug-in mass from position k on
-    done = 0
-    got = 0.0
-    chunk = 256
-    while done < order.size:
-        idx = order[done : done + chunk]
+
+    def factor(idx: np.ndarray) -> np.ndarray:
         scale = np.sqrt(beta_n[idx] / (alpha_n * aa[idx]))
         hi = np.full(idx.shape, np.inf) if q_max is None else (q_max - qh[idx]) / scale
         log_mass = _log_t_interval(-qh[idx] / scale, hi, 2.0 * alpha_n)
-        f = _censored_log_factor(Bc[:, idx], qh[idx], aa[idx], beta_n[idx], alpha_n, q_max, log_mass)
-        out[idx] = f
-        got += float(np.exp(logl[idx] + f - top).sum())
-        done += idx.size
+        return _censored_log_factor(Bc[:, idx], qh[idx], aa[idx], beta_n[idx], alpha_n, q_max, log_mass)
+
+    # chunks down the ranking, as many at once as there are worker threads (the special
+    # functions release the GIL), until the rest of the ranking holds a negligible share
+    done = 0
+    got = 0.0
+    chunk = CENSORED_CHUNK
+    pool = _censored_pool()
+    while done < order.size:
+        idxs = [
+            order[k : k + chunk]
+            for k in range(done, min(done + chunk * _CENSORED_WORKERS, order.size), chunk)
+        ]
+        fs = list(pool.map(factor, idxs)) if pool is not None and len(idxs) > 1 else [factor(i) for i in idxs]
+        for idx, f in zip(idxs, fs, strict=True):
+            out[idx] = f
+            got += float(np.exp(logl[idx] + f - top).sum())
+            done += idx.size
         if done < order.size and rest[done] < tail * got:
             break
     return out
+
+
+#: Candidates per chunk of the censored correction.
+CENSORED_CHUNK = 256
+#: Threads that compute chunks at once (the machine's cores, at most 2).
+_CENSORED_WORKERS = max(1, min(2, os.cpu_count() or 1))
+_POOL: ThreadPoolExecutor | None = None
+
+
+def _censored_pool() -> ThreadPoolExecutor | None:
+    """The shared worker threads of the censored correction (None on one core)."""
+    global _POOL
+    if _CENSORED_WORKERS < 2:
+        return None
+    if _POOL is None:
+        _POOL = ThreadPoolExecutor(_CENSORED_WORKERS, thread_name_prefix="dgse-censored")
+    return _POOL
 
 
 def adjoint_log_evidence(

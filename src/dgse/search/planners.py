@@ -356,7 +356,6 @@ class UtilityPlanner:
         W = u.shape[1]
         return (k // W, k % W)
 
-
     def _confirming_goal(
         self, belief: Belief, robot_cell: Cell, distances: np.ndarray, history: SearchHistory
     ) -> Cell | None:
