@@ -90,6 +90,15 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--cases", type=int, default=None, help="only the first N scenarios of the set")
     ap.add_argument(
+        "--files",
+        type=Path,
+        nargs="+",
+        default=None,
+        metavar="CASE",
+        help="search these case files instead of a set (e.g. the filament cases of "
+        "benchmarks/results/phys_robustness/_cases/*_filament.npz); --set then only names the output",
+    )
+    ap.add_argument(
         "-E",
         "--estimator-option",
         action="append",
@@ -102,6 +111,13 @@ def main() -> None:
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     set_name = args.set if args.cases is None else f"{args.set}{args.cases}"
+    if args.files:
+        from dgse.world.case import Case
+
+        cases = [(f, Case.load(f)) for f in args.files]
+        set_name = f"{args.set}-files{len(cases)}"
+    else:
+        cases = cases_dir(args.out, args.set, args.cases)
     stem = f"{set_name}_{args.method}_{args.knowledge}_{args.rule}" + (f"_{args.tag}" if args.tag else "")
     est_opts = {}
     for item in args.estimator_option:
@@ -110,7 +126,7 @@ def main() -> None:
             ap.error(f"-E takes KEY=JSON, got {item!r}")
         est_opts[key] = json.loads(value)
     result = run_trials(
-        cases_dir(args.out, args.set, args.cases),
+        cases,
         args.method,
         "utility",
         trials=args.trials,
