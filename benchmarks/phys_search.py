@@ -16,7 +16,10 @@ Stop rules (``--rule``):
 * ``mass1m90`` / ``mass2m95``: instead of the entropy test, stop once the posterior
   holds 90 % within 1 m (95 % within 2 m) of its mode (``mass_radius_m``, ``mass_level``);
 * ``mass1m90-disk1m`` / ``mass1m90-disk0.5m``: ``mass1m90``, and the utility's source term
-  is the posterior mass within 1 m (0.5 m) of a cell (``source_radius_m``), not the cell's own.
+  is the posterior mass within 1 m (0.5 m) of a cell (``source_radius_m``), not the cell's own;
+* ``mass1m90-disk1m-deadline60s``: and the search stops with its estimate once less than 60 s
+  of the time limit is left (``deadline_margin_s``); such stops are counted apart
+  (``deadline_stops``).
 
 Every finished episode is journaled beside the JSON, so an interrupted run resumes::
 
@@ -44,6 +47,13 @@ RULES: dict[str, dict[str, Any]] = {
         "mass_level": 0.9,
         "source_radius_m": 1.0,
     },
+    "mass1m90-disk1m-deadline60s": {
+        "min_observations": 5,
+        "mass_radius_m": 1.0,
+        "mass_level": 0.9,
+        "source_radius_m": 1.0,
+        "deadline_margin_s": 60.0,
+    },
     "mass1m90-disk0.5m": {
         "min_observations": 5,
         "mass_radius_m": 1.0,
@@ -70,13 +80,18 @@ def cases_dir(out: Path, name: str, limit: int | None = None) -> Path:
 def stop_quality(result: dict[str, Any]) -> dict[str, Any]:
     """Entropy stops (episodes that terminated) and the share of them within 2 m of the source."""
     rows = [t for c in result["per_case"] for t in c["trials"]]
-    stops = [t for t in rows if t.get("terminated")]
+    margin = result["settings"].get("planner_options", {}).get("deadline_margin_s")
+    ended = [t for t in rows if t.get("terminated")]
+    late = [] if margin is None else [t for t in ended if t["search_time_s"] + margin >= t["time_limit_s"]]
+    stops = [t for t in ended if t not in late]
     near = [t for t in stops if t["error_m"] <= 2.0]
     return {
         "episodes": len(rows),
         "entropy_stops": len(stops),
         "stops_within_2m": len(near),
         "stops_within_2m_share": (len(near) / len(stops)) if stops else None,
+        "deadline_stops": len(late),
+        "deadline_stops_within_2m": sum(t["error_m"] <= 2.0 for t in late),
     }
 
 

@@ -224,6 +224,25 @@ def test_disk_source_term_visits_a_broad_region():
         UtilityPlanner(source_radius_m=0.0)
 
 
+def test_deadline_stop():
+    """deadline_margin_s: stop with the current estimate once the time left is below the margin."""
+    occ = np.zeros((10, 10), np.uint8)
+    belief = _belief(occ, np.ones((10, 10)))  # flat: the entropy test never passes
+    graph = FreeSpaceGraph(occ, 0.1)
+    h = _history(graph, [(1, 1)] * 6)
+    h.step, h.time_limit_s = 6, 2000.0
+    pl = UtilityPlanner(min_observations=5, deadline_margin_s=60.0)
+    h.time_s = 1900.0
+    assert not pl.should_stop(belief, h)
+    h.time_s = 1945.0
+    assert pl.should_stop(belief, h) and pl.deadline_reached(h)
+    assert not UtilityPlanner(min_observations=5).should_stop(belief, h)  # the paper's rule: no deadline
+    h.step = 3
+    assert not pl.should_stop(belief, h)  # min_observations still holds the stop back
+    with pytest.raises(InputDataError, match="deadline_margin_s"):
+        UtilityPlanner(deadline_margin_s=-1.0)
+
+
 def test_registry():
     assert "utility" in planner_names()
     p = get_planner("utility", eta=0.75)

@@ -366,7 +366,7 @@ def run_episode(
     )
     planner.reset()
     stream = StreamingEstimator(estimator, case.occupancy, case.resolution)
-    history = SearchHistory(graph=graph, rng=planner_rng)
+    history = SearchHistory(graph=graph, rng=planner_rng, time_limit_s=time_limit)
     source_xy = (float(case.source[0]), float(case.source[1]))
     factor = _record_factor(graph.shape, int(record_max_cells))
     steps: list[StepRecord] = []
