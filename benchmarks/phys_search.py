@@ -82,7 +82,16 @@ def stop_quality(result: dict[str, Any]) -> dict[str, Any]:
     rows = [t for c in result["per_case"] for t in c["trials"]]
     margin = result["settings"].get("planner_options", {}).get("deadline_margin_s")
     ended = [t for t in rows if t.get("terminated")]
-    late = [] if margin is None else [t for t in ended if t["search_time_s"] + margin >= t["time_limit_s"]]
+    # reason "deadline" since it exists; the first runs' deadline stops are told by their time
+    late = [
+        t
+        for t in ended
+        if t.get("reason") == "deadline"
+        or (
+            margin is not None
+            and t["search_time_s"] + min(margin, 0.1 * t["time_limit_s"]) >= t["time_limit_s"]
+        )
+    ]
     stops = [t for t in ended if t not in late]
     near = [t for t in stops if t["error_m"] <= 2.0]
     return {

@@ -74,6 +74,14 @@ def test_no_gas_ends_at_the_time_limit():
     assert none.estimate_xy == pytest.approx(r.estimate_xy)
 
 
+def test_deadline_stop_ends_before_the_limit():
+    """deadline_margin_s: the search that would time out declares its estimate instead."""
+    case = corridor_case(gas=False)
+    r = run_episode(case, UniformEstimator(), UtilityPlanner(deadline_margin_s=10.0), rng=2, time_limit=100.0)
+    assert r.reason == "deadline" and r.terminated
+    assert 90.0 <= r.search_time_s < 100.0
+
+
 def test_seeding_compute_time_and_downsampled_records():
     case = corridor_case(gas=False)
     a = run_episode(case, UniformEstimator(), UtilityPlanner(), rng=7, time_limit=30.0, record=False)

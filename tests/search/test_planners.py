@@ -239,6 +239,10 @@ def test_deadline_stop():
     assert not UtilityPlanner(min_observations=5).should_stop(belief, h)  # the paper's rule: no deadline
     h.step = 3
     assert not pl.should_stop(belief, h)  # min_observations still holds the stop back
+    h.step, h.time_limit_s, h.time_s = 6, 60.0, 10.0
+    assert not pl.should_stop(belief, h)  # a short limit: at most a tenth of it is the margin
+    h.time_s = 55.0
+    assert pl.should_stop(belief, h)
     with pytest.raises(InputDataError, match="deadline_margin_s"):
         UtilityPlanner(deadline_margin_s=-1.0)
 

@@ -59,7 +59,7 @@ from dgse.estimators.belief import Belief
 from dgse.estimators.knowledge import DEFAULT_LEVEL, Knowledge
 from dgse.estimators.registry import Estimator, StreamingEstimator
 from dgse.search.paths import Cell, graph_for
-from dgse.search.planners import Planner, SearchHistory
+from dgse.search.planners import Planner, SearchHistory, stopped_by_deadline
 from dgse.search.robot import DEFAULT_DWELL, DEFAULT_SPEED, Robot, random_start_cell
 from dgse.sensing.noise import NoiseModel, NoiseParams
 from dgse.world.case import Case
@@ -76,8 +76,9 @@ __all__ = [
 
 #: Time limit of a search, s (paper Sec. V-D).
 DEFAULT_TIME_LIMIT = 2000.0
-#: Why an episode ended: the planner's termination test, ``next_goal`` returned None, the time limit.
-REASONS = ("converged", "planner_stop", "time_limit")
+#: Why an episode ended: the planner's termination test, its deadline (``deadline_margin_s``),
+#: ``next_goal`` returned None, the time limit.
+REASONS = ("converged", "deadline", "planner_stop", "time_limit")
 
 
 @dataclass(eq=False)
@@ -430,7 +431,7 @@ def run_episode(
         if include_compute_time:
             robot.wait(rec.compute_s, until=time_limit)
         if stop:
-            reason = "converged"
+            reason = "deadline" if stopped_by_deadline(planner, history) else "converged"
             break
         if goal is None:
             reason = "planner_stop"

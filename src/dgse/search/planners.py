@@ -85,6 +85,7 @@ __all__ = [
     "mass_within",
     "planner_names",
     "register_planner",
+    "stopped_by_deadline",
 ]
 
 
@@ -222,8 +223,9 @@ class UtilityPlanner:
         deadline_margin_s: None (the paper's rule: a search that runs out of time fails) or
             a margin, s: the search also stops, with its current estimate, once less than
             this is left of ``history.time_limit_s``.  A robot with a time budget declares
-            its best guess before the budget ends; such a stop is a deadline stop, not a
-            test that passed, and benchmarks report it apart.
+            its best guess before the budget ends; such a stop ends the episode with reason
+            ``"deadline"``, not ``"converged"``, and benchmarks report it apart.  At most a
+            tenth of the limit.
     """
 
     w_d: float = 0.1
@@ -296,10 +298,15 @@ class UtilityPlanner:
         return history is None or self._unconfirmed_mode(belief, history) is None
 
     def deadline_reached(self, history: SearchHistory | None) -> bool:
-        """True when ``deadline_margin_s`` is set and less than it is left of the time limit."""
-        if self.deadline_margin_s is None or history is None:
+        """True when ``deadline_margin_s`` is set and less than it is left of the time limit.
+
+        The margin is at most a tenth of the limit, so that a short search is not ended
+        at its first permitted reading.
+        """
+        if self.deadline_margin_s is None or history is None or not math.isfinite(history.time_limit_s):
             return False
-        return history.time_s + self.deadline_margin_s >= history.time_limit_s
+        margin = min(self.deadline_margin_s, 0.1 * history.time_limit_s)
+        return history.time_s + margin >= history.time_limit_s
 
     def _entropy_passes(self, belief: Belief) -> bool:
         """The stop test without its minimum and confirmation: entropy, or mass near the mode."""
@@ -397,6 +404,11 @@ class UtilityPlanner:
             return None
         k = int(np.argmin(np.where(ok, near, np.inf)))
         return (k // W, k % W)
+
+
+def stopped_by_deadline(planner: Planner, history: SearchHistory) -> bool:
+    """Whether ``planner``'s stop now is a deadline stop (``UtilityPlanner.deadline_margin_s``)."""
+    return isinstance(planner, UtilityPlanner) and planner.deadline_reached(history)
 
 
 # -- registry -------------------------------------------------------------------------
