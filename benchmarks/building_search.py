@@ -27,9 +27,10 @@ import time
 from pathlib import Path
 
 import numpy as np
+from phys_search import write_result
 
 from dgse.estimators.phys import SEARCH_PLANNER
-from dgse.search.campaign import json_safe, run_trials
+from dgse.search.campaign import run_trials
 
 FIRST_SEED = 3000
 
@@ -131,17 +132,7 @@ def main() -> None:
             steps=True,
             journal=args.out / f"{stem}.journal.jsonl",
         )
-    result = summarize(args.out, stem, settings)
-    path = args.out / f"{stem}.json"
-    path.write_text(json.dumps(json_safe(result), indent=1))
-    agg = result["aggregate"]
-    print(
-        f"{stem} ({agg['n_trials']} episodes): success {agg['success_rate']:.2f}, error mean "
-        f"{agg['error_m_mean']:.2f} m (median {agg['error_m_median']:.2f}), ST "
-        f"{agg['search_time_s_mean']:.0f} s, TD {agg['distance_m_mean']:.0f} m, step median "
-        f"{agg['step_seconds_median']:.3f} s"
-    )
-    print(f"wrote {path}")
+    write_result(args.out / f"{stem}.json", summarize(args.out, stem, settings), stem)
 
 
 if __name__ == "__main__":

@@ -104,6 +104,19 @@ def stop_quality(result: dict[str, Any]) -> dict[str, Any]:
     }
 
 
+def write_result(path: Path, result: dict[str, Any], label: str, extra: str = "") -> None:
+    """Write ``result`` as JSON and print its one-line summary (success, error, ST, TD, step)."""
+    path.write_text(json.dumps(json_safe(result), indent=1))
+    agg = result["aggregate"]
+    print(
+        f"{label} ({agg['n_trials']} episodes): success {agg['success_rate']:.2f}, error mean "
+        f"{agg['error_m_mean']:.2f} m (median {agg['error_m_median']:.2f}), ST "
+        f"{agg['search_time_s_mean']:.0f} s, TD {agg['distance_m_mean']:.0f} m, step median "
+        f"{agg['step_seconds_median']:.3f} s{extra}"
+    )
+    print(f"wrote {path}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--set", choices=sorted(SETS), default="validation")
@@ -164,15 +177,7 @@ def main() -> None:
     result["settings"]["rule"] = args.rule
     result["settings"]["set"] = args.set
     result["settings"]["estimator_options"] = est_opts
-    path = args.out / f"{stem}.json"
-    path.write_text(json.dumps(json_safe(result), indent=1))
-    agg = result["aggregate"]
-    print(
-        f"{stem}: success {agg['success_rate']:.2f}, error mean {agg['error_m_mean']:.2f} m "
-        f"(median {agg['error_m_median']:.2f}), ST {agg['search_time_s_mean']:.0f} s, "
-        f"step median {agg['step_seconds_median']:.3f} s, stops {result['stops']}"
-    )
-    print(f"wrote {path}")
+    write_result(args.out / f"{stem}.json", result, stem, f", stops {result['stops']}")
 
 
 if __name__ == "__main__":
