@@ -80,19 +80,9 @@ def cases_dir(out: Path, name: str, limit: int | None = None) -> Path:
 def stop_quality(result: dict[str, Any]) -> dict[str, Any]:
     """Entropy stops (episodes that terminated) and the share of them within 2 m of the source."""
     rows = [t for c in result["per_case"] for t in c["trials"]]
-    margin = result["settings"].get("planner_options", {}).get("deadline_margin_s")
     ended = [t for t in rows if t.get("terminated")]
-    # reason "deadline" since it exists; the first runs' deadline stops are told by their time
-    late = [
-        t
-        for t in ended
-        if t.get("reason") == "deadline"
-        or (
-            margin is not None
-            and t["search_time_s"] + min(margin, 0.1 * t["time_limit_s"]) >= t["time_limit_s"]
-        )
-    ]
-    stops = [t for t in ended if t not in late]
+    late = [t for t in ended if t.get("reason") == "deadline"]
+    stops = [t for t in ended if t.get("reason") != "deadline"]
     near = [t for t in stops if t["error_m"] <= 2.0]
     return {
         "episodes": len(rows),
