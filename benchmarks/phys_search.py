@@ -6,6 +6,8 @@ entropy stops within 2 m of the source (``stops_within_2m``: a stop must mean
 something).  Case sets (made once, into ignored ``_cases_<set>/`` folders):
 
 * ``validation``: seeds 900-907 (the range the dgse-phys parameters were tuned on);
+* ``validation2``: seeds 908-923, more validation scenarios (to see rare failures such as
+  wrong stops before choosing a rule against them);
 * ``test``: seeds 2000-2019 (never used for tuning).
 
 Stop rules (``--rule``):
@@ -35,7 +37,7 @@ from typing import Any
 
 from dgse.search.campaign import json_safe, run_trials
 
-SETS = {"validation": range(900, 908), "test": range(2000, 2020)}
+SETS = {"validation": range(900, 908), "validation2": range(908, 924), "test": range(2000, 2020)}
 RULES: dict[str, dict[str, Any]] = {
     "paper": {"min_observations": 5},
     "confirm": {"min_observations": 5, "confirm_radius_m": 1.0, "confirm_readings": 2},
@@ -71,7 +73,7 @@ def cases_dir(out: Path, name: str, limit: int | None = None) -> Path:
     d = out / (f"_cases_{name}" if limit is None else f"_cases_{name}_{len(seeds)}")
     d.mkdir(parents=True, exist_ok=True)
     for seed in seeds:
-        path = d / f"{name}{seed}_src0.npz"
+        path = d / f"{name.rstrip('0123456789')}{seed}_src0.npz"
         if not path.exists():
             random_cases(seed, n_sources=1)[0].save(path)
     return d
@@ -133,6 +135,11 @@ def main() -> None:
         metavar="KEY=JSON",
         help="an estimator option, e.g. -E refine_speeds=0 (repeatable)",
     )
+    ap.add_argument(
+        "--steps",
+        action="store_true",
+        help="keep every step's record (cell, readings, estimate) in the journal and the JSON",
+    )
     ap.add_argument("--tag", default="", help="appended to the output names (a variant's own files)")
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/phys_search"))
     args = ap.parse_args()
@@ -161,6 +168,7 @@ def main() -> None:
         planner_options=RULES[args.rule],
         estimator_options=est_opts,
         knowledge=args.knowledge,
+        steps=args.steps,
         journal=args.out / f"{stem}.journal.jsonl",
     )
     result["stops"] = stop_quality(result)

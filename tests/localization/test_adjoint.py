@@ -229,3 +229,41 @@ def test_bad_input_is_rejected() -> None:
         AdjointEstimator(wind="estimated").set_knowledge(wind_no_openings)
     with pytest.raises(InputDataError):
         AdjointEstimator(wind="sideways")  # type: ignore[arg-type]
+
+
+def test_zeros_a_candidate_cannot_reach_leave_it_at_one_half_each() -> None:
+    """A candidate the zero sensors do not see gets exactly ``(1/2)`` per zero, whatever its rate fit.
+
+    With few positive readings the rate and noise posteriors are broad and the adaptive
+    quadrature misses by a few hundredths of a nat; such candidates skip it.
+    """
+    rng = np.random.default_rng(4)
+    A = rng.uniform(0.2, 3.0, (5, 300))
+    A[3:, 100:] = 0.0  # candidates 100.. do not reach the two zero sensors
+    z = np.array([40.0, 5.0, 60.0, 0.0, 0.0])
+    part, det = adjoint_log_evidence(A, z, censored="deferred", kappas=(0.0,))
+    f = censored_correction(logl=part, **det["censor"], tail=0.0)
+    np.testing.assert_allclose(f[100:], -2 * math.log(2.0), atol=1e-3)
+    assert np.all(f[:100] < -2 * math.log(2.0))
+
+
+def test_responses_are_never_negative_so_a_zero_favours_no_candidate() -> None:
+    """The second-order upwind operator undershoots beside a point source; a response is clipped at 0.
+
+    Left in, a zero reading would make the candidates just downstream of its sensor more
+    probable (``Phi(-q a / sigma) > 1/2`` where ``a < 0``).
+    """
+    case = channel_case()
+    fm = flow_model(case.layout, case.inlet_velocity)
+    sensors = np.array([[8, 14], [10, 24], [6, 30]])
+    raw = fm.mesh.values(fm.transport.adjoint(sensors))
+    assert raw.min() < -1e-3 * raw.max()  # the scheme's undershoot is there ...
+    A = fm.responses(sensors)
+    assert A.min() >= 0.0  # ... and clipped
+    np.testing.assert_allclose(A, np.maximum(raw * fm.physics.ppm_per_gm3, 0.0))
+    fields = fm.forward(np.array([case.source_cell]), np.array([0.2]))
+    assert fields.min() >= 0.0
+    z = np.array([0.0, 0.0, 120.0])
+    part, det = adjoint_log_evidence(A, z, censored="deferred")
+    f = censored_correction(logl=part, **det["censor"], tail=0.0)
+    assert np.all(f <= -2 * math.log(2.0) + 1e-9)

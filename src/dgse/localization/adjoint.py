@@ -212,14 +212,19 @@ class FlowModel:
 
         Adjoint rows of the linear (``linearUpwind``) operator, computed in
         one batch for the cells not seen before and cached (the last
-        :data:`MAX_CACHED_ROWS` cells).
+        :data:`MAX_CACHED_ROWS` cells), clipped at 0: a release cannot lower a
+        reading, but the second-order upwind scheme undershoots next to a
+        point source, and a row's most negative value is often a tenth of
+        its largest (sources a cell or two downstream of the sensor).  Left
+        in, such lobes made a zero reading *favour* the candidates just
+        downstream of it (``Phi(-q a / sigma) > 1/2`` for ``a < 0``).
         """
         c = np.asarray(cells, dtype=np.int64).reshape(-1, 2)
         keys = [(int(i), int(j)) for i, j in c]
         new = sorted({k for k in keys if k not in self._rows})
         if new:
             adj = self.transport.adjoint(np.array(new, dtype=np.int64))
-            vals = self.mesh.values(adj) * self.physics.ppm_per_gm3
+            vals = np.maximum(self.mesh.values(adj) * self.physics.ppm_per_gm3, 0.0)
             for k, row in zip(new, vals, strict=True):
                 self._rows[k] = row
         n = self.mesh.n
@@ -233,7 +238,7 @@ class FlowModel:
 
         The operator is linear: the field per g/s of each source cell is solved
         once (in one batch for the cells not seen before) and cached, the last
-        :data:`MAX_CACHED_FIELDS` cells.
+        :data:`MAX_CACHED_FIELDS` cells; clipped at 0 like :meth:`responses`.
         """
         m = self.mesh
         ts = self.transport
@@ -244,7 +249,7 @@ class FlowModel:
             nc = np.array(new, dtype=np.int64)
             B = np.zeros((m.n, len(new)))
             B[m.index[nc[:, 0], nc[:, 1]], np.arange(len(new))] = 1.0 / ts.physics.slab_depth
-            X = ts.factor(ts.adjoint_scheme).solve(B) * self.physics.ppm_per_gm3
+            X = np.maximum(ts.factor(ts.adjoint_scheme).solve(B) * self.physics.ppm_per_gm3, 0.0)
             for k, col in zip(new, X.T, strict=True):
                 self._fields[k] = col
         out = np.stack([self._fields[k] for k in keys]) if keys else np.zeros((0, m.n))
@@ -599,7 +604,17 @@ def censored_correction(
     out = special.log_ndtr(-lam[None, :] * Bc).sum(axis=0)
     key = logl + out
     order = np.argsort(key)[::-1]
+    # candidates the zero sensors hardly see: where even the largest plausible
+    # lambda = q sqrt(tau) (q at its prior's end, tau at its 1 - 1e-12 quantile) gives
+    # lambda sum_i B_i below CENSORED_FAINT, every factor Phi(-lambda B_i) is 1/2 to first
+    # order, and the plug-in value is within that many nats of the integrated one
     top = float(key[order[0]])
+    got = 0.0
+    if math.isfinite(qmax):
+        tau_hi = special.gammainccinv(alpha_n, 1e-12) / beta_n
+        faint = qmax * np.sqrt(tau_hi) * np.maximum(Bc, 0.0).sum(axis=0) < CENSORED_FAINT
+        got = float(np.exp(key[faint] - top).sum())
+        order = order[~faint[order]]
     rest = np.cumsum(np.exp(key[order] - top)[::-1])[::-1]  # plug-in mass from position k on
 
     def factor(idx: np.ndarray) -> np.ndarray:
@@ -611,7 +626,6 @@ def censored_correction(
     # chunks down the ranking, as many at once as there are worker threads (the special
     # functions release the GIL), until the rest of the ranking holds a negligible share
     done = 0
-    got = 0.0
     chunk = CENSORED_CHUNK
     pool = _censored_pool()
     while done < order.size:
@@ -626,9 +640,14 @@ def censored_correction(
             done += idx.size
         if done < order.size and rest[done] < tail * got:
             break
-    return out
+    # each zero with a non-negative response has probability at most 1/2: a bound the
+    # quadrature can overshoot by a few hundredths of a nat when the posterior is broad
+    return np.minimum(out, -math.log(2.0) * (Bc >= 0.0).sum(axis=0))
 
 
+#: Nats within which the plug-in zeros' factor stands for the integrated one of a candidate the
+#: zero sensors hardly see (:func:`censored_correction`).
+CENSORED_FAINT = 1e-3
 #: Candidates per chunk of the censored correction.
 CENSORED_CHUNK = 256
 #: Threads that compute chunks at once (the machine's cores, at most 2).
