@@ -121,6 +121,7 @@ new sensor cell and a few dense ``(m, N)`` products.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import json
 import math
@@ -402,21 +403,41 @@ CENSORED_TAIL = 1e-4
 
 
 def _truncnorm_ppf(u: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Quantile ``u`` of the standard normal truncated to ``[lo, hi]``, stable in both tails."""
-    lo, hi, u = np.broadcast_arrays(lo, hi, u)
-    out = np.empty(u.shape)
+    """Quantiles ``u`` ``(k,)`` of the standard normal truncated to ``[lo, hi]`` ``(n,)``: ``(k, n)``.
+
+    Stable in both tails; the bounds' log CDFs are taken once per column.
+    """
+    u = np.asarray(u, dtype=np.float64)[:, None]
+    lo = np.asarray(lo, dtype=np.float64)
+    hi = np.asarray(hi, dtype=np.float64)
+    out = np.empty((u.shape[0], lo.size))
     upper = lo >= 0  # mass in the right tail: work with survival functions
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         # left/middle: F = Phi(lo) + u (Phi(hi) - Phi(lo)), in logs
         a, b = special.log_ndtr(lo[~upper]), special.log_ndtr(hi[~upper])
         d = np.exp(a - b)  # Phi(lo) / Phi(hi) <= 1
-        out[~upper] = special.ndtri_exp(b + np.log(d + u[~upper] * (1.0 - d)))
+        out[:, ~upper] = special.ndtri_exp(b + np.log(d + u * (1.0 - d)))
         a, b = special.log_ndtr(-lo[upper]), special.log_ndtr(-hi[upper])
         d = np.exp(b - a)  # Phi(-hi) / Phi(-lo) <= 1
-        out[upper] = -special.ndtri_exp(a + np.log(1.0 - u[upper] * (1.0 - d)))
+        out[:, upper] = -special.ndtri_exp(a + np.log(1.0 - u * (1.0 - d)))
     narrow = ~np.isfinite(out) | (hi - lo < 1e-9 * (1.0 + np.abs(lo)))
-    out[narrow] = (lo + u * np.minimum(hi - lo, 1e300))[narrow]
+    out = np.where(narrow, lo + u * np.minimum(hi - lo, 1e300), out)
     return np.clip(out, lo, hi)
+
+
+@functools.cache
+def _censored_nodes(
+    q_nodes: int, q_pieces: tuple[float, ...], tau_nodes: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The censored correction's rules: ``(u, log w_u)`` composite Gauss-Legendre over the
+    rate's CDF pieces, ``(x, w)`` Gauss-Hermite over ``log tau``."""
+    xg, wg = np.polynomial.legendre.leggauss(q_nodes)
+    us, ws = [], []
+    for a, b in itertools.pairwise(q_pieces):
+        us.append(a + (b - a) * 0.5 * (xg + 1.0))
+        ws.append((b - a) * 0.5 * wg)
+    xh, wh = special.roots_hermite(tau_nodes)
+    return np.concatenate(us), np.log(np.concatenate(ws)), xh, wh
 
 
 def _censored_log_factor(
@@ -447,13 +468,7 @@ def _censored_log_factor(
     find the mode of the integrand (rate at its conditional mean), then Gauss-Hermite nodes
     around it; at each node, composite Gauss-Legendre nodes over the rate's conditional CDF.
     """
-    xg, wg = np.polynomial.legendre.leggauss(CENSORED_Q_NODES)
-    us, ws = [], []
-    for a, b in itertools.pairwise(CENSORED_Q_PIECES):
-        us.append(a + (b - a) * 0.5 * (xg + 1.0))
-        ws.append((b - a) * 0.5 * wg)
-    u = np.concatenate(us)
-    log_wu = np.log(np.concatenate(ws))
+    u, log_wu, xh, wh = _censored_nodes(CENSORED_Q_NODES, CENSORED_Q_PIECES, CENSORED_TAU_NODES)
     qmax = np.inf if q_max is None else q_max
     qc = np.clip(qhat, 0.0, qmax)
     # mode of psi(t) = alpha_n t - beta_n e^t + sum log Phi(-qc B e^(t/2)) over t = log tau
@@ -476,7 +491,6 @@ def _censored_log_factor(
     t = np.where(np.isfinite(t), t, t0)
     width = np.clip(1.0 / np.sqrt(np.maximum(-d2, 1e-6)), 1e-3, 10.0)  # Laplace sd in log tau
     width = np.where(np.isfinite(width), width, 1.0)
-    xh, wh = special.roots_hermite(CENSORED_TAU_NODES)
     log_gamma_norm = alpha_n * np.log(beta_n) - special.gammaln(alpha_n)
     # every (tau, q) node: lambda = q sqrt(tau) enters the zeros' factor as
     # G(lambda) = sum_i log Phi(-lambda B_i), one smooth function per candidate: it is
@@ -489,7 +503,7 @@ def _censored_log_factor(
         lo = -qhat / sd
         hi = (qmax - qhat) / sd
         lmass = _log_t_interval_normal(lo, hi)  # log P(0 <= q <= q_max | tau)
-        q = qhat[None, :] + sd[None, :] * _truncnorm_ppf(u[:, None], lo[None, :], hi[None, :])  # (k, n)
+        q = qhat[None, :] + sd[None, :] * _truncnorm_ppf(u, lo, hi)  # (k, n)
         q = np.clip(q, 0.0, qmax)
         nodes.append((tk, tau, lmass, q * np.sqrt(tau)[None, :]))
     lam = np.stack([nd[3] for nd in nodes])  # (tau nodes, q nodes, n)
@@ -527,23 +541,40 @@ def _chebyshev_sum_log_ndtr(B: np.ndarray, x: np.ndarray, lam_max: np.ndarray) -
     Args:
         B: ``(c, n)``; x: ``(..., n)`` points in ``[0, 1]``; lam_max: ``(n,)``.
 
-    The sum is an analytic function of ``lambda`` (linear at 0, quadratic far out), so a
-    polynomial through ``CENSORED_CHEBYSHEV_POINTS`` Chebyshev points of the second kind,
-    evaluated with the barycentric formula, reproduces it to far below the quadrature's error
-    at a fraction of the cost of evaluating it at every node.
+    The sum is an analytic function of ``lambda`` (linear at 0, quadratic far out), so the
+    polynomial through ``CENSORED_CHEBYSHEV_POINTS`` Chebyshev points of the second kind
+    reproduces it to far below the quadrature's error at a fraction of the cost of
+    evaluating it at every node: its Chebyshev coefficients come from the values by one
+    small matrix product, and Clenshaw's recurrence evaluates it at the nodes.
     """
     k = CENSORED_CHEBYSHEV_POINTS
-    j = np.arange(k)
-    cheb = 0.5 * (1.0 - np.cos(np.pi * j / (k - 1)))  # points in [0, 1], 0 and 1 included
+    theta = np.pi * np.arange(k) / (k - 1)
+    cheb = 0.5 * (1.0 - np.cos(theta))  # points in [0, 1], 0 and 1 included (y = -cos theta)
     lam = cheb[:, None, None] * lam_max[None, None, :]
     vals = special.log_ndtr(-lam * B[None, :, :]).sum(axis=1)  # (k, n)
-    bw = np.where(j % 2 == 0, 1.0, -1.0)
-    bw[0] *= 0.5
-    bw[-1] *= 0.5
-    diff = x[..., None, :] - cheb.reshape((1,) * (x.ndim - 1) + (k, 1))  # (..., k, n)
-    diff = np.where(np.abs(diff) < 1e-13, 1e-13, diff)  # on a point: that point's weight dominates
-    c = bw.reshape((1,) * (x.ndim - 1) + (k, 1)) / diff
-    return (c * vals).sum(axis=-2) / c.sum(axis=-2)
+    coef = _chebyshev_coefficient_matrix(k) @ vals  # (k, n), in y = 2 x - 1
+    y2 = 2.0 * (2.0 * x - 1.0)
+    b1 = np.zeros(x.shape)
+    b2 = np.zeros(x.shape)
+    for j in range(k - 1, 0, -1):
+        b1, b2 = coef[j] + y2 * b1 - b2, b1
+    return coef[0] + 0.5 * y2 * b1 - b2
+
+
+@functools.cache
+def _chebyshev_coefficient_matrix(k: int) -> np.ndarray:
+    """``(k, k)``: values at the ``k`` Chebyshev points ``y_j = -cos(pi j / (k - 1))`` to coefficients.
+
+    The interpolant is ``sum_m c_m T_m(y)``; at these points the discrete cosine transform
+    gives ``c_m = (2 / (k - 1)) sum_j'' f_j T_m(y_j)`` (ends halved, and ``c_0``, ``c_{k-1}`` halved).
+    """
+    j = np.arange(k)
+    T = np.cos(np.outer(j, np.pi - np.pi * j / (k - 1)))  # T_m(y_j) = cos(m arccos y_j)
+    w = np.full(k, 2.0 / (k - 1))
+    w[[0, -1]] *= 0.5
+    M = T * w[None, :]
+    M[[0, -1]] *= 0.5
+    return M
 
 
 def _log_t_interval_normal(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
