@@ -74,8 +74,16 @@ conditional CDF, the zeros' sum interpolated in ``q sqrt(tau)`` through
 Chebyshev points; within a few hundredths of a nat of brute-force
 integration in the tests).  Candidates whose positive-readings evidence
 leaves less than ``CENSORED_TAIL`` of the mass are left at the factor's
-bound.  With several ``kappas`` the zeros' factor uses the most probable
-``kappa``'s noise weights.
+plug-in value, and so are those the zero sensors cannot see (``q sqrt(tau)
+sum_i a_i / (sigma r_i)`` below ``CENSORED_FAINT`` even at the rate prior's
+end and the precision's 1 - 1e-12 quantile: each factor is 1/2 to within
+that many nats).  No candidate's factor exceeds ``(1/2)`` per zero.  With
+several ``kappas`` the zeros' factor uses the most probable ``kappa``'s
+noise weights.
+
+Responses are clipped at 0 (:meth:`FlowModel.responses`): the second-order
+upwind operator's rows dip to minus a tenth of their peak just downstream of
+the sensor, and a zero reading then favoured exactly those candidates.
 
 Wind
 ----
