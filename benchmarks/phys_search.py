@@ -138,7 +138,7 @@ def main() -> None:
     ap.add_argument(
         "--steps",
         action="store_true",
-        help="keep every step's record (cell, readings, estimate) in the journal and the JSON",
+        help="keep every step's record (cell, readings, estimate) in the journal (not in the JSON)",
     )
     ap.add_argument("--tag", default="", help="appended to the output names (a variant's own files)")
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/phys_search"))
@@ -171,6 +171,9 @@ def main() -> None:
         steps=args.steps,
         journal=args.out / f"{stem}.journal.jsonl",
     )
+    for case in result["per_case"]:  # steps stay in the journal: the JSON keeps the summaries
+        for trial in case["trials"]:
+            trial.pop("steps", None)
     result["stops"] = stop_quality(result)
     result["settings"]["rule"] = args.rule
     result["settings"]["set"] = args.set
