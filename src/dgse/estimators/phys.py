@@ -78,7 +78,7 @@ from dgse.physics.openings import potential_flow_proposals
 from dgse.physics.projection import project_wind, transport_from_wind
 from dgse.physics.rans import FlowSettings
 from dgse.sensing.sensors import Observations
-from dgse.threads import with_one_blas_thread
+from dgse.threads import map_threads, with_one_blas_thread
 from dgse.world.layout import Layout
 
 __all__ = [
@@ -538,11 +538,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             log_prior.append(math.log(h.prior) + lw)
         # flows the wind readings rule out (WIND_HOPELESS_NATS below the best) get no gas evidence
         lp_best = max(log_prior)
-        for h, lp in zip(hyps, log_prior, strict=True):
-            if lp < lp_best - WIND_HOPELESS_NATS:
-                log_ev.append(np.full(h.flow.mesh.n, -np.inf))
-                details.append((None, {}))
-                continue
+
+        def evidence(h: FlowHypothesis) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
             A = h.flow.responses(cells)
             logl, det = adjoint_log_evidence(
                 A,
@@ -553,6 +550,17 @@ class PhysicsGuidedEstimator(KnowledgeUser):
                 sigma0_fraction=self.sigma0_fraction,
                 censored="deferred" if self.censored else False,
             )
+            return A, logl, det
+
+        live = [k for k, lp in enumerate(log_prior) if lp >= lp_best - WIND_HOPELESS_NATS]
+        # one flow's rows and evidence per thread (each flow keeps its own caches)
+        got = dict(zip(live, map_threads(evidence, [hyps[k] for k in live]), strict=True))
+        for k, h in enumerate(hyps):
+            if k not in got:
+                log_ev.append(np.full(h.flow.mesh.n, -np.inf))
+                details.append((None, {}))
+                continue
+            A, logl, det = got[k]
             log_ev.append(logl)
             details.append((A, det))
         log_ev = [x / temp for x in _censor(log_ev, log_prior, [d for _, d in details], temp)]
