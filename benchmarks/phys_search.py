@@ -21,7 +21,9 @@ Stop rules (``--rule``):
   is the posterior mass within 1 m (0.5 m) of a cell (``source_radius_m``), not the cell's own;
 * ``mass1m90-disk1m-deadline60s``: and the search stops with its estimate once less than 60 s
   of the time limit is left (``deadline_margin_s``); such stops are counted apart
-  (``deadline_stops``).
+  (``deadline_stops``);
+* ``mass1m90-disk1m-deadline60s-revisit0.5m``: and the variance terms of a cell are divided by
+  one plus the cells measured within 0.5 m of it (``revisit_radius_m``).
 
 Every finished episode is journaled beside the JSON, so an interrupted run resumes::
 
@@ -55,6 +57,14 @@ RULES: dict[str, dict[str, Any]] = {
         "mass_level": 0.9,
         "source_radius_m": 1.0,
         "deadline_margin_s": 60.0,
+    },
+    "mass1m90-disk1m-deadline60s-revisit0.5m": {
+        "min_observations": 5,
+        "mass_radius_m": 1.0,
+        "mass_level": 0.9,
+        "source_radius_m": 1.0,
+        "deadline_margin_s": 60.0,
+        "revisit_radius_m": 0.5,
     },
     "mass1m90-disk0.5m": {
         "min_observations": 5,

@@ -226,6 +226,13 @@ class UtilityPlanner:
             its best guess before the budget ends; such a stop ends the episode with reason
             ``"deadline"``, not ``"converged"``, and benchmarks report it apart.  At most a
             tenth of the limit.
+        revisit_radius_m: None (the paper's terms) or a radius, m: the wind and
+            concentration variance terms of a cell are divided by ``1 + k``, ``k`` the
+            cells already measured within this radius of it.  Where the model cannot fit
+            the readings (a sharp plume edge that no flow hypothesis puts in the right
+            place) the predicted variance stays high however often the robot measures
+            there, and the paper's terms keep it measuring cell after cell along that
+            edge; measured neighbourhoods lose that pull, the source term keeps its own.
     """
 
     w_d: float = 0.1
@@ -243,6 +250,7 @@ class UtilityPlanner:
     mass_level: float = 0.9
     source_radius_m: float | None = None
     deadline_margin_s: float | None = None
+    revisit_radius_m: float | None = None
     name: str = field(default="utility", init=False)
 
     def __post_init__(self) -> None:
@@ -273,6 +281,7 @@ class UtilityPlanner:
             raise InputDataError(f"mass_level must lie in (0, 1], got {self.mass_level}")
         self.mass_level = float(self.mass_level)
         self.source_radius_m = _radius_or_none("source_radius_m", self.source_radius_m)
+        self.revisit_radius_m = _radius_or_none("revisit_radius_m", self.revisit_radius_m)
         if self.deadline_margin_s is not None:
             m = float(self.deadline_margin_s)
             if not (math.isfinite(m) and m >= 0):
@@ -327,8 +336,13 @@ class UtilityPlanner:
                 return None
         return int(mode[0]), int(mode[1])
 
-    def utility(self, belief: Belief, distances: np.ndarray) -> np.ndarray:
-        """``float64 (H, W)`` utility ``U_i``; ``-inf`` on walls and unreachable cells."""
+    def utility(
+        self, belief: Belief, distances: np.ndarray, history: SearchHistory | None = None
+    ) -> np.ndarray:
+        """``float64 (H, W)`` utility ``U_i``; ``-inf`` on walls and unreachable cells.
+
+        ``history``: the readings so far (for ``revisit_radius_m``; None: none taken).
+        """
         d = np.asarray(distances, dtype=np.float64)
         if d.shape != belief.shape:
             raise InputDataError(f"distances have shape {d.shape}, the belief {belief.shape}")
@@ -336,10 +350,15 @@ class UtilityPlanner:
             gain = self.w_s * belief.source_probs
         else:
             gain = self.w_s * mass_within(belief.source_probs, belief.resolution, self.source_radius_m)
+        fresh: float | np.ndarray = 1.0  # how new a cell's neighbourhood is (revisit_radius_m)
+        measured = None if history is None else history.measured
+        if self.revisit_radius_m is not None and measured is not None and measured.shape == belief.shape:
+            near = mass_within(measured.astype(np.float64), belief.resolution, self.revisit_radius_m)
+            fresh = 1.0 / (1.0 + np.rint(near))
         if belief.wind_var is not None and self.w_w:
-            gain = gain + self.w_w * belief.wind_var.sum(axis=0)
+            gain = gain + self.w_w * belief.wind_var.sum(axis=0) * fresh
         if belief.log_conc_var is not None and self.w_c:
-            gain = gain + self.w_c * belief.log_conc_var
+            gain = gain + self.w_c * belief.log_conc_var * fresh
         ok = np.isfinite(d) & belief.free
         scale = 1.0 / belief.resolution if self.distance_unit == "cell" else 1.0
         u = np.full(belief.shape, -np.inf)
@@ -363,7 +382,7 @@ class UtilityPlanner:
             goal = self._confirming_goal(belief, robot_cell, distances, history)
             if goal is not None:
                 return goal
-        u = self.utility(belief, distances)
+        u = self.utility(belief, distances, history)
         i0, j0 = int(robot_cell[0]), int(robot_cell[1])
         u[i0, j0] = -np.inf
         if self.exclude_measured and history is not None:
