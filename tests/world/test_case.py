@@ -47,6 +47,19 @@ def test_openfoam_case_loads_and_round_trips(openfoam_cases_dir, tmp_path):
         assert json.loads(str(d["meta"])) == case.meta
 
 
+def test_saving_one_case_file_from_several_threads_at_once(openfoam_cases_dir, tmp_path):
+    """Runs that make the same case set concurrently must not trip over each other's temp file."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    case = Case.load(openfoam_cases_dir / "small_src0.npz")
+    target = tmp_path / "shared.npz"
+    with ThreadPoolExecutor(4) as pool:
+        paths = list(pool.map(lambda _: case.save(target), range(8)))
+    assert paths == [target] * 8
+    assert np.array_equal(Case.load(target).concentration, case.concentration)
+    assert [p.name for p in tmp_path.iterdir()] == ["shared.npz"]  # no temp file left
+
+
 def test_frames_round_trip(openfoam_cases_dir, tmp_path):
     a = _arrays(openfoam_cases_dir)
     frames = np.stack([a["concentration"] * s for s in (0.5, 1.0, 1.5)]).astype(np.float32)

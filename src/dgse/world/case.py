@@ -9,6 +9,8 @@ shapes, dtypes, units and the source position and raises
 from __future__ import annotations
 
 import json
+import os
+import threading
 import zipfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -118,7 +120,9 @@ class Case:
         }
         if self.frames is not None:
             arrays["frames"] = self.frames
-        tmp = path.with_name(path.name + ".part")
+        # a name of this process's own: runs that make the same case set at once each
+        # write a whole file and the last rename wins (the contents are the same)
+        tmp = path.with_name(f"{path.name}.{os.getpid()}.{threading.get_ident()}.part")
         with open(tmp, "wb") as fh:
             np.savez_compressed(fh, **arrays)
         tmp.replace(path)
