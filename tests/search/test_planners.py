@@ -224,6 +224,38 @@ def test_disk_source_term_visits_a_broad_region():
         UtilityPlanner(source_radius_m=0.0)
 
 
+def test_measured_neighbourhoods_lose_their_variance_pull():
+    """A sharp plume edge the model cannot place keeps a high predicted variance.
+
+    On a 1 x 30 corridor of 0.1 m cells, the edge (cells 3-12) has variance 4, the far
+    end (cells 20-29) 1, the source posterior is flat.  With cells 3-11 measured, the
+    paper's terms go on to cell 12 of the edge; ``revisit_radius_m`` divides its pull by
+    the neighbours measured within 0.5 m and sends the robot to the far end.
+    """
+    occ = np.zeros((1, 30), np.uint8)
+    g = FreeSpaceGraph(occ, 0.1)
+    cv = np.zeros((1, 30))
+    cv[0, 3:13] = 4.0
+    cv[0, 20:] = 1.0
+    b = _belief(occ, np.ones((1, 30)), res=0.1, conc_var=cv)
+    hist = _history(g, [(0, j) for j in range(3, 12)])
+    d = g.distances_from((0, 11))
+    assert UtilityPlanner().next_goal(b, (0, 11), d, hist) == (0, 12)
+    planner = UtilityPlanner(revisit_radius_m=0.5)
+    goal = planner.next_goal(b, (0, 11), d, hist)
+    assert goal is not None and goal[1] >= 20
+    # the discount: 1 / (1 + measured cells within 0.5 m)
+    u = planner.utility(b, d, hist)
+    u0 = UtilityPlanner().utility(b, d)
+    near12 = sum(abs(j - 12) <= 5 for j in range(3, 12))
+    src = math.exp(-0.1 * 0.1) * 100.0 * b.source_probs[0, 12]
+    assert u[0, 12] - src == pytest.approx((u0[0, 12] - src) / (1 + near12), rel=1e-9)
+    # without readings nothing changes
+    np.testing.assert_array_equal(planner.utility(b, d, _history(g)), u0)
+    with pytest.raises(InputDataError, match="revisit_radius_m"):
+        UtilityPlanner(revisit_radius_m=-1.0)
+
+
 def test_deadline_stop():
     """deadline_margin_s: stop with the current estimate once the time left is below the margin."""
     occ = np.zeros((10, 10), np.uint8)
