@@ -59,6 +59,13 @@ def main() -> None:
     ap.add_argument("--trials", type=int, default=2)
     ap.add_argument("--sets", nargs="+", default=["reference", "test"])
     ap.add_argument(
+        "--methods",
+        nargs="+",
+        default=None,
+        metavar="METHOD@LEVEL",
+        help="only these rows, e.g. dgse-phys@openings adjoint-oracle@wind (default: all)",
+    )
+    ap.add_argument(
         "--reference",
         type=Path,
         default=Path(
@@ -69,10 +76,17 @@ def main() -> None:
     )
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
+    rows = METHODS
+    if args.methods:
+        known = {f"{m}@{lv}": (m, lv) for m, lv in METHODS}
+        bad = [x for x in args.methods if x not in known]
+        if bad:
+            ap.error(f"unknown rows {bad}; choose from {sorted(known)}")
+        rows = [known[x] for x in args.methods]
     sources = {"reference": args.reference, "test": _test_cases(args.out)}
     table: dict = {}
     for name in args.sets:
-        for method, level in METHODS:
+        for method, level in rows:
             out = args.out / f"{name}_{method}_{level}.json"
             res = evaluate(
                 sources[name], method, COUNTS, trials=args.trials, seed=0, knowledge=level,
