@@ -13,6 +13,8 @@ something).  Case sets (made once, into ignored ``_cases_<set>/`` folders):
 Stop rules (``--rule``):
 
 * ``paper``: the entropy test from the 5th reading (``min_observations=5``);
+* ``paper-eta0.78``: the same with the shipped DGSE-S's threshold (``dgse demo``'s, tuned on
+  the validation split by ``benchmarks/tune_eta.py``);
 * ``confirm``: the same, and a stop needs 2 readings within 1 m of the posterior's
   mode (``confirm_radius_m=1``, ``confirm_readings=2``);
 * ``mass1m90`` / ``mass2m95``: instead of the entropy test, stop once the posterior
@@ -42,6 +44,7 @@ from dgse.search.campaign import json_safe, run_trials
 SETS = {"validation": range(900, 908), "validation2": range(908, 924), "test": range(2000, 2020)}
 RULES: dict[str, dict[str, Any]] = {
     "paper": {"min_observations": 5},
+    "paper-eta0.78": {"min_observations": 5, "eta": 0.78},
     "confirm": {"min_observations": 5, "confirm_radius_m": 1.0, "confirm_readings": 2},
     "mass1m90": {"min_observations": 5, "mass_radius_m": 1.0, "mass_level": 0.9},
     "mass2m95": {"min_observations": 5, "mass_radius_m": 2.0, "mass_level": 0.95},
