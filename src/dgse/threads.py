@@ -10,8 +10,9 @@ took 10-12 ms on this project's 2-core machine (``w @ A`` with ``A`` of
 ``150 x 6000``).  :func:`one_blas_thread` runs a block with one BLAS thread
 (``threadpoolctl``; a no-op where it finds no BLAS library to limit).
 
-Independent pieces of one estimate (the evidence of each flow hypothesis) run
-on the machine's cores with :func:`map_threads` instead: NumPy, SciPy's
+Independent pieces of one estimate (the evidence of each flow hypothesis, the
+chunks of candidates of the zero readings' correction) run on the machine's
+cores with :func:`map_threads` instead: NumPy, SciPy's
 sparse solves and its special functions release the GIL, so Python threads
 share the work without copying the arrays to other processes.
 """

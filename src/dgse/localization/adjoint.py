@@ -82,8 +82,9 @@ several ``kappas`` the zeros' factor uses the most probable ``kappa``'s
 noise weights.
 
 Responses are clipped at 0 (:meth:`FlowModel.responses`): the second-order
-upwind operator's rows dip to minus a tenth of their peak just downstream of
-the sensor, and a zero reading then favoured exactly those candidates.
+upwind operator's rows dip below zero just downstream of the sensor (down to
+minus 0.18 of their peak: ``benchmarks/phys_diagnostics.py``), and a zero
+reading then favoured exactly those candidates.
 
 Wind
 ----
@@ -133,17 +134,16 @@ import functools
 import itertools
 import json
 import math
-import os
 import time
 from collections import OrderedDict
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
 from scipy import special
 
+from dgse import threads
 from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators.belief import Belief
 from dgse.estimators.knowledge import Knowledge, KnowledgeUser, Level
@@ -223,8 +223,8 @@ class FlowModel:
         one batch for the cells not seen before and cached (the last
         :data:`MAX_CACHED_ROWS` cells), clipped at 0: a release cannot lower a
         reading, but the second-order upwind scheme undershoots next to a
-        point source, and a row's most negative value is often a tenth of
-        its largest (sources a cell or two downstream of the sensor).  Left
+        point source: a row dips below zero for sources a cell or two
+        downstream of the sensor (to minus 0.18 of its peak on test 2005).  Left
         in, such lobes made a zero reading *favour* the candidates just
         downstream of it (``Phi(-q a / sigma) > 1/2`` for ``a < 0``).
         """
@@ -666,13 +666,11 @@ def censored_correction(
     # functions release the GIL), until the rest of the ranking holds a negligible share
     done = 0
     chunk = CENSORED_CHUNK
-    pool = _censored_pool()
     while done < order.size:
         idxs = [
-            order[k : k + chunk]
-            for k in range(done, min(done + chunk * _CENSORED_WORKERS, order.size), chunk)
+            order[k : k + chunk] for k in range(done, min(done + chunk * threads.WORKERS, order.size), chunk)
         ]
-        fs = list(pool.map(factor, idxs)) if pool is not None and len(idxs) > 1 else [factor(i) for i in idxs]
+        fs = threads.map_threads(factor, idxs)
         for idx, f in zip(idxs, fs, strict=True):
             out[idx] = f
             got += float(np.exp(logl[idx] + f - top).sum())
@@ -687,21 +685,8 @@ def censored_correction(
 #: Nats within which the plug-in zeros' factor stands for the integrated one of a candidate the
 #: zero sensors hardly see (:func:`censored_correction`).
 CENSORED_FAINT = 1e-3
-#: Candidates per chunk of the censored correction.
+#: Candidates per chunk of the censored correction (chunks run on :func:`dgse.threads.map_threads`).
 CENSORED_CHUNK = 256
-#: Threads that compute chunks at once (the machine's cores, at most 2).
-_CENSORED_WORKERS = max(1, min(2, os.cpu_count() or 1))
-_POOL: ThreadPoolExecutor | None = None
-
-
-def _censored_pool() -> ThreadPoolExecutor | None:
-    """The shared worker threads of the censored correction (None on one core)."""
-    global _POOL
-    if _CENSORED_WORKERS < 2:
-        return None
-    if _POOL is None:
-        _POOL = ThreadPoolExecutor(_CENSORED_WORKERS, thread_name_prefix="dgse-censored")
-    return _POOL
 
 
 def adjoint_log_evidence(
