@@ -125,12 +125,13 @@ def test_demo_searches_a_random_scenario(capsys, tmp_path):
 
     weights = save_model(tiny_model("dgse-s"), tmp_path / "tiny.safetensors")
     out = tmp_path / "demo"
-    args = ["demo", "--seed", "3", "--model", str(weights), "--time-limit", "40", "--no-animate"]
+    net = ["--method", "dgse-s", "--model"]
+    args = ["demo", "--seed", "3", *net, str(weights), "--time-limit", "40", "--no-animate"]
     code, text, err = _run(capsys, *args, "-o", str(out))
     assert code == 0, err
     assert "localization error" in text and "search time" in text
     assert (out / "search_final.png").exists() and len(list(out.glob("*.npz"))) == 1
-    code, _, err = _run(capsys, "demo", "--model", str(tmp_path / "missing.safetensors"))
+    code, _, err = _run(capsys, "demo", *net, str(tmp_path / "missing.safetensors"))
     assert code == 2 and "missing.safetensors" in err
 
 

@@ -267,7 +267,7 @@ class FlowModel:
         return out * np.asarray(rates, dtype=np.float64).reshape(-1, 1)
 
 
-_FLOWS: OrderedDict[tuple[str, float], FlowModel] = OrderedDict()
+_FLOWS: OrderedDict[tuple[str, float, float | None, str], FlowModel] = OrderedDict()
 
 
 def _layout_key(layout: Layout) -> str:
@@ -288,10 +288,13 @@ def flow_model(
 
     ``warm_start``: a model of the same layout at another speed; its flow, scaled, starts
     the iteration (:func:`dgse.physics.builtin.flow_and_transport`), which converges to the
-    same criteria in fewer iterations.
+    same criteria in fewer iterations, though not to the same turbulence in quiet rooms
+    (see :class:`dgse.estimators.phys.PhysicsGuidedEstimator`'s ``warm_start``), so
+    warm- and cold-started flows are cached apart, as are flows of other settings.
     """
     v = float(inlet_velocity)
-    key = (_layout_key(layout), round(v, 9))
+    start_v = None if warm_start is None else round(float(warm_start.inlet_velocity), 9)
+    key = (_layout_key(layout), round(v, 9), start_v, repr(settings))
     hit = _FLOWS.get(key)
     if hit is not None and hit.physics == physics:
         _FLOWS.move_to_end(key)
