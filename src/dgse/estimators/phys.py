@@ -324,7 +324,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             criteria, but the turbulence of quiet rooms (``k`` and ``epsilon`` a thousandth
             of the jet's, invisible to normalised residuals) stays where the start left it.
             On test scenario 2005 the warm-started flow's ``nu_t`` differed from the cold
-            one's by 35 % (median over cells) and the source estimate from 150 readings
+            one's by 71 % (median over free cells) and the source estimate from 150 readings
             moved from 0.17 to 3.2 m off (``python benchmarks/phys_diagnostics.py``).
         flow_settings: SIMPLEC controls of the built-in solver.
         physics: physical constants.
