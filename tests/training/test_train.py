@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import lightning as L
@@ -237,3 +238,29 @@ def test_localization_error_is_distance_of_the_mean_position():
     probs[1, 0, 0] = probs[1, 0, 4] = 0.5  # mean at (row 0, col 2); true cell (row 3, col 2)
     err = localization_error(probs, torch.tensor([1 * 5 + 2, 3 * 5 + 2]), cell_size=0.1)
     assert err.tolist() == pytest.approx([0.0, 0.3])
+
+
+def test_init_starts_a_fresh_run_from_given_weights(store, tmp_path):
+    """Fine-tuning: with zero learning rate the run's weights are exactly the given ones."""
+    first = train(_config(store, tmp_path / "a", epochs=1, limit_train_batches=1, progress_bar=False))
+    assert first.best_path is not None
+    src = load_model(first.best_path, variant="dgse-s")
+    cfg = _config(
+        store, tmp_path / "b", epochs=1, limit_train_batches=1, progress_bar=False, init=str(first.best_path)
+    )
+    tuned = train(replace(cfg, lr=1e-12, weight_decay=0.0))
+    got = load_model(tuned.best_path, variant="dgse-s").state_dict()
+    for name, w in src.state_dict().items():
+        assert torch.allclose(got[name], w, atol=1e-6), name
+    fresh = train(_config(store, tmp_path / "c", epochs=1, limit_train_batches=1, progress_bar=False, seed=5))
+    fresh_w = load_model(fresh.best_path, variant="dgse-s").state_dict()
+    assert any(not torch.allclose(fresh_w[n], w, atol=1e-3) for n, w in src.state_dict().items())
+    # another architecture, or no such file: a clear error before any step
+    arch = {"base_width": 8, "depth": 2}
+    wide = _config(store, tmp_path / "d", init=str(first.best_path), model_overrides=arch)
+    with pytest.raises(InputDataError, match="another network"):
+        train(wide)
+    with pytest.raises(InputDataError, match="not a model file"):
+        train(_config(store, tmp_path / "e", init=str(tmp_path / "missing.safetensors")))
+    with pytest.raises(InputDataError, match=r"best\.safetensors is a model file"):
+        train(_config(store, tmp_path / "f", init=str(first.last_path)))  # a training state

@@ -114,6 +114,14 @@ def train_cmd(
     export: Annotated[
         Path | None, typer.Option("--export", help="Also write the selected model to this .safetensors file.")
     ] = None,
+    init: Annotated[
+        str | None,
+        typer.Option(
+            "--init",
+            help="Start from these weights (fine-tuning): a .safetensors model of the same "
+            "architecture, or 'default' for the shipped ones.",
+        ),
+    ] = None,
     fast_dev_run: Annotated[
         bool,
         typer.Option(
@@ -164,6 +172,7 @@ def train_cmd(
         "threads": threads,
         "seed": seed,
         "export": str(export) if export is not None else None,
+        "init": init,
         "progress_bar": progress,
     }
     overrides.update({k: v for k, v in options.items() if v is not None})

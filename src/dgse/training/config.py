@@ -170,6 +170,10 @@ class TrainConfig:
         data: path of the dataset store (``.h5``) with ``train`` and ``val`` splits.
         out_dir: directory for checkpoints and logs (see :func:`dgse.training.train.train`).
         export: if set, the selected model is also written to this ``.safetensors`` path.
+        init: a fresh run starts from these weights instead of a random initialization
+            (fine-tuning): a ``.safetensors`` model file of the same architecture, or
+            ``"default"`` for the shipped weights of ``model``.  A resumed run continues
+            from its own weights and ignores it.
         epochs: number of epochs to train (in total, counting resumed ones).
         batch_size: samples per optimizer step and device.
         lr, weight_decay: Adam parameters.
@@ -209,6 +213,7 @@ class TrainConfig:
     data: str | None = None
     out_dir: str = "runs/dgse"
     export: str | None = None
+    init: str | None = None
     epochs: int = 100
     batch_size: int = 300
     lr: float = 5e-4
@@ -250,6 +255,7 @@ class TrainConfig:
         _check_str("data", self.data, optional=True)
         _check_str("out_dir", self.out_dir)
         _check_str("export", self.export, optional=True)
+        _check_str("init", self.init, optional=True)
         for key, lo in (
             ("epochs", 1),
             ("batch_size", 1),

@@ -93,7 +93,13 @@ from safetensors import safe_open
 from safetensors.torch import save_file
 
 from dgse.errors import InputDataError
-from dgse.models.checkpoint import load_checkpoint, read_checkpoint_info, save_model
+from dgse.models.checkpoint import (
+    CheckpointError,
+    load_checkpoint,
+    load_model,
+    read_checkpoint_info,
+    save_model,
+)
 from dgse.models.networks import DGSEModel, ModelConfig
 from dgse.training.config import TrainConfig
 from dgse.training.datamodule import DGSEDataModule, EpochSetup
@@ -109,6 +115,7 @@ __all__ = [
     "TrainState",
     "TrainStateCheckpoint",
     "export_model",
+    "init_weights",
     "prepare_out_dir",
     "read_train_state",
     "train",
@@ -368,6 +375,34 @@ def _load_weights(state: TrainState, model: DGSEModel) -> None:
                     f"{tuple(t.shape)}, the parameter {shape}"
                 )
     model.load_state_dict({k: state.model_state[k].to(v.dtype) for k, v in expected.items()}, strict=True)
+
+
+def init_weights(model: DGSEModel, init: str | os.PathLike[str]) -> Path:
+    """Copy the weights of ``init`` (a model file, or ``"default"``: the shipped ones) into ``model``.
+
+    Raises:
+        InputDataError: a missing or unreadable file, or a network of another variant or
+            architecture than ``model``.
+    """
+    from dgse.estimators.dgse import default_model_path
+
+    variant = model.config.variant
+    path = default_model_path(variant) if str(init) == "default" else Path(init)
+    if not path.is_file():
+        raise InputDataError(f"init: {path} is not a model file")
+    try:
+        source = load_model(path)
+    except CheckpointError as e:
+        raise InputDataError(f"init: {e} (a run's best.safetensors is a model file)") from None
+    want = {k: v for k, v in model.config.to_dict().items() if k != "preset"}
+    got = {k: v for k, v in source.config.to_dict().items() if k != "preset"}
+    if got != want:
+        diff = sorted(k for k in want if want[k] != got.get(k))
+        raise InputDataError(
+            f"init: {path} holds another network than the configured one (differs in {', '.join(diff)})"
+        )
+    model.load_state_dict(source.state_dict())
+    return path
 
 
 def _set_progress(trainer: L.Trainer, next_epoch: int, global_step: int, batches_that_stepped: int) -> None:
@@ -851,6 +886,8 @@ def train(
     )
     if state is not None:
         _load_weights(state, module.model)
+    elif config.init is not None:
+        init_weights(module.model, config.init)
 
     stop = StopControl(config.max_time_s, t0=t_start)
     ckpt = TrainStateCheckpoint(out, config, state, stop, str(Path(config.data).resolve()))
