@@ -1,0 +1,144 @@
+"""DGSE-S's source-localization error against map size, per set of weights (issue 14).
+
+Scenarios: random multi-room layouts of the training generator
+(:func:`dgse.physics.scenario.random_cases`) whose sides are drawn from each
+size bin (``--bins``, m, at 0.1 m cells), ``--cases`` per bin with seeds
+6000 + 100 * bin + k (no dataset or tuning run uses them), made once into
+``OUT/_cases/``.  Per scenario and trial, ``--readings`` random readings with
+Table I noise (:func:`dgse.evaluation.evaluate.draw_observations`); the error
+of each model (``--model``: ``default`` for the shipped DGSE-S, or a weights
+file, e.g. a fine-tuned one) and of the guess "the source is at the highest
+reading", from the same readings.
+
+    python benchmarks/size_error.py --model default runs/dgse-s-sizes/best.safetensors
+
+writes ``OUT/size_error.json``, ``OUT/size_error.md`` and ``OUT/size_error.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from dgse.estimators.registry import get_estimator
+from dgse.evaluation.evaluate import draw_observations
+from dgse.physics.scenario import random_cases
+from dgse.world.case import Case
+
+BINS = [(5.0, 10.0), (10.0, 15.0), (15.0, 20.0)]
+
+
+def bin_cases(out: Path, b: int, lo: float, hi: float, n: int) -> list[tuple[str, Case]]:
+    """The ``n`` scenarios of size bin ``b`` (sides in ``[lo, hi]`` m), solved once and kept."""
+    d = out / "_cases"
+    d.mkdir(parents=True, exist_ok=True)
+    cases = []
+    for k in range(n):
+        seed = 6000 + 100 * b + k
+        path = d / f"size{lo:g}-{hi:g}_{seed}.npz"
+        if not path.exists():
+            t0 = time.perf_counter()
+            case = random_cases(seed, n_sources=1, width_range=(lo, hi), height_range=(lo, hi))[0]
+            case.save(path)
+            print(f"  solved {path.name}: {case.occupancy.shape} cells in {time.perf_counter() - t0:.0f} s")
+        cases.append((path.stem, Case.load(path)))
+    return cases
+
+
+def highest_reading_error(case: Case, obs) -> float:
+    """Distance from the source to the reading cell with the most gas, m."""
+    i, j = obs.cells[int(np.argmax(obs.gas))]
+    x, y = case.grid.center_of(int(i), int(j))
+    return float(np.hypot(x - case.source[0], y - case.source[1]))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--model", nargs="+", default=["default"], help="DGSE-S weights: default or files")
+    ap.add_argument("--cases", type=int, default=8, help="scenarios per size bin")
+    ap.add_argument("--trials", type=int, default=4, help="reading sets per scenario")
+    ap.add_argument("--readings", type=int, default=50)
+    ap.add_argument("--bins", type=float, nargs="+", default=[v for b in BINS for v in b], metavar="LO HI")
+    ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/size_error"))
+    args = ap.parse_args()
+    if len(args.bins) % 2:
+        ap.error("--bins takes pairs LO HI")
+    bins = list(zip(args.bins[::2], args.bins[1::2], strict=True))
+    args.out.mkdir(parents=True, exist_ok=True)
+    estimators = {
+        m: get_estimator("dgse-s", model=m, seed=0, dtype="bf16", channels_last=True) for m in args.model
+    }
+    rows = []
+    for b, (lo, hi) in enumerate(bins):
+        print(f"bin {lo:g}-{hi:g} m")
+        for name, case in bin_cases(args.out, b, lo, hi, args.cases):
+            for t in range(args.trials):
+                obs = draw_observations(case, args.readings, seed=0, case_id=name, trial=t)
+                row = {
+                    "bin": f"{lo:g}-{hi:g}",
+                    "case": name,
+                    "cells": list(case.occupancy.shape),
+                    "trial": t,
+                    "highest_reading": highest_reading_error(case, obs),
+                }
+                for m, est in estimators.items():
+                    belief = est.estimate(case.occupancy, case.resolution, obs)
+                    row[m] = belief.localization_error(case.source)
+                rows.append(row)
+        print("  " + ", ".join(f"{k}: {_mean(rows, f'{lo:g}-{hi:g}', k):.2f} m" for k in _keys(args.model)))
+    summary = {
+        f"{lo:g}-{hi:g}": {k: _mean(rows, f"{lo:g}-{hi:g}", k) for k in _keys(args.model)} for lo, hi in bins
+    }
+    settings = {"readings": args.readings, "trials": args.trials, "cases_per_bin": args.cases, "bins": bins}
+    result = {"settings": settings, "models": args.model, "mean_error_m": summary, "rows": rows}
+    (args.out / "size_error.json").write_text(json.dumps(result, indent=1))
+    lines = [
+        "# DGSE-S error against map size",
+        "",
+        f"`python benchmarks/size_error.py --model {' '.join(args.model)}`: mean source-localization "
+        f"error (m) from {args.readings} random readings, {args.cases} scenarios x {args.trials} "
+        "trials per bin.",
+        "",
+        "| map side (m) | " + " | ".join(_keys(args.model)) + " |",
+        "|---" * (len(args.model) + 2) + "|",
+    ]
+    for name, means in summary.items():
+        lines.append(f"| {name} | " + " | ".join(f"{v:.2f}" for v in means.values()) + " |")
+    (args.out / "size_error.md").write_text("\n".join(lines) + "\n")
+    _plot(summary, args.out / "size_error.png")
+    print("\n".join(lines))
+    print(f"wrote {args.out}/size_error.{{json,md,png}}")
+
+
+def _keys(models: list[str]) -> list[str]:
+    return [*models, "highest_reading"]
+
+
+def _mean(rows: list[dict], name: str, key: str) -> float:
+    return float(np.mean([r[key] for r in rows if r["bin"] == name]))
+
+
+def _plot(summary: dict[str, dict[str, float]], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(summary)
+    fig, ax = plt.subplots(figsize=(5.5, 3.5))
+    for key in next(iter(summary.values())):
+        ax.plot(names, [summary[n][key] for n in names], marker="o", label=Path(key).parent.name or key)
+    ax.set_xlabel("map side (m)")
+    ax.set_ylabel("mean SL error (m)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+if __name__ == "__main__":
+    main()
