@@ -211,6 +211,8 @@ def test_checked_in_configs():
     cpu = load_config(CONFIGS / "cpu-small.yaml")
     assert cpu.preset == "small" and 32 <= cpu.batch_size <= 64 and cpu.max_time_s is not None
     assert cpu.configs_per_env < 30 and cpu.accelerator == "cpu"
+    sizes = load_config(CONFIGS / "cpu-small-sizes.yaml")  # fine-tunes the shipped weights
+    assert sizes.init == "default" and sizes.model_config() == cpu.model_config() and sizes.lr < cpu.lr
     tiny = load_config(TINY)
     assert tiny.model_config().base_width == 4 and tiny.model_config().depth == 2
     defaults = paper.to_dict() | {"out_dir": "runs/dgse", "num_workers": 0}
