@@ -176,17 +176,17 @@ def test_levels_and_bad_input(case):
         get_estimator("dgse-phys", wind_noise_floor="x")
 
 
-def test_speed_flows_are_solved_cold_unless_warm_start_is_asked(case):
-    """Each candidate speed is the flow ``dgse solve`` gives; warm starts are cached apart."""
+def test_speed_flows_are_warm_started_unless_told_otherwise(case):
+    """Cold: each candidate speed is the flow ``dgse solve`` gives; warm starts are cached apart."""
     from dgse.localization.adjoint import clear_flow_cache
 
     clear_flow_cache()
     k = Knowledge.from_case(case, "openings")
-    cold = get_estimator("dgse-phys", knowledge=k, speeds=(0.6, 1.2), refine_speeds=0).hypotheses()
+    opts = {"knowledge": k, "speeds": (0.6, 1.2), "refine_speeds": 0}
+    cold = get_estimator("dgse-phys", **opts, warm_start=False).hypotheses()
     assert [h.flow.info["warm_start"] for h in cold] == [None, None]
     assert cold[1].flow is flow_model(case.layout, 1.2)
-    warm = get_estimator("dgse-phys", knowledge=k, speeds=(0.6, 1.2), refine_speeds=0, warm_start=True)
-    hot = warm.hypotheses()
+    hot = get_estimator("dgse-phys", **opts).hypotheses()
     assert hot[1].flow.info["warm_start"] == pytest.approx(0.6)
     assert hot[1].flow is not cold[1].flow and flow_model(case.layout, 1.2).info["warm_start"] is None
     # the same flow to the solver's tolerance where the wind is strong

@@ -319,13 +319,16 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         censored: read zero readings as censored (the sensor clips negatives; see
             :func:`~dgse.localization.adjoint.censored_correction`); False: as exact zeros.
         warm_start: at knowledge ``openings``, start each speed's RANS solve from the
-            flow of a neighbouring speed (about 4x fewer iterations) instead of from the
-            coarse grid, as ``dgse solve`` does.  Off by default: both meet the residual
-            criteria, but the turbulence of quiet rooms (``k`` and ``epsilon`` a thousandth
-            of the jet's, invisible to normalised residuals) stays where the start left it.
-            On test scenario 2005 the warm-started flow's ``nu_t`` differed from the cold
-            one's by 71 % (median over free cells) and the source estimate from 150 readings
-            moved from 0.17 to 3.2 m off (``python benchmarks/phys_diagnostics.py``).
+            flow of the speed below (about 2.5x faster: 2.4 s against 5.8 s for the six
+            speeds of test scenario 2005) instead of from the coarse grid, as ``dgse solve``
+            does.  Both meet the residual criteria, but the turbulence of quiet rooms (``k``
+            and ``epsilon`` a thousandth of the jet's, invisible to normalised residuals)
+            stays where the start left it: on test 2005 the two flows' ``nu_t`` differ by
+            71 % (median over free cells) and the estimate from 150 readings is 3.2 m off
+            warm, 0.17 m cold (``python benchmarks/phys_diagnostics.py``).  Validation searches
+            favour the warm start (900-907 and 908-913, openings, ``SEARCH_PLANNER``: 14 of
+            14 found warm, 12 of 14 cold; test 2005 failed both ways), and it is the faster,
+            so it is the default.
         flow_settings: SIMPLEC controls of the built-in solver.
         physics: physical constants.
     """
@@ -352,7 +355,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     refine_speeds: int = 4
     refine_readings: int = 10
     refine_ratio: float = 1.08
-    warm_start: bool = False
+    warm_start: bool = True
     flow_settings: FlowSettings | None = None
     physics: Physics = DEFAULT_PHYSICS
     name: str = field(default="dgse-phys", init=False)
