@@ -2,8 +2,8 @@
 
 Scenarios: random multi-room layouts of the training generator
 (:func:`dgse.physics.scenario.random_cases`) whose sides are drawn from each
-size bin (``--bins``, m, at 0.1 m cells), ``--cases`` per bin with seeds
-6000 + 100 * bin + k (no dataset or tuning run uses them), made once into
+size bin (``--bins``, m, at 0.1 m cells), the first ``--cases`` per bin whose flow
+converges, seeds 6000 + 100 * bin + k (no dataset or tuning run uses them), made once into
 ``OUT/_cases/``.  Per scenario and trial, ``--readings`` random readings with
 Table I noise (:func:`dgse.evaluation.evaluate.draw_observations`); the error
 of each model (``--model``: ``default`` for the shipped DGSE-S, or a weights
@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dgse.errors import ConvergenceError
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.evaluate import draw_observations
 from dgse.physics.scenario import random_cases
@@ -33,16 +34,30 @@ BINS = [(5.0, 10.0), (10.0, 15.0), (15.0, 20.0)]
 
 
 def bin_cases(out: Path, b: int, lo: float, hi: float, n: int) -> list[tuple[str, Case]]:
-    """The ``n`` scenarios of size bin ``b`` (sides in ``[lo, hi]`` m), solved once and kept."""
+    """The first ``n`` scenarios of size bin ``b`` (sides in ``[lo, hi]`` m) whose flow converges.
+
+    Seeds ``6000 + 100 b + k`` in order; each is solved once and kept (a seed whose flow
+    does not converge is marked ``.failed`` and skipped, as ``dgse generate`` skips it).
+    """
     d = out / "_cases"
     d.mkdir(parents=True, exist_ok=True)
     cases = []
-    for k in range(n):
+    for k in range(100):
+        if len(cases) == n:
+            break
         seed = 6000 + 100 * b + k
         path = d / f"size{lo:g}-{hi:g}_{seed}.npz"
+        failed = path.with_suffix(".failed")
+        if failed.exists():
+            continue
         if not path.exists():
             t0 = time.perf_counter()
-            case = random_cases(seed, n_sources=1, width_range=(lo, hi), height_range=(lo, hi))[0]
+            try:
+                case = random_cases(seed, n_sources=1, width_range=(lo, hi), height_range=(lo, hi))[0]
+            except ConvergenceError as e:
+                failed.write_text(str(e))
+                print(f"  skipped seed {seed}: {e}")
+                continue
             case.save(path)
             print(f"  solved {path.name}: {case.occupancy.shape} cells in {time.perf_counter() - t0:.0f} s")
         cases.append((path.stem, Case.load(path)))
