@@ -1,4 +1,4 @@
-"""Two diagnoses of issue 12's physics posterior, as numbers a command reproduces.
+"""Three diagnoses of issue 12's physics posterior, as numbers a command reproduces.
 
 * ``undershoot``: how negative the raw (unclipped) adjoint rows of the built-in
   linear-upwind operator are, per sensor cell: the share of candidates with a
@@ -9,9 +9,10 @@
   given, from the same random readings (Table I noise) of one scenario: dgse-phys
   with the openings known and a single candidate speed, for each of ``--speeds``.
 * ``warm_start``: dgse-phys with its full speed grid from the same readings, each
-  speed solved cold (the default) and warm-started from the one below (``warm_start=
-  True``), and how far the two flows at 1 m/s differ: wind and ``nu_t`` (relative L2
-  and the median over free cells of the relative difference).
+  speed warm-started from the one below (``warm_start=True``, the default) and solved
+  cold from the coarse grid (``warm_start=False``), and how far the two flows at 1 m/s
+  differ: wind and ``nu_t`` (relative L2 and the median over free cells of the
+  relative difference).
 
 Scenarios are the generated test ones of ``benchmarks/phys_search.py`` (made once)::
 

@@ -10,7 +10,7 @@ of each model (``--model``: ``default`` for the shipped DGSE-S, or a weights
 file, e.g. a fine-tuned one) and of the guess "the source is at the highest
 reading", from the same readings.
 
-    python benchmarks/size_error.py --model default runs/dgse-s-sizes/best.safetensors
+    python benchmarks/size_error.py --model default benchmarks/results/size_error/dgse-s-sizes.safetensors
 
 writes ``OUT/size_error.json``, ``OUT/size_error.md`` and ``OUT/size_error.png``.
 """
