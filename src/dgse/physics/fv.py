@@ -304,6 +304,7 @@ def gauss_seidel(aP, a, b, nb, x, rel_tol, max_sweeps):
         initial[k] = r0[k] / (norm + 1e-20)
     sweeps = 0
     est = np.empty(m)
+    inv = 1.0 / aP  # a multiply instead of a divide on the sweep's dependency chain
     while sweeps < max_sweeps:
         est[:] = 0.0
         for c in range(n):
@@ -314,7 +315,7 @@ def gauss_seidel(aP, a, b, nb, x, rel_tol, max_sweeps):
                     if j >= 0:
                         s += a[c, d] * x[j, k]
                 est[k] += abs(s - aP[c] * x[c, k])
-                x[c, k] = s / aP[c]
+                x[c, k] = s * inv[c]
         done = True
         for k in range(m):
             if est[k] > rel_tol * r0[k]:
@@ -328,7 +329,7 @@ def gauss_seidel(aP, a, b, nb, x, rel_tol, max_sweeps):
                     j = nb[c, d]
                     if j >= 0:
                         s += a[c, d] * x[j, k]
-                x[c, k] = s / aP[c]
+                x[c, k] = s * inv[c]
         sweeps += 1
     return sweeps, initial
 
