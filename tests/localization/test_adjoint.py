@@ -267,3 +267,27 @@ def test_responses_are_never_negative_so_a_zero_favours_no_candidate() -> None:
     part, det = adjoint_log_evidence(A, z, censored="deferred")
     f = censored_correction(logl=part, **det["censor"], tail=0.0)
     assert np.all(f <= -2 * math.log(2.0) + 1e-9)
+
+
+def test_the_zeros_cut_never_drops_mass_the_plug_in_value_hides() -> None:
+    """After one positive reading the noise posterior is broad: the plug-in factor of a candidate
+    the zeros see well is 100+ nats below its integrated one.  The candidates left at the plug-in
+    value must be those bound to hold negligible mass, not those the plug-in value ranks low."""
+    rng = np.random.default_rng(0)
+    n_near, n_far = 300, 3000
+    A = np.empty((3, n_near + n_far))
+    A[0] = rng.uniform(200.0, 300.0, A.shape[1])  # the positive reading sees every candidate alike
+    A[1:, :n_near] = rng.uniform(0.0, 0.01, (2, n_near))  # the zero sensors hardly see these
+    A[1:, n_near:] = rng.uniform(200.0, 300.0, (2, n_far))  # and see these as the positive one does
+    z = np.array([900.0, 0.0, 0.0])
+    part, det = adjoint_log_evidence(A, z, censored="deferred", kappas=(0.0,))
+
+    def posterior(f: np.ndarray) -> np.ndarray:
+        p = np.exp(part + f - (part + f).max())
+        return p / p.sum()
+
+    cut = censored_correction(logl=part, **det["censor"])
+    full = censored_correction(logl=part, **det["censor"], tail=0.0)
+    assert posterior(full)[n_near:].sum() > 0.03  # the far group holds mass (the cut used to drop it)
+    assert 0.5 * np.abs(posterior(cut) - posterior(full)).sum() < 1e-3
+    assert np.all(cut[n_near:] > full[n_near:] - 1.0)

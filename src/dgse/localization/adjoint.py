@@ -616,9 +616,11 @@ def censored_correction(
     A reading clipped at zero says only that the noisy concentration was at most 0:
     ``P = Phi(-q a_i(s) / (sigma r_i))``.  Integrated over the posterior of the rate and the
     noise floor given the positive readings (:func:`_censored_log_factor`) for the candidates
-    that hold the posterior mass: candidates are ranked by a plug-in value (rate and noise
-    at their point estimates), and the exact factor is computed down that ranking until the
-    rest hold less than ``tail`` of the mass; the rest keep the plug-in value.
+    that hold the posterior mass: candidates are ranked by an upper bound of their mass
+    (the positive readings' evidence times ``1/2`` per zero their response reaches), and the
+    exact factor is computed down that ranking until the rest are bound to hold less than
+    ``tail`` of the mass computed so far; the rest keep a plug-in value (rate and noise at
+    their point estimates).
 
     Args:
         A: ``(m, N)`` responses; z: ``(m,)`` readings (zeros are the censored ones);
@@ -645,19 +647,24 @@ def censored_correction(
     lam = np.clip(qh, 0.0, qmax) * np.sqrt(alpha_n / beta_n)
     out = special.log_ndtr(-lam[None, :] * Bc).sum(axis=0)
     key = logl + out
-    order = np.argsort(key)[::-1]
+    # the ranking and the stop use an upper bound of each candidate's factor, never the
+    # plug-in value: with few positive readings the noise posterior is broad and the plug-in
+    # factor can sit 100+ nats below the integrated one (a cut on it moved 84 % of the
+    # posterior mass after 3 readings of a test search)
+    bound = logl - math.log(2.0) * (Bc >= 0.0).sum(axis=0)
+    order = np.argsort(bound)[::-1]
     # candidates the zero sensors hardly see: where even the largest plausible
     # lambda = q sqrt(tau) (q at its prior's end, tau at its 1 - 1e-12 quantile) gives
     # lambda sum_i B_i below CENSORED_FAINT, every factor Phi(-lambda B_i) is 1/2 to first
     # order, and the plug-in value is within that many nats of the integrated one
-    top = float(key[order[0]])
+    top = float(bound[order[0]])
     got = 0.0
     if math.isfinite(qmax):
         tau_hi = special.gammainccinv(alpha_n, 1e-12) / beta_n
         faint = qmax * np.sqrt(tau_hi) * np.maximum(Bc, 0.0).sum(axis=0) < CENSORED_FAINT
         got = float(np.exp(key[faint] - top).sum())
         order = order[~faint[order]]
-    rest = np.cumsum(np.exp(key[order] - top)[::-1])[::-1]  # plug-in mass from position k on
+    rest = np.cumsum(np.exp(bound[order] - top)[::-1])[::-1]  # bound of the mass from position k on
 
     def factor(idx: np.ndarray) -> np.ndarray:
         scale = np.sqrt(beta_n[idx] / (alpha_n * aa[idx]))
