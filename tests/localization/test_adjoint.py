@@ -269,10 +269,11 @@ def test_responses_are_never_negative_so_a_zero_favours_no_candidate() -> None:
     assert np.all(f <= -2 * math.log(2.0) + 1e-9)
 
 
-def test_the_zeros_cut_never_drops_mass_the_plug_in_value_hides() -> None:
+def test_the_bound_ranking_never_drops_mass_the_plug_in_value_hides() -> None:
     """After one positive reading the noise posterior is broad: the plug-in factor of a candidate
-    the zeros see well is 100+ nats below its integrated one.  The candidates left at the plug-in
-    value must be those bound to hold negligible mass, not those the plug-in value ranks low."""
+    the zeros see well is 100+ nats below its integrated one.  Ranked by an upper bound, the
+    candidates left at the plug-in value are those bound to hold negligible mass; ranked by
+    the plug-in value (the default the searches were chosen with) the cut drops mass."""
     rng = np.random.default_rng(0)
     n_near, n_far = 300, 3000
     A = np.empty((3, n_near + n_far))
@@ -286,8 +287,12 @@ def test_the_zeros_cut_never_drops_mass_the_plug_in_value_hides() -> None:
         p = np.exp(part + f - (part + f).max())
         return p / p.sum()
 
-    cut = censored_correction(logl=part, **det["censor"])
+    cut = censored_correction(logl=part, **det["censor"], ranking="bound")
     full = censored_correction(logl=part, **det["censor"], tail=0.0)
-    assert posterior(full)[n_near:].sum() > 0.03  # the far group holds mass (the cut used to drop it)
+    assert posterior(full)[n_near:].sum() > 0.03  # the far group holds mass
     assert 0.5 * np.abs(posterior(cut) - posterior(full)).sum() < 1e-3
     assert np.all(cut[n_near:] > full[n_near:] - 1.0)
+    plug_in = censored_correction(logl=part, **det["censor"], ranking="plug-in")
+    assert 0.5 * np.abs(posterior(plug_in) - posterior(full)).sum() > 0.01
+    with pytest.raises(ValueError, match="unknown ranking"):
+        censored_correction(logl=part, **det["censor"], ranking="best")
