@@ -429,9 +429,12 @@ inlet 4.07 m/s, unless stated.
   converged.  At alpha_turb 0.99 the k solve takes most of the 50 sweeps: the
   largest remaining cost per iteration.
 * **Later (same issue, idle machine): sweeps capped at 10 and lifted on a stall.**
-  Gauss-Seidel now multiplies by the inverse diagonal instead of dividing (the
-  division sat on the sweep's dependency chain): 1.45 ms against 2.09 ms per
-  symmetric sweep on 89k cells.  Capping the k and epsilon solves under SER,
+  On maps over 12k free cells Gauss-Seidel multiplies by the inverse diagonal
+  instead of dividing (the division sat on the sweep's dependency chain): 1.45-1.53
+  ms against 2.09-2.12 ms per symmetric sweep on 89k cells.  Not on smaller grids
+  (paper-size maps, coarse starts): the last bits change, and the recorded
+  dgse-phys searches took other paths (test 2000: 29 readings instead of 9).  The
+  tables above were measured with the multiply on every grid.  Capping the k and epsilon solves under SER,
   random 300 x 300 seed 7 (flow alone): cap 50: 358 fine iterations, 96 s; 20:
   504, 96 s; 10: 439, 73 s; 5: 747, 108 s (before the kernel change).  With the
   cap 10 alone, random 200 x 200 seed 8 stalled with k at 1.3e-4 and needed the

@@ -274,13 +274,18 @@ def residual_norm(aP, a, b, nb, x):
 
 
 @_jit
-def gauss_seidel(aP, a, b, nb, x, rel_tol, max_sweeps):
+def gauss_seidel(aP, a, b, nb, x, rel_tol, max_sweeps, reciprocal=False):
     """Symmetric Gauss-Seidel on ``aP x - sum a x_nb = b`` for ``m`` right-hand sides.
 
     ``b`` and ``x`` are ``(n, m)``; ``x`` is updated in place until every column's
     residual fell by ``rel_tol`` (estimated during the forward sweep) or after
     ``max_sweeps`` symmetric sweeps.  Returns ``(sweeps, initial)``: the sweeps
     done and OpenFOAM's normalised initial residual of each column.
+
+    ``reciprocal``: multiply by ``1 / aP`` instead of dividing by ``aP`` (the division
+    sits on the sweep's dependency chain: 1.45 against 2.09 ms a sweep on 89k cells).
+    The results differ in the last bits, and a search driven by the flow can take
+    another path, so paper-size maps keep the division the recorded searches used.
     """
     n, m = x.shape
     initial = np.zeros(m)
@@ -304,7 +309,7 @@ def gauss_seidel(aP, a, b, nb, x, rel_tol, max_sweeps):
         initial[k] = r0[k] / (norm + 1e-20)
     sweeps = 0
     est = np.empty(m)
-    inv = 1.0 / aP  # a multiply instead of a divide on the sweep's dependency chain
+    inv = 1.0 / aP
     while sweeps < max_sweeps:
         est[:] = 0.0
         for c in range(n):
@@ -315,7 +320,7 @@ def gauss_seidel(aP, a, b, nb, x, rel_tol, max_sweeps):
                     if j >= 0:
                         s += a[c, d] * x[j, k]
                 est[k] += abs(s - aP[c] * x[c, k])
-                x[c, k] = s * inv[c]
+                x[c, k] = s * inv[c] if reciprocal else s / aP[c]
         done = True
         for k in range(m):
             if est[k] > rel_tol * r0[k]:
@@ -329,7 +334,7 @@ def gauss_seidel(aP, a, b, nb, x, rel_tol, max_sweeps):
                     j = nb[c, d]
                     if j >= 0:
                         s += a[c, d] * x[j, k]
-                x[c, k] = s * inv[c]
+                x[c, k] = s * inv[c] if reciprocal else s / aP[c]
         sweeps += 1
     return sweeps, initial
 

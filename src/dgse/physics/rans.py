@@ -483,7 +483,7 @@ class KEpsilon:
         b = np.where(wall_cell, eps_wall, b)
         a = np.where(wall_cell[:, None], 0.0, a)
         eps_new = st.eps.copy()[:, None]
-        n_sw, res = gauss_seidel(aP, a, b[:, None], nb, eps_new, s.rel_tol, s.max_sweeps)
+        n_sw, res = gauss_seidel(aP, a, b[:, None], nb, eps_new, s.rel_tol, s.max_sweeps, n > s.ser_cells > 0)
         sweeps["epsilon"] += n_sw
         residuals["epsilon"] = float(res[0])
         eps_new = eps_new[:, 0]
@@ -499,7 +499,7 @@ class KEpsilon:
             b += ho_source(st.k, gradient(st.k, bval, fixed_t, nb, ft, h, True), F, nb, ft, h)
         aP, b = relax(aP, a, b, st.k, s.alpha_turb)
         k_new = st.k.copy()[:, None]
-        n_sw, res = gauss_seidel(aP, a, b[:, None], nb, k_new, s.rel_tol, s.max_sweeps)
+        n_sw, res = gauss_seidel(aP, a, b[:, None], nb, k_new, s.rel_tol, s.max_sweeps, n > s.ser_cells > 0)
         sweeps["k"] += n_sw
         residuals["k"] = float(res[0])
         k_new = k_new[:, 0]
@@ -768,7 +768,7 @@ def _simplec(
         rhs_y = by - gp[:, 1] * V
         u_star = np.stack([st.ux, st.uy], axis=1)
         n_sw, res = gauss_seidel(
-            aPr, a, np.stack([rhs_x, rhs_y], axis=1), nb, u_star, s.rel_tol, s.max_sweeps
+            aPr, a, np.stack([rhs_x, rhs_y], axis=1), nb, u_star, s.rel_tol, s.max_sweeps, ser
         )
         sweeps["U"] += n_sw
         residuals["Ux"], residuals["Uy"] = float(res[0]), float(res[1])
