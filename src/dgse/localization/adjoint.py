@@ -627,8 +627,8 @@ def censored_correction(
     below the integrated one, so the cut leaves out mass (``benchmarks/censored_cut.py``:
     up to 74 % of the posterior after 3 readings of a search).  ``"bound"`` ranks by an
     upper bound (the positive readings' evidence times ``1/2`` per zero the response
-    reaches) and so leaves out at most ``tail`` of the mass; it searched worse on the
-    validation scenarios (see :data:`CENSORED_RANKING`).
+    reaches) and so leaves out at most ``tail`` of the mass (why it is not the default:
+    :data:`CENSORED_RANKING`).
 
     Args:
         A: ``(m, N)`` responses; z: ``(m,)`` readings (zeros are the censored ones);
@@ -710,10 +710,12 @@ def censored_correction(
 #: zero sensors hardly see (:func:`censored_correction`).
 CENSORED_FAINT = 1e-3
 #: How :func:`censored_correction` ranks the candidates for its cut.  ``"plug-in"`` is an
-#: approximation (it can leave out most of the mass after few readings) but the searches
-#: were chosen with it: with ``"bound"`` (exact to ``tail``) the validation searches
+#: approximation (it can leave out most of the mass after few readings) but every recorded
+#: search was made with it.  With ``"bound"`` (exact to ``tail``) the validation searches
 #: (openings, ``SEARCH_PLANNER``, seed 0) found 22 of 24 sources against 23 of 24, with
-#: a new stop 5.6 m off on scenario 917 (issue 12, session 10).
+#: a new stop 5.6 m off on scenario 917; that run also had a solver change that moved the
+#: flows' last bits (since reverted on paper-size maps), which alone changes search paths,
+#: so it does not separate the two: the choice is open (issue 12, session 10).
 CENSORED_RANKING = "plug-in"
 #: Candidates per chunk of the censored correction (chunks run on :func:`dgse.threads.map_threads`).
 CENSORED_CHUNK = 256
