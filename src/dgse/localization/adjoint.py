@@ -713,9 +713,10 @@ CENSORED_FAINT = 1e-3
 #: approximation (it can leave out most of the mass after few readings) but every recorded
 #: search was made with it.  With ``"bound"`` (exact to ``tail``) the validation searches
 #: (openings, ``SEARCH_PLANNER``, seed 0) found 22 of 24 sources against 23 of 24, with
-#: a new stop 5.6 m off on scenario 917; that run also had a solver change that moved the
-#: flows' last bits (since reverted on paper-size maps), which alone changes search paths,
-#: so it does not separate the two: the choice is open (issue 12, session 10).
+#: a new stop 5.6 m off on scenario 917 (and 903 stopping 1.75 m off where it had run to
+#: the deadline 1.07 m off); both re-run with only the ranking changed gave the same.
+#: After few readings the exact zeros say little under the broad noise posterior; the
+#: plug-in acts as a tighter noise prior, which the searches benefit from (issue 12).
 CENSORED_RANKING = "plug-in"
 #: Candidates per chunk of the censored correction (chunks run on :func:`dgse.threads.map_threads`).
 CENSORED_CHUNK = 256
