@@ -431,22 +431,21 @@ inlet 4.07 m/s, unless stated.
 * **Later (same issue, idle machine): sweeps capped at 10 and lifted on a stall.**
   On maps over 12k free cells Gauss-Seidel multiplies by the inverse diagonal
   instead of dividing (the division sat on the sweep's dependency chain): 1.45-1.53
-  ms against 2.09-2.12 ms per symmetric sweep on 89k cells.  Not on smaller grids
-  (paper-size maps, coarse starts): the last bits change, and the recorded
-  dgse-phys searches took other paths (test 2000: 29 readings instead of 9).  The
-  tables above were measured with the multiply on every grid.  Capping the k and epsilon solves under SER,
-  random 300 x 300 seed 7 (flow alone): cap 50: 358 fine iterations, 96 s; 20:
-  504, 96 s; 10: 439, 73 s; 5: 747, 108 s (before the kernel change).  With the
-  cap 10 alone, random 200 x 200 seed 8 stalled with k at 1.3e-4 and needed the
-  relaxation retry (78 s against 38 s uncapped), and `rooms:11:20:6` converged in
-  25 s where the uncapped run stalled and retried (63 s).  So the cap is lifted
-  when the capped iteration stalls, and the iteration goes on from where it is
-  (stall test on half the window after that): 200 x 200 seed 8: 51 s; rooms: 21 s;
-  300 x 300 seed 7: 70 s, seed 8: 106 s (flow alone, idle).  The slow test's
+  ms against 2.09-2.12 ms per symmetric sweep on 89k cells. Not on smaller grids
+  (paper-size maps, coarse starts): the last bits change, and the recorded dgse-phys
+  searches took other paths (test 2000: 29 readings instead of 9). Capping the k and
+  epsilon solves under SER, random 300 x 300 seed 7 (flow alone): cap 50: 358 fine
+  iterations, 96 s; 20: 504, 96 s; 10: 439, 73 s; 5: 747, 108 s (before the kernel
+  change). With the cap 10 alone, random 200 x 200 seed 8 stalled with k at 1.3e-4
+  and needed the relaxation retry (78 s against 38 s uncapped), and `rooms:11:20:6`
+  converged in 25 s where the uncapped run stalled and retried (63 s). So the cap is
+  lifted when the capped iteration stalls, and the iteration goes on from where it
+  is (stall test on half the window after that): 200 x 200 seed 8: 51 s; rooms: 21
+  s; 300 x 300 seed 7: 70 s, seed 8: 106 s (flow alone, idle). The slow test's
   multi-room map stalls capped and uncapped and converges on the retry: 1322
-  iterations, 73 s (1121, 81 s before).  Converged flows of the same map with
-  different caps differ by 0.8-1.4 % in velocity and 1-6 % in nu_t (300 x 300):
-  the residual criteria do not pin large flows down more tightly than that.
+  iterations, 73 s (1121, 81 s before). Converged flows of the same map with
+  different caps differ by 0.8-1.4 % in velocity and 1-6 % in nu_t (300 x 300): the
+  residual criteria do not pin large flows down more tightly than that.
 * **Multi-room 20 x 20 m** (`random_layout_with_rooms(3)`, 39,620 free cells, the
   slow test): the SER attempt oscillates (k residual 1.7e-3 -> 1.8e-2 -> 1.4e-3)
   and stalls at 401 iterations; the retry (relaxation 0.7, no SER, same coarse
