@@ -191,3 +191,28 @@ def test_speed_flows_are_warm_started_unless_told_otherwise(case):
     assert hot[1].flow is not cold[1].flow and flow_model(case.layout, 1.2).info["warm_start"] is None
     # the same flow to the solver's tolerance where the wind is strong
     assert np.allclose(hot[1].flow.wind, cold[1].flow.wind, atol=0.02 * np.abs(cold[1].flow.wind).max())
+
+
+def test_censored_ranking_reaches_the_zeros_correction(case, monkeypatch):
+    import dgse.estimators.phys as phys
+
+    seen: list[str | None] = []
+    original = phys.censored_correction
+
+    def spy(**kw):
+        seen.append(kw["ranking"])
+        return original(**kw)
+
+    monkeypatch.setattr(phys, "censored_correction", spy)
+    k = Knowledge.from_case(case, "openings")
+    obs = draw_observations(case, 30, seed=1)
+    assert (obs.gas <= 0).any()  # zeros to correct for
+    for ranking in ("plug-in", "bound"):
+        seen.clear()
+        est = get_estimator(
+            "dgse-phys", knowledge=k, censored_ranking=ranking, speeds=(1.2,), refine_speeds=0
+        )
+        est.estimate(case.occupancy, case.resolution, obs)
+        assert seen and set(seen) == {ranking}
+    with pytest.raises(InputDataError, match="censored_ranking"):
+        get_estimator("dgse-phys", censored_ranking="best")

@@ -221,7 +221,11 @@ HOPELESS_NATS = 10.0
 
 
 def _censor(
-    log_ev: list[np.ndarray], log_prior: Sequence[float], details: Sequence[dict[str, Any]], temp: float
+    log_ev: list[np.ndarray],
+    log_prior: Sequence[float],
+    details: Sequence[dict[str, Any]],
+    temp: float,
+    ranking: str | None = None,
 ) -> list[np.ndarray]:
     """Add the zero readings' factor to each hypothesis's evidence, skipping hopeless ones.
 
@@ -244,7 +248,7 @@ def _censor(
         if bounds[i] < best - HOPELESS_NATS:
             out[i] = log_ev[i] + ceiling
             continue
-        out[i] = log_ev[i] + censored_correction(logl=log_ev[i], **details[i]["censor"])
+        out[i] = log_ev[i] + censored_correction(logl=log_ev[i], ranking=ranking, **details[i]["censor"])
         best = max(best, total(i, out[i]))
     return out
 
@@ -318,6 +322,10 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             level's default (100; 30 at ``map``); ``inf``: off.
         censored: read zero readings as censored (the sensor clips negatives; see
             :func:`~dgse.localization.adjoint.censored_correction`); False: as exact zeros.
+        censored_ranking: how that correction picks the candidates it integrates:
+            ``"plug-in"`` (the default the searches were chosen with, an approximation) or
+            ``"bound"`` (exact to its tolerance; see
+            :data:`~dgse.localization.adjoint.CENSORED_RANKING`).
         warm_start: at knowledge ``openings``, start each speed's RANS solve from the
             flow of the speed below (about 2.5x faster: 2.4 s against 5.8 s for the six
             speeds of test scenario 2005) instead of from the coarse grid, as ``dgse solve``
@@ -347,6 +355,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     temperature: float = 1.0
     effective_readings: float | None = None
     censored: bool = True
+    censored_ranking: str = "plug-in"
     map_proposals: int = 5
     learned_weight: float = LEARNED_WEIGHT
     learned_readings: float = LEARNED_READINGS
@@ -380,6 +389,10 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         if self.effective_readings is not None and not (self.effective_readings > 0):
             raise InputDataError(
                 f"effective_readings must be positive (inf: off) or None, got {self.effective_readings}"
+            )
+        if self.censored_ranking not in ("plug-in", "bound"):
+            raise InputDataError(
+                f"censored_ranking must be 'plug-in' or 'bound', got {self.censored_ranking!r}"
             )
         if not (0.0 <= self.learned_weight <= 1.0):
             raise InputDataError(f"learned_weight must be in [0, 1], got {self.learned_weight}")
@@ -582,7 +595,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             A, logl, det = got[k]
             log_ev.append(logl)
             details.append((A, det))
-        log_ev = [x / temp for x in _censor(log_ev, log_prior, [d for _, d in details], temp)]
+        zeros = _censor(log_ev, log_prior, [d for _, d in details], temp, self.censored_ranking)
+        log_ev = [x / temp for x in zeros]
         t_h = 1.0 if self.hypothesis_readings is None else max(1.0, len(obs) / self.hypothesis_readings)
         post, hw = mix_posteriors(log_ev, log_prior, t_h)
         self._refine_speed(hyps, hw, len(obs))
