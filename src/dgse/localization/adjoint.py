@@ -716,7 +716,9 @@ CENSORED_FAINT = 1e-3
 #: a new stop 5.6 m off on scenario 917 (and 903 stopping 1.75 m off where it had run to
 #: the deadline 1.07 m off); both re-run with only the ranking changed gave the same.
 #: After few readings the exact zeros say little under the broad noise posterior; the
-#: plug-in acts as a tighter noise prior, which the searches benefit from (issue 12).
+#: plug-in acts as a tighter noise prior, which the searches benefit from.  A tighter
+#: prior with the bound ranking (dgse-phys ``alpha0=5``) did worse still: 5 of 8 on
+#: 900-907, three stops 2.1-4.8 m off (issue 12).
 CENSORED_RANKING = "plug-in"
 #: Candidates per chunk of the censored correction (chunks run on :func:`dgse.threads.map_threads`).
 CENSORED_CHUNK = 256
