@@ -655,30 +655,27 @@ def censored_correction(
     lam = np.clip(qh, 0.0, qmax) * np.sqrt(alpha_n / beta_n)
     out = special.log_ndtr(-lam[None, :] * Bc).sum(axis=0)
     key = logl + out
-    # the ranking and the stop use an upper bound of each candidate's factor, never the
-    # plug-in value: with few positive readings the noise posterior is broad and the plug-in
-    # factor can sit 100+ nats below the integrated one (a cut on it moved 84 % of the
-    # posterior mass after 3 readings of a test search)
+    # the ranking and the stop: the plug-in value, or an upper bound of the factor (see above)
     ranking = CENSORED_RANKING if ranking is None else ranking
     if ranking == "bound":
-        bound = logl - math.log(2.0) * (Bc >= 0.0).sum(axis=0)
+        rank_key = logl - math.log(2.0) * (Bc >= 0.0).sum(axis=0)
     elif ranking == "plug-in":
-        bound = key
+        rank_key = key
     else:
         raise ValueError(f"unknown ranking {ranking!r}: use 'plug-in' or 'bound'")
-    order = np.argsort(bound)[::-1]
+    order = np.argsort(rank_key)[::-1]
     # candidates the zero sensors hardly see: where even the largest plausible
     # lambda = q sqrt(tau) (q at its prior's end, tau at its 1 - 1e-12 quantile) gives
     # lambda sum_i B_i below CENSORED_FAINT, every factor Phi(-lambda B_i) is 1/2 to first
     # order, and the plug-in value is within that many nats of the integrated one
-    top = float(bound[order[0]])
+    top = float(rank_key[order[0]])
     got = 0.0
     if math.isfinite(qmax):
         tau_hi = special.gammainccinv(alpha_n, 1e-12) / beta_n
         faint = qmax * np.sqrt(tau_hi) * np.maximum(Bc, 0.0).sum(axis=0) < CENSORED_FAINT
         got = float(np.exp(key[faint] - top).sum())
         order = order[~faint[order]]
-    rest = np.cumsum(np.exp(bound[order] - top)[::-1])[::-1]  # ranked mass from position k on
+    rest = np.cumsum(np.exp(rank_key[order] - top)[::-1])[::-1]  # ranked mass from position k on
 
     def factor(idx: np.ndarray) -> np.ndarray:
         scale = np.sqrt(beta_n[idx] / (alpha_n * aa[idx]))

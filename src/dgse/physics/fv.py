@@ -283,7 +283,7 @@ def gauss_seidel(aP, a, b, nb, x, rel_tol, max_sweeps, reciprocal=False):
     done and OpenFOAM's normalised initial residual of each column.
 
     ``reciprocal``: multiply by ``1 / aP`` instead of dividing by ``aP`` (the division
-    sits on the sweep's dependency chain: 1.45 against 2.09 ms a sweep on 89k cells).
+    sits on the sweep's dependency chain; timings in ``benchmarks/results/solver_speed.md``).
     The results differ in the last bits, and a search driven by the flow can take
     another path, so paper-size maps keep the division the recorded searches used.
     """

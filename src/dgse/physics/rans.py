@@ -104,11 +104,10 @@ class FlowSettings:
     #: Gauss-Seidel sweeps at most per k and epsilon solve under SER: with the pseudo-time
     #: step near that of ``alpha_turb_max`` those equations lose their diagonal dominance
     #: and a solve to ``rel_tol`` takes ~50 sweeps (most of an iteration's time on large
-    #: maps) for a change the next iteration undoes; 10 converged a 300 x 300 map in 439
-    #: iterations and 62 s against 358 and 81 s with 50 (20: 504, 86 s; 5: 747, 96 s).
-    #: Capped solves can hold the k residual just above the tolerance: a stall under the
-    #: cap lifts it (the iteration goes on from where it is, its stall test on half the
-    #: window) before the relaxation retry
+    #: maps) for a change the next iteration undoes.  Capped solves can hold the k residual
+    #: just above the tolerance: a stall under the cap lifts it (the iteration goes on from
+    #: where it is, its stall test on half the window) before the relaxation retry.  The
+    #: caps tried are in ``benchmarks/results/solver_speed.md``
     ser_max_sweeps: int = 10
 
 
@@ -454,6 +453,7 @@ class KEpsilon:
         kappa, y = physics.kappa, 0.5 * h
         inlet, outlet, wall_cell = self.inlet, self.outlet, self.wall_cell
         k_in, eps_in, nut_in = self.k_in, self.eps_in, self.nut_in
+        reciprocal = 0 < s.ser_cells < n  # large maps: see gauss_seidel
         F = st.F
         gux = gradient(st.ux, self.ubx, self.fixed_u, nb, ft, h, False)
         guy = gradient(st.uy, self.uby, self.fixed_u, nb, ft, h, False)
@@ -483,7 +483,7 @@ class KEpsilon:
         b = np.where(wall_cell, eps_wall, b)
         a = np.where(wall_cell[:, None], 0.0, a)
         eps_new = st.eps.copy()[:, None]
-        n_sw, res = gauss_seidel(aP, a, b[:, None], nb, eps_new, s.rel_tol, s.max_sweeps, n > s.ser_cells > 0)
+        n_sw, res = gauss_seidel(aP, a, b[:, None], nb, eps_new, s.rel_tol, s.max_sweeps, reciprocal)
         sweeps["epsilon"] += n_sw
         residuals["epsilon"] = float(res[0])
         eps_new = eps_new[:, 0]
@@ -499,7 +499,7 @@ class KEpsilon:
             b += ho_source(st.k, gradient(st.k, bval, fixed_t, nb, ft, h, True), F, nb, ft, h)
         aP, b = relax(aP, a, b, st.k, s.alpha_turb)
         k_new = st.k.copy()[:, None]
-        n_sw, res = gauss_seidel(aP, a, b[:, None], nb, k_new, s.rel_tol, s.max_sweeps, n > s.ser_cells > 0)
+        n_sw, res = gauss_seidel(aP, a, b[:, None], nb, k_new, s.rel_tol, s.max_sweeps, reciprocal)
         sweeps["k"] += n_sw
         residuals["k"] = float(res[0])
         k_new = k_new[:, 0]
