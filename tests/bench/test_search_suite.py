@@ -97,3 +97,13 @@ def test_search_suite_quick(bench_root, tmp_path):
     again = json.loads(run_suite("search", tmp_path, quick=True, seed=0).read_text())
     assert {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.json")} == before
     assert again["notes"][0].startswith(f"0 episodes were run in this invocation and {n} were reused")
+
+
+def test_pieces_from_before_knowledge_levels_count_as_map() -> None:
+    from dgse.bench.search import stored_plan
+
+    old = {"plan": {"method": "dgse-s", "trials": 1, "case": "layout-000004_src0"}}
+    assert stored_plan(old) == {**old["plan"], "knowledge": "map"}
+    new = {"plan": {**old["plan"], "knowledge": "openings"}}
+    assert stored_plan(new)["knowledge"] == "openings"
+    assert stored_plan({"per_case": []}) is None

@@ -33,9 +33,9 @@ from dgse.evaluation.calibration import (
 __all__ = ["FIELD_METHODS", "SOURCE_METHODS", "run"]
 
 #: Methods with probabilistic wind and/or concentration fields.
-FIELD_METHODS = ("dgse-s", "dgse-p", "gwgmrf", "ggmrf")
+FIELD_METHODS = ("dgse-s", "dgse-phys", "dgse-p", "gwgmrf", "ggmrf")
 #: Methods with a source posterior.
-SOURCE_METHODS = ("dgse-s", "dgse-p", "dgse-o", "adjoint", "dualmode")
+SOURCE_METHODS = ("dgse-s", "dgse-phys", "dgse-p", "dgse-o", "adjoint", "dualmode")
 
 
 def _collect(ctx: BenchContext, method: str, files: list[Path], counts: list[int], trials: int) -> dict:
@@ -120,7 +120,8 @@ def run(ctx: BenchContext) -> None:
     trials = ctx.pick(2, 1)
     files = sorted(ctx.scenarios(n_scen, "test").glob("*.npz"))
     results: dict[str, dict] = {}
-    for method in dict.fromkeys(FIELD_METHODS + SOURCE_METHODS):
+    methods, _ = ctx.methods_at_level(list(dict.fromkeys(FIELD_METHODS + SOURCE_METHODS)))
+    for method in methods:
         try:
             results[method] = ctx.cached(
                 ctx.level_name(f"calibration_{method}"),

@@ -6,6 +6,10 @@ readings (distinct free cells, Table I noise, seeded by scenario and trial,
 planner):
 
 * DGSE-S (``dgse-s``, the shipped default weights, ``K = T = 5``);
+* the physics-guided DGSE (``dgse-phys``): the adjoint posterior on flow hypotheses for
+  the run's knowledge level (proposed openings mixed with DGSE-S's source belief at
+  ``map``, inlet speeds weighed by the wind readings at ``openings``, the given wind
+  made mass-conserving at ``wind``);
 * the dual-mode planner's particle filter (``dualmode``, Kim et al.);
 * PMFS (``pmfs``, Ojeda et al.; filament simulations per source hypothesis,
   its launch parameters);
@@ -42,7 +46,7 @@ from dgse.bench.plots import plt, seconds_bars, style_of
 __all__ = ["EXCLUDED", "METHODS", "ORACLES", "run"]
 
 #: Methods of the comparison, in plotting order.
-METHODS = ("dgse-s", "dualmode", "pmfs", "adjoint", "adjoint-oracle")
+METHODS = ("dgse-s", "dgse-phys", "dualmode", "pmfs", "adjoint", "adjoint-oracle")
 #: Methods that know more than the robot does (drawn hatched, kept out of "best method" counts).
 ORACLES = ("adjoint-oracle",)
 #: Registered source estimators left out, and why.
@@ -203,6 +207,7 @@ def run(ctx: BenchContext) -> None:
     method_limit["pmfs"] = ctx.pick(None, 1)
     # quick runs: the adjoint's flow solves for the candidate inlet speeds dominate, one scenario
     method_limit["adjoint"] = ctx.pick(None, 1)
+    method_limit["dgse-phys"] = ctx.pick(None, 1)
     methods, left_out = ctx.methods_at_level(METHODS)
     cases_dir = ctx.scenarios(n_scen, "test")
     files = sorted(cases_dir.glob("*.npz"))
@@ -230,7 +235,9 @@ def run(ctx: BenchContext) -> None:
         + (f" ({'; '.join(reduced)})" if reduced else "")
         + "; trial k is the same sensor set and readings for every method. Only the methods' "
         "source-posterior estimation (no planners). DGSE-S: shipped default weights, K = T = 5, float32, "
-        f"{threads} torch thread(s). Adjoint (est. wind): the robot knows the map and its "
+        f"{threads} torch thread(s). DGSE-phys: the physics-guided estimator at the same knowledge (at "
+        "'map' it proposes the openings from the wind readings and mixes in DGSE-S below 50 readings). "
+        "Adjoint (est. wind): the robot knows the map and its "
         "openings and fits the inlet speed to the wind readings. Adjoint oracle: the same posterior with the "
         "TRUE inlet velocity, the generating physics up to the convection scheme -- the intended "
         "lower-bound reference that knows the true wind, not a practical method (hatched). "

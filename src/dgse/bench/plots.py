@@ -16,6 +16,7 @@ __all__ = ["METHOD_STYLE", "curves_vs_observations", "seconds_bars", "style_of"]
 #: Colours and markers per method, so every figure shows a method alike.
 METHOD_STYLE: dict[str, dict[str, Any]] = {
     "dgse-s": {"color": "#d62728", "marker": "o", "label": "DGSE-S"},
+    "dgse-phys": {"color": "#000080", "marker": "p", "label": "DGSE-phys"},
     "dgse-p": {"color": "#1f77b4", "marker": "s", "label": "DGSE-P"},
     "dgse-o": {"color": "#2ca02c", "marker": "^", "label": "DGSE-O"},
     "kdmvw": {"color": "#9467bd", "marker": "v", "label": "KDM+V/W"},

@@ -375,7 +375,8 @@ def _evidence(
     alpha_n = alpha0 + 0.5 * (m - 1)
     beta_n = beta0 + 0.5 * S
     nu = 2.0 * alpha_n
-    scale = np.sqrt(beta_n / (alpha_n * aa))
+    with np.errstate(over="ignore"):  # a candidate no reading sees (aa at its floor): scale inf
+        scale = np.sqrt(beta_n / (alpha_n * aa))
     logl = -np.log(r).sum() - 0.5 * np.log(aa) - alpha_n * np.log(beta_n)
     # the truncation term (<= 0) only where it can matter: candidates within TRUNC_NATS of
     # the best truncated one (the Student-t CDF costs about a microsecond a candidate); the
