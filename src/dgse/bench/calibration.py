@@ -124,7 +124,7 @@ def run(ctx: BenchContext) -> None:
     for method in methods:
         try:
             results[method] = ctx.cached(
-                ctx.level_name(f"calibration_{method}"),
+                f"calibration_{method}",
                 lambda m=method: _collect(ctx, m, files, counts, trials),
             )
         except UnsupportedError as e:  # e.g. no shipped weights for a variant

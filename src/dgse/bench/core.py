@@ -197,7 +197,8 @@ class BenchContext:
 
     Args:
         suite: the suite's name (``variants``, ``gdm``, ...).
-        out_root: the run's output directory (the suite writes into ``out_root/suite``).
+        out_root: the run's output directory (the suite writes into ``out_root/suite``, or
+            ``out_root/suite-LEVEL`` at a knowledge level other than ``map``).
         quick: a small run (CI); suites pick smaller counts with :meth:`pick`.
         data: a dataset store whose test split gives the ``test`` scenarios (None:
             random layouts solved here).
@@ -227,14 +228,16 @@ class BenchContext:
 
         self.suite = suite
         self.root = Path(out_root)
-        self.out = self.root / suite
+        self.knowledge = check_level(knowledge)
+        # one directory per suite and level: runs at several levels share a root (and its
+        # scenarios) and appear side by side in one report
+        self.out = self.root / (suite if self.knowledge == "map" else f"{suite}-{self.knowledge}")
         self.out.mkdir(parents=True, exist_ok=True)
         self.quick = bool(quick)
         self.data = Path(data) if data is not None else None
         if self.data is not None and not self.data.is_file():
             raise InputDataError(f"{self.data}: no such dataset store")
         self.seed = int(seed)
-        self.knowledge = check_level(knowledge)
         self.progress = bool(progress)
         self.command = command if command is not None else " ".join(["dgse", *sys.argv[1:]])
         self.title = title or suite
@@ -319,10 +322,6 @@ class BenchContext:
         """A remark for the report (e.g. skipped scenarios)."""
         self.notes.append(text)
 
-    def level_name(self, name: str) -> str:
-        """``name`` of a result file, marked with the knowledge level unless it is ``map``."""
-        return name if self.knowledge == "map" else f"{name}_{self.knowledge}"
-
     def methods_at_level(self, methods: Sequence[str]) -> tuple[list[str], dict[str, str]]:
         """``(kept, left_out)``: the estimators of ``methods`` that work at :attr:`knowledge`, and
         for each one left out why (the levels it needs); a note records the left-out ones."""
@@ -358,7 +357,7 @@ class BenchContext:
             "format": MANIFEST_FORMAT,
             "format_version": 1,
             "suite": self.suite,
-            "title": self.title,
+            "title": self.title if self.knowledge == "map" else f"{self.title} (knowledge: {self.knowledge})",
             "description": self.description,
             "quick": self.quick,
             "seed": self.seed,

@@ -73,7 +73,6 @@ def evaluate_cached(
     from dgse.evaluation import evaluate
 
     n_cases = len(sorted(cases.glob("*.npz"))) if limit is None else limit
-    name = ctx.level_name(name)
     got = ctx.load_json(name)
     if (
         got is not None

@@ -248,7 +248,7 @@ def _run_method(
     paths: dict[str, Any] = {}
     settings: dict[str, Any] = {}
     for i, (path, case) in enumerate(cases):
-        piece = ctx.out / "runs" / f"{ctx.level_name(method.key)}_{kind}_{path.stem}.json"
+        piece = ctx.out / "runs" / f"{method.key}_{kind}_{path.stem}.json"
         plan = _jsonable({**base, "case": path.stem, "keep_path": i < keep_paths})
         got = _read_piece(piece)
         fresh = got is None or stored_plan(got) != plan
@@ -307,7 +307,7 @@ def _run_method(
         "per_case": per_case,
         "paths": paths,
     }
-    ctx.save_json(ctx.level_name(f"run_{method.key}_{kind}"), data)
+    ctx.save_json(f"run_{method.key}_{kind}", data)
     return _jsonable(data)
 
 
