@@ -679,7 +679,8 @@ def censored_correction(
     rest = np.cumsum(np.exp(rank_key[order] - top)[::-1])[::-1]  # ranked mass from position k on
 
     def factor(idx: np.ndarray) -> np.ndarray:
-        scale = np.sqrt(beta_n[idx] / (alpha_n * aa[idx]))
+        with np.errstate(over="ignore"):  # a candidate no positive reading sees: scale inf
+            scale = np.sqrt(beta_n[idx] / (alpha_n * aa[idx]))
         hi = np.full(idx.shape, np.inf) if q_max is None else (q_max - qh[idx]) / scale
         log_mass = _log_t_interval(-qh[idx] / scale, hi, 2.0 * alpha_n)
         return _censored_log_factor(Bc[:, idx], qh[idx], aa[idx], beta_n[idx], alpha_n, q_max, log_mass)
