@@ -64,6 +64,8 @@ from dgse.estimators.belief import Belief
 from dgse.estimators.knowledge import Knowledge, KnowledgeUser, Level
 from dgse.localization import check_inputs, log_moments_from_ppm
 from dgse.localization.adjoint import (
+    CENSORED_RANKING,
+    CENSORED_RANKINGS,
     DEFAULT_KAPPAS,
     AdjointResponseModel,
     FlowModel,
@@ -355,7 +357,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     temperature: float = 1.0
     effective_readings: float | None = None
     censored: bool = True
-    censored_ranking: str = "plug-in"
+    censored_ranking: str = CENSORED_RANKING
     map_proposals: int = 5
     learned_weight: float = LEARNED_WEIGHT
     learned_readings: float = LEARNED_READINGS
@@ -390,9 +392,9 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             raise InputDataError(
                 f"effective_readings must be positive (inf: off) or None, got {self.effective_readings}"
             )
-        if self.censored_ranking not in ("plug-in", "bound"):
+        if self.censored_ranking not in CENSORED_RANKINGS:
             raise InputDataError(
-                f"censored_ranking must be 'plug-in' or 'bound', got {self.censored_ranking!r}"
+                f"censored_ranking must be one of {CENSORED_RANKINGS}, got {self.censored_ranking!r}"
             )
         if not (0.0 <= self.learned_weight <= 1.0):
             raise InputDataError(f"learned_weight must be in [0, 1], got {self.learned_weight}")

@@ -663,7 +663,7 @@ def censored_correction(
     elif ranking == "plug-in":
         rank_key = key
     else:
-        raise ValueError(f"unknown ranking {ranking!r}: use 'plug-in' or 'bound'")
+        raise ValueError(f"unknown ranking {ranking!r}: use one of {CENSORED_RANKINGS}")
     order = np.argsort(rank_key)[::-1]
     # candidates the zero sensors hardly see: where even the largest plausible
     # lambda = q sqrt(tau) (q at its prior's end, tau at its 1 - 1e-12 quantile) gives
@@ -719,6 +719,8 @@ CENSORED_FAINT = 1e-3
 #: prior with the bound ranking (dgse-phys ``alpha0=5``) did worse still: 5 of 8 on
 #: 900-907, three stops 2.1-4.8 m off (issue 12).
 CENSORED_RANKING = "plug-in"
+#: The rankings :func:`censored_correction` knows.
+CENSORED_RANKINGS = ("plug-in", "bound")
 #: Candidates per chunk of the censored correction (chunks run on :func:`dgse.threads.map_threads`).
 CENSORED_CHUNK = 256
 
