@@ -85,7 +85,7 @@ def test_capped_turbulence_sweeps_are_lifted_when_they_stall(plain):
     layout, mesh, st0, _ = plain
     settings = FlowSettings(
         tolerance=1e-5, coarse_cells=0, ser_cells=1, pressure_solver="lu", ser_max_sweeps=0,
-        stall_window=40, retry_relaxation=None,
+        stall_window=50, retry_relaxation=None,
     )  # fmt: skip
     st, info = solve_flow(layout, mesh, 1.5, settings=settings)
     assert info["turbulence_sweeps_uncapped_at"] is not None

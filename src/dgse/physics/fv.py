@@ -274,7 +274,7 @@ def residual_norm(aP, a, b, nb, x):
 
 
 @_jit
-def gauss_seidel(aP, a, b, nb, x, rel_tol, max_sweeps, reciprocal=False):
+def gauss_seidel(aP, a, b, nb, x, rel_tol, max_sweeps, short_chain=False):
     """Symmetric Gauss-Seidel on ``aP x - sum a x_nb = b`` for ``m`` right-hand sides.
 
     ``b`` and ``x`` are ``(n, m)``; ``x`` is updated in place until every column's
@@ -282,10 +282,11 @@ def gauss_seidel(aP, a, b, nb, x, rel_tol, max_sweeps, reciprocal=False):
     ``max_sweeps`` symmetric sweeps.  Returns ``(sweeps, initial)``: the sweeps
     done and OpenFOAM's normalised initial residual of each column.
 
-    ``reciprocal``: multiply by ``1 / aP`` instead of dividing by ``aP`` (the division
-    sits on the sweep's dependency chain; timings in ``benchmarks/results/solver_speed.md``).
-    The results differ in the last bits, and a search driven by the flow can take
-    another path, so paper-size maps keep the division the recorded searches used.
+    ``short_chain``: multiply by ``1 / aP`` instead of dividing by ``aP``, and add the
+    neighbour the sweep has just updated (west going forward, east going back) last
+    rather than second: both shorten the sweep's dependency chain from one cell to the
+    next (timings in ``benchmarks/results/solver_speed.md``).  The results differ in the
+    last bits (a search driven by the flow can then take another path).
     """
     n, m = x.shape
     initial = np.zeros(m)
@@ -307,9 +308,10 @@ def gauss_seidel(aP, a, b, nb, x, rel_tol, max_sweeps, reciprocal=False):
             r0[k] += abs(b[c, k] - ax)
             norm += abs(ax - aavg) + abs(b[c, k] - aavg)
         initial[k] = r0[k] / (norm + 1e-20)
+    if short_chain:
+        return _sweeps_short_chain(aP, a, b, nb, x, rel_tol, max_sweeps, r0), initial
     sweeps = 0
     est = np.empty(m)
-    inv = 1.0 / aP
     while sweeps < max_sweeps:
         est[:] = 0.0
         for c in range(n):
@@ -320,7 +322,7 @@ def gauss_seidel(aP, a, b, nb, x, rel_tol, max_sweeps, reciprocal=False):
                     if j >= 0:
                         s += a[c, d] * x[j, k]
                 est[k] += abs(s - aP[c] * x[c, k])
-                x[c, k] = s * inv[c] if reciprocal else s / aP[c]
+                x[c, k] = s / aP[c]
         done = True
         for k in range(m):
             if est[k] > rel_tol * r0[k]:
@@ -334,9 +336,51 @@ def gauss_seidel(aP, a, b, nb, x, rel_tol, max_sweeps, reciprocal=False):
                     j = nb[c, d]
                     if j >= 0:
                         s += a[c, d] * x[j, k]
-                x[c, k] = s * inv[c] if reciprocal else s / aP[c]
+                x[c, k] = s / aP[c]
         sweeps += 1
     return sweeps, initial
+
+
+@_jit
+def _sweeps_short_chain(aP, a, b, nb, x, rel_tol, max_sweeps, r0):
+    """:func:`gauss_seidel`'s sweeps with ``short_chain``; returns the sweeps done."""
+    n, m = x.shape
+    sweeps = 0
+    est = np.empty(m)
+    inv = 1.0 / aP
+    while sweeps < max_sweeps:
+        est[:] = 0.0
+        for c in range(n):
+            for k in range(m):
+                s = b[c, k]
+                for d in (0, 2, 3):  # E, N, S, then W: updated just before
+                    j = nb[c, d]
+                    if j >= 0:
+                        s += a[c, d] * x[j, k]
+                j = nb[c, 1]
+                if j >= 0:
+                    s += a[c, 1] * x[j, k]
+                est[k] += abs(s - aP[c] * x[c, k])
+                x[c, k] = s * inv[c]
+        done = True
+        for k in range(m):
+            if est[k] > rel_tol * r0[k]:
+                done = False
+        if done and sweeps > 0:
+            break
+        for c in range(n - 1, -1, -1):
+            for k in range(m):
+                s = b[c, k]
+                for d in (1, 2, 3):  # W, N, S, then E: updated just before
+                    j = nb[c, d]
+                    if j >= 0:
+                        s += a[c, d] * x[j, k]
+                j = nb[c, 0]
+                if j >= 0:
+                    s += a[c, 0] * x[j, k]
+                x[c, k] = s * inv[c]
+        sweeps += 1
+    return sweeps
 
 
 @_jit

@@ -20,7 +20,6 @@ is :func:`solve_flow`.
 
 from __future__ import annotations
 
-import itertools
 import math
 import time
 from collections.abc import Callable
@@ -28,7 +27,7 @@ from dataclasses import dataclass, replace
 
 import numba
 import numpy as np
-import scipy.ndimage as ndi
+import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from dgse.errors import InputDataError
@@ -109,6 +108,11 @@ class FlowSettings:
     #: where it is, its stall test on half the window) before the relaxation retry.  The
     #: caps tried are in ``benchmarks/results/solver_speed.md``
     ser_max_sweeps: int = 10
+    #: Gauss-Seidel's short-chain arithmetic (``short_chain`` of
+    #: :func:`~dgse.physics.fv.gauss_seidel`): faster sweeps, the same solution up to
+    #: rounding.  False gives the flows of the results recorded before 2026-11-26 bit for
+    #: bit (on paper-size maps; larger ones had it already)
+    short_chain: bool = True
 
 
 @dataclass
@@ -173,6 +177,8 @@ def coarsen_layout(layout: Layout) -> Layout | None:
     coarse = pad.reshape(pad.shape[0] // 2, 2, pad.shape[1] // 2, 2).max(axis=(1, 3))
     try:
         lay = Layout(coarse, layout.inlets, layout.outlets, 2 * layout.resolution, name=layout.name)
+        from scipy import ndimage as ndi  # imported here: only large maps need it
+
         labels, _ = ndi.label(lay.free)
         with_in = set(np.unique(labels[lay.opening_mask("inlet")])) - {0}
         with_out = set(np.unique(labels[lay.opening_mask("outlet")])) - {0}
@@ -211,12 +217,61 @@ def prolong_state(coarse: Mesh, state: FlowState, fine: Mesh, inlet_velocity: fl
         wsum[ok] += w
     none = wsum == 0
     if none.any():
+        from scipy import ndimage as ndi
+
         _, (ni, nj) = ndi.distance_transform_edt(~coarse.free, return_indices=True)
         near = coarse.index[ni[ci[none], cj[none]], nj[ci[none], cj[none]]]
         acc[:, none] = fields[:, near]
         wsum[none] = 1.0
     ux, uy, p, k, eps, nut = acc / wsum
     return FlowState(ux=ux, uy=uy, p=p, k=k, eps=eps, nut=nut, F=face_fluxes(fine, ux, uy, inlet_velocity))
+
+
+class GalerkinMap:
+    """The coarse operator ``R A P`` as a linear map of ``A``'s values, for a fixed pattern.
+
+    ``R A P`` is linear in the entries of ``A``: with ``A``'s sparsity pattern
+    fixed (the stencil of a mesh), the coarse matrix's values are ``M a``, ``a``
+    the fine values in CSR order and ``M`` a sparse matrix built once from
+    ``R`` and ``P`` (one row per coarse entry, one column per fine entry).
+    Applying it is one sparse product; forming ``R A P`` by two sparse
+    matrix-matrix products each time costs several times more (and re-derives
+    the same pattern).  Entries that cancel exactly stay as explicit zeros.
+
+    Args:
+        pattern: a CSR matrix whose ``indptr``/``indices`` are ``A``'s pattern.
+        R, P: restriction ``(nc, n)`` and interpolation ``(n, nc)``.
+    """
+
+    def __init__(self, pattern, R, P) -> None:
+        A = pattern.tocsr()
+        RT = R.T.tocsr()
+        P = P.tocsr()
+        nc = P.shape[1]
+        rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
+        cols = A.indices
+        n_i = np.diff(RT.indptr)[rows]  # coarse rows each fine entry restricts to
+        n_j = np.diff(P.indptr)[cols]  # coarse columns it interpolates from
+        count = n_i * n_j
+        e = np.repeat(np.arange(A.nnz), count)
+        t = np.arange(e.size) - np.repeat(np.cumsum(count) - count, count)
+        ri = RT.indptr[rows[e]] + t // n_j[e]
+        pj = P.indptr[cols[e]] + t % n_j[e]
+        key = RT.indices[ri].astype(np.int64) * nc + P.indices[pj]
+        uniq, pos = np.unique(key, return_inverse=True)
+        self._M = sp.csr_matrix((RT.data[ri] * P.data[pj], (pos, e)), shape=(uniq.size, A.nnz))
+        self._indices = (uniq % nc).astype(np.int32)
+        per_row = np.bincount(uniq // nc, minlength=nc)
+        self._indptr = np.concatenate([[0], np.cumsum(per_row)]).astype(np.int32)
+        self.shape = (nc, nc)
+
+    def pattern(self) -> sp.csr_matrix:
+        """An all-ones matrix with the coarse pattern (to build the next level's map on)."""
+        return sp.csr_matrix((np.ones(self._indices.size), self._indices, self._indptr), shape=self.shape)
+
+    def apply(self, data: np.ndarray) -> sp.csr_matrix:
+        """``R A P`` for the fine values ``data`` (CSR order of the pattern)."""
+        return sp.csr_matrix((self._M @ data, self._indices, self._indptr), shape=self.shape)
 
 
 class PressureSolver:
@@ -246,6 +301,7 @@ class PressureSolver:
         self.lu_cells = lu_cells
         self._M = None
         self._ml = None
+        self._maps: list[GalerkinMap] | None = None
         self.factorizations = 0  #: preconditioners built from scratch (LU factorizations or AMG set-ups)
         self.krylov_iterations = 0
 
@@ -266,11 +322,17 @@ class PressureSolver:
         if self._ml is None or rebuild:
             self._ml = pyamg.ruge_stuben_solver(A, max_coarse=400, coarse_solver="splu")
             self.factorizations += 1
+            self._maps = None
         else:  # same coarsening and interpolation, coarse operators of the current matrix
             levels = self._ml.levels
+            if self._maps is None:
+                self._maps, pattern = [], A
+                for fine in levels[:-1]:
+                    self._maps.append(GalerkinMap(pattern, fine.R, fine.P))
+                    pattern = self._maps[-1].pattern()
             levels[0].A = A
-            for fine, coarse in itertools.pairwise(levels):
-                coarse.A = (fine.R @ fine.A @ fine.P).tocsr()
+            for g, fine, coarse in zip(self._maps, levels[:-1], levels[1:], strict=True):
+                coarse.A = g.apply(fine.A.data)
             self._ml.coarse_solver = pyamg.multilevel.coarse_grid_solver("splu")
         return self._ml.aspreconditioner(cycle="V")
 
@@ -392,6 +454,37 @@ def corrected_flux(phb, lapA, rAtU, p, nb, ft):
     return F
 
 
+@_jit
+def turbulence_production(gux, gy, nut, yplus, nutw, ux, uy, k, wall_cell, nu, cmu25, cmu75, kappa, y, ypl):
+    """``(G, epsilon_wall)`` per cell: the production of k, and epsilon in wall cells.
+
+    ``G = nu_t (2 dux/dx^2 + 2 duy/dy^2 + (dux/dy + duy/dx)^2 - 2/3 div(u)^2)`` away from
+    walls; in wall cells the standard wall functions: ``G = (nu_t,w + nu) |u| / y *
+    C_mu^0.25 sqrt(k) / (kappa y)`` in the log region (``y+ > y+_lam``), 0 in the
+    laminar one, and ``epsilon = C_mu^0.75 k^1.5 / (kappa y)`` (log) or ``2 k nu / y^2``.
+    """
+    n = k.shape[0]
+    G = np.empty(n)
+    eps_w = np.empty(n)
+    for c in range(n):
+        log_region = yplus[c] > ypl
+        if log_region:
+            eps_w[c] = cmu75 * k[c] ** 1.5 / (kappa * y)
+        else:
+            eps_w[c] = 2.0 * k[c] * nu / y**2
+        if wall_cell[c]:
+            if log_region:
+                umag = math.hypot(ux[c], uy[c])
+                G[c] = (nutw[c] + nu) * (umag / y) * cmu25 * math.sqrt(k[c]) / (kappa * y)
+            else:
+                G[c] = 0.0
+        else:
+            div = gux[c, 0] + gy[c, 1]
+            shear = gux[c, 1] + gy[c, 0]
+            G[c] = nut[c] * (2.0 * gux[c, 0] ** 2 + 2.0 * gy[c, 1] ** 2 + shear**2 - (2.0 / 3.0) * div**2)
+    return G, eps_w
+
+
 class KEpsilon:
     """The standard k-epsilon model with standard wall functions on one mesh (one step of it).
 
@@ -424,6 +517,8 @@ class KEpsilon:
         self.k_in, self.eps_in = float(k_in), float(eps_in)
         self.nut_in = physics.C_mu * self.k_in**2 / self.eps_in
         self.max_length = max(mesh.shape) * mesh.h
+        self.k_b = np.full((mesh.n, 4), self.k_in)  # face values where k is fixed (inlets)
+        self.eps_b = np.full((mesh.n, 4), self.eps_in)
 
     def wall_functions(self, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(y+, nu_t at walls)`` of the cells for turbulent kinetic energy ``k``."""
@@ -446,27 +541,21 @@ class KEpsilon:
     ) -> int:
         """One update of ``st.k``, ``st.eps``, ``st.nut``; returns the cells whose length scale was capped."""
         mesh, physics = self.mesh, self.physics
-        nb, ft, h, n = mesh.nb, mesh.ft, mesh.h, mesh.n
+        nb, ft, h = mesh.nb, mesh.ft, mesh.h
         V = h * h
         nu, Cmu = physics.nu, physics.C_mu
         Cmu25, Cmu75 = Cmu**0.25, Cmu**0.75
         kappa, y = physics.kappa, 0.5 * h
         inlet, outlet, wall_cell = self.inlet, self.outlet, self.wall_cell
         k_in, eps_in, nut_in = self.k_in, self.eps_in, self.nut_in
-        reciprocal = 0 < s.ser_cells < n  # large maps: see gauss_seidel
         F = st.F
         gux = gradient(st.ux, self.ubx, self.fixed_u, nb, ft, h, False)
         guy = gradient(st.uy, self.uby, self.fixed_u, nb, ft, h, False)
-        divu = gux[:, 0] + guy[:, 1]
-        G = st.nut * (
-            2.0 * gux[:, 0] ** 2 + 2.0 * guy[:, 1] ** 2 + (gux[:, 1] + guy[:, 0]) ** 2 - (2.0 / 3.0) * divu**2
-        )
         k_old, eps_old = st.k, st.eps
-        log_region = yplus > physics.y_plus_lam
-        umag = np.hypot(st.ux, st.uy)
-        G0 = (nutw + nu) * (umag / y) * Cmu25 * np.sqrt(k_old) / (kappa * y)
-        eps_wall = np.where(log_region, Cmu75 * k_old**1.5 / (kappa * y), 2.0 * k_old * nu / y**2)
-        G = np.where(wall_cell, np.where(log_region, G0, 0.0), G)
+        G, eps_wall = turbulence_production(
+            gux, guy, st.nut, yplus, nutw, st.ux, st.uy, k_old, wall_cell,
+            nu, Cmu25, Cmu75, kappa, y, physics.y_plus_lam,
+        )  # fmt: skip
         fixed_t = inlet | (outlet & (F < 0))  # inletOutlet at outlets
 
         deff = nu + st.nut / physics.sigma_eps
@@ -475,15 +564,14 @@ class KEpsilon:
         b = row_sum(cb) * eps_in + physics.C_1 * G * eps_old / k_old * V
         aP = aP + physics.C_2 * eps_old / k_old * V
         if s.high_order:
-            bval = np.full((n, 4), eps_in)
-            b += ho_source(st.eps, gradient(st.eps, bval, fixed_t, nb, ft, h, True), F, nb, ft, h)
+            b += ho_source(st.eps, gradient(st.eps, self.eps_b, fixed_t, nb, ft, h, True), F, nb, ft, h)
         aP, b = relax(aP, a, b, st.eps, s.alpha_turb)
         # wall cells take the wall-function value (OpenFOAM's setValues)
         aP = np.where(wall_cell, 1.0, aP)
         b = np.where(wall_cell, eps_wall, b)
         a = np.where(wall_cell[:, None], 0.0, a)
         eps_new = st.eps.copy()[:, None]
-        n_sw, res = gauss_seidel(aP, a, b[:, None], nb, eps_new, s.rel_tol, s.max_sweeps, reciprocal)
+        n_sw, res = gauss_seidel(aP, a, b[:, None], nb, eps_new, s.rel_tol, s.max_sweeps, s.short_chain)
         sweeps["epsilon"] += n_sw
         residuals["epsilon"] = float(res[0])
         eps_new = eps_new[:, 0]
@@ -495,11 +583,10 @@ class KEpsilon:
         b = row_sum(cb) * k_in + G * V
         aP = aP + eps_new / k_old * V
         if s.high_order:
-            bval = np.full((n, 4), k_in)
-            b += ho_source(st.k, gradient(st.k, bval, fixed_t, nb, ft, h, True), F, nb, ft, h)
+            b += ho_source(st.k, gradient(st.k, self.k_b, fixed_t, nb, ft, h, True), F, nb, ft, h)
         aP, b = relax(aP, a, b, st.k, s.alpha_turb)
         k_new = st.k.copy()[:, None]
-        n_sw, res = gauss_seidel(aP, a, b[:, None], nb, k_new, s.rel_tol, s.max_sweeps, reciprocal)
+        n_sw, res = gauss_seidel(aP, a, b[:, None], nb, k_new, s.rel_tol, s.max_sweeps, s.short_chain)
         sweeps["k"] += n_sw
         residuals["k"] = float(res[0])
         k_new = k_new[:, 0]
@@ -768,7 +855,7 @@ def _simplec(
         rhs_y = by - gp[:, 1] * V
         u_star = np.stack([st.ux, st.uy], axis=1)
         n_sw, res = gauss_seidel(
-            aPr, a, np.stack([rhs_x, rhs_y], axis=1), nb, u_star, s.rel_tol, s.max_sweeps, ser
+            aPr, a, np.stack([rhs_x, rhs_y], axis=1), nb, u_star, s.rel_tol, s.max_sweeps, s.short_chain
         )
         sweeps["U"] += n_sw
         residuals["Ux"], residuals["Uy"] = float(res[0]), float(res[1])
