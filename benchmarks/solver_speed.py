@@ -39,18 +39,22 @@ REFERENCE = Path(os.environ.get("DGSE_REFERENCE_CASES", REPO.parent / "shared" /
 def worker(args: argparse.Namespace) -> None:
     """Solve one layout with four sources and save the fields (runs in its own process)."""
     from dgse.errors import ConvergenceError
-    from dgse.physics.builtin import BuiltinEngine
-    from dgse.physics.engines import Source, get_engine
-    from dgse.physics.rans import FlowSettings
+    from dgse.physics.engines import Source
 
     layout, v_in, sources = _scenario(args.scenario)
     if args.warm:
         json.dump(warm_start(layout, v_in, args.warm), open(args.out + ".json", "w"))
         return
+    # each engine's process imports only that engine (the other's imports are not its start-up)
     if args.engine == "builtin":
+        from dgse.physics.builtin import BuiltinEngine
+        from dgse.physics.rans import FlowSettings
+
         settings = FlowSettings(tolerance=args.tolerance) if args.tolerance else None
         engine = BuiltinEngine(settings=settings)
     else:
+        from dgse.physics.engines import get_engine
+
         engine = get_engine(args.engine)
     t = time.perf_counter()
     try:

@@ -9,6 +9,8 @@ case files they re-solve are committed in ``tests/fixtures/openfoam``
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -49,7 +51,7 @@ def isolated_registry(monkeypatch):
     monkeypatch.setattr(engines, "_FACTORIES", dict(engines._FACTORIES))
     monkeypatch.setattr(engines, "_UNAVAILABLE", dict(engines._UNAVAILABLE))
     # the openfoam module is already imported; do not depend on the other engines here
-    monkeypatch.setattr(engines, "_load_optional", lambda: None)
+    monkeypatch.setattr(engines, "_load_optional", lambda name=None: None)
 
 
 # --------------------------------------------------------------------------------------
@@ -212,3 +214,15 @@ def test_timeout_stops_the_run():
     layout = random_layout(0, width_range=(10.0, 10.0), height_range=(10.0, 10.0))
     with pytest.raises(of.OpenFOAMTimeoutError, match="timeout of 1 s"):
         of.OpenFOAMEngine(timeout=1.0).solve(layout, 0.5, [])
+
+
+def test_an_engine_is_imported_alone():
+    """A process that solves with OpenFOAM does not import the built-in solver (numba, SciPy
+    sparse): its start-up is part of what the speed comparison times."""
+    code = (
+        "import sys; from dgse.physics.engines import get_engine\n"
+        "try:\n    get_engine('openfoam')\nexcept Exception:\n    pass\n"
+        "print('dgse.physics.builtin' in sys.modules, 'numba' in sys.modules)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["False", "False"]

@@ -99,10 +99,19 @@ def unavailable_engines() -> dict[str, str]:
     return dict(_UNAVAILABLE)
 
 
-def _load_optional() -> None:
+#: the module that registers each built-in engine (imported on first use: a process that
+#: solves with one engine does not import the others)
+_MODULES = {"builtin": "dgse.physics.builtin", "openfoam": "dgse.physics.openfoam"}
+
+
+def _load_optional(name: str | None = None) -> None:
     # Engines register themselves on import; optional ones mark themselves
     # unavailable (with the reason) when their software is missing.
-    from dgse.physics import builtin, openfoam  # noqa: F401
+    import importlib
+
+    for engine, module in _MODULES.items():
+        if name is None or name == engine:
+            importlib.import_module(module)
 
 
 def engine_names() -> list[str]:
@@ -113,7 +122,8 @@ def engine_names() -> list[str]:
 
 def get_engine(name: str = "builtin", **options) -> Engine:
     """The engine ``name``; raises :class:`UnsupportedError` saying why when unusable."""
-    _load_optional()
+    if name not in _FACTORIES:
+        _load_optional(name if name in _MODULES else None)
     if name in _FACTORIES:
         return _FACTORIES[name](**options)
     if name in _UNAVAILABLE:

@@ -461,18 +461,19 @@ def turbulence_production(gux, gy, nut, yplus, nutw, ux, uy, k, wall_cell, nu, c
     ``G = nu_t (2 dux/dx^2 + 2 duy/dy^2 + (dux/dy + duy/dx)^2 - 2/3 div(u)^2)`` away from
     walls; in wall cells the standard wall functions: ``G = (nu_t,w + nu) |u| / y *
     C_mu^0.25 sqrt(k) / (kappa y)`` in the log region (``y+ > y+_lam``), 0 in the
-    laminar one, and ``epsilon = C_mu^0.75 k^1.5 / (kappa y)`` (log) or ``2 k nu / y^2``.
+    laminar one, and ``epsilon = C_mu^0.75 k^1.5 / (kappa y)`` (log) or ``2 k nu / y^2``
+    (0 elsewhere).
     """
     n = k.shape[0]
     G = np.empty(n)
-    eps_w = np.empty(n)
+    eps_w = np.zeros(n)  # only wall cells use it
     for c in range(n):
-        log_region = yplus[c] > ypl
-        if log_region:
-            eps_w[c] = cmu75 * k[c] ** 1.5 / (kappa * y)
-        else:
-            eps_w[c] = 2.0 * k[c] * nu / y**2
         if wall_cell[c]:
+            log_region = yplus[c] > ypl
+            if log_region:
+                eps_w[c] = cmu75 * k[c] * math.sqrt(k[c]) / (kappa * y)
+            else:
+                eps_w[c] = 2.0 * k[c] * nu / y**2
             if log_region:
                 umag = math.hypot(ux[c], uy[c])
                 G[c] = (nutw[c] + nu) * (umag / y) * cmu25 * math.sqrt(k[c]) / (kappa * y)
