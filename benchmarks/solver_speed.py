@@ -455,6 +455,37 @@ inlet 4.07 m/s, unless stated.
   and stalls at 401 iterations; the retry (relaxation 0.7, no SER, same coarse
   start) converges: 1121 fine iterations in all.  A stronger SER back-off (step
   cut by (r_min / r)^2) did not stop the oscillation.
+* **Cost per iteration (2026-11-26, idle machine, timings of one setting alternated
+  with the other's; the machine's own noise is +-10-15 %).**  Profile of 300 x 300
+  seed 7 before: Gauss-Seidel 32 %, the AMG's coarse operators `R A P` (two sparse
+  matrix products per level, every solve) 13 %, k-epsilon's NumPy work 8 %, gradients
+  5 %.  (1) `R A P` is linear in `A`'s values and `A`'s pattern is the mesh's stencil:
+  a sparse matrix from the fine values to the coarse ones, built once per hierarchy
+  (0.34 s at 200 x 200), gives all levels in 2.8 ms against 13.5 ms (`GalerkinMap`;
+  the same operators to 1e-15 relative).  (2) Gauss-Seidel adds the neighbour just
+  updated (west going forward, east going back) last and multiplies by the
+  reciprocal diagonal: the dependency chain from one cell to the next loses three
+  additions.  Per symmetric sweep on 89k cells: one right-hand side 1.05-1.11 ms
+  (division, the old paper-size arithmetic: 2.04-2.17; reciprocal only: 1.44-1.52),
+  two 1.23-1.6 ms (2.08-2.5; 1.6-2.3).  Not faster: a padded branch-free neighbour
+  loop (2.0 / 3.4 ms) and two half-domain sweeps interleaved (3.4 / 6.4 ms).  Paper-size
+  maps now use it too (flows agree with the old arithmetic to 1e-11 - 3e-5 relative;
+  in-process flow 0.72-1.13 s against 0.82-1.26 s on random 1001, 1002).  (3) The
+  k-epsilon production and wall values in one kernel.  Together, 200 x 200 seed 7:
+  24.2-26.0 s against 28.9 s (same iterations); 300 x 300 seed 7, flow alone: 71 s
+  (540 fine iterations, 107 ms each) against 79 s (510, 136 ms).  Tried and not kept:
+  AMG on paper-size maps (1.16-1.46 s against 0.82-1.18 s with the stale LU), a
+  forward/backward instead of symmetric AMG smoother (200 x 200: 20.9-23.5 s against
+  20.0-24.5 s, within the noise), a turbulence sweep cap of 20 instead of 10 (200 x
+  200 seed 7: 248 fine iterations, 16 s, against 399, 24 s; but 300 x 300 seed 7 took
+  more iterations with 20 than with 10 above: the cap's effect depends on the map).
+* **Start-up.**  `get_engine(name)` imports only that engine's module (before, both:
+  `dgse solve --engine openfoam` loaded numba and SciPy's sparse solvers it never
+  used), and each worker of this benchmark imports only its engine, so the OpenFOAM
+  column no longer carries the built-in solver's imports.  `scipy.ndimage` (0.17 s)
+  is imported only by the coarse start.  What stays: Python and NumPy/SciPy imports
+  (~0.6 s), numba's first compiled call (~0.25 s to set up its JIT, then ~5 ms per
+  cached kernel).
 
 Before this work (commit 6088505, same machine, not shared then as far as known):
 

@@ -107,3 +107,18 @@ def test_validation_errors():
         normalize_source_probs(np.where(occ == 1, 1.0, 0.0), occ)
     with pytest.raises(InputDataError):
         normalize_source_probs(np.full(occ.shape, np.nan), occ)
+
+
+def test_reducible_variance_is_part_of_the_variance():
+    occ = np.zeros((3, 4), np.uint8)
+    p = np.full((3, 4), 1 / 12)
+    mean, var = np.zeros((2, 3, 4)), np.full((2, 3, 4), 0.5)
+    b = Belief(occ, 0.1, p, wind_mean=mean, wind_var=var, wind_var_reducible=0.2 * var)
+    assert np.allclose(b.wind_var_to_explore, 0.1) and b.log_conc_var_to_explore is None
+    assert np.array_equal(Belief(occ, 0.1, p, wind_mean=mean, wind_var=var).wind_var_to_explore, var)
+    with pytest.raises(InputDataError, match="exceeds wind_var"):
+        Belief(occ, 0.1, p, wind_mean=mean, wind_var=var, wind_var_reducible=2 * var)
+    with pytest.raises(InputDataError, match="without log_conc_var"):
+        Belief(occ, 0.1, p, log_conc_mean=np.zeros((3, 4)), log_conc_var_reducible=np.zeros((3, 4)))
+    with pytest.raises(InputDataError, match="shape"):
+        Belief(occ, 0.1, p, wind_mean=mean, wind_var=var, wind_var_reducible=np.zeros((3, 4)))

@@ -216,3 +216,30 @@ def test_censored_ranking_reaches_the_zeros_correction(case, monkeypatch):
         assert seen and set(seen) == {ranking}
     with pytest.raises(InputDataError, match="censored_ranking"):
         get_estimator("dgse-phys", censored_ranking="best")
+
+
+def test_field_variances_add_a_model_error_the_planner_leaves_out(case):
+    """The belief's variances are the hypotheses' spread plus the model error; the spread alone
+    (what readings reduce) is kept apart, and the utility planner sees only it."""
+    from dgse.estimators.phys import field_error_variance
+    from dgse.search.planners import UtilityPlanner
+
+    k = Knowledge.from_case(case, "openings")
+    obs = draw_observations(case, 30, seed=5)
+    beliefs = []
+    for fe in ((0, 0, 0, 0), (0.3, 0.05, 0.5, 0.2)):
+        est = get_estimator("dgse-phys", knowledge=k, speeds=(0.6, 1.2), field_error=fe)
+        beliefs.append(est.estimate(case.occupancy, case.resolution, obs))
+    off, on = beliefs
+    w_err, c_err = field_error_variance(on.wind_mean, on.log_conc_mean, (0.3, 0.05, 0.5, 0.2))
+    assert np.allclose(w_err, 0.09 * (on.wind_mean**2).sum(axis=0) + 0.0025)
+    assert np.allclose(on.wind_var, on.wind_var_reducible + w_err)
+    assert np.allclose(on.log_conc_var, on.log_conc_var_reducible + c_err)
+    assert np.array_equal(on.wind_var_reducible, off.wind_var)
+    assert np.array_equal(off.wind_var, off.wind_var_reducible)
+    assert (on.wind_var > off.wind_var).all()
+    dist = np.where(case.free, 1.0, np.inf)
+    planner = UtilityPlanner()
+    assert np.array_equal(planner.utility(on, dist), planner.utility(off, dist))
+    with pytest.raises(InputDataError, match="field_error"):
+        get_estimator("dgse-phys", field_error=(0.1, -1, 0, 0))

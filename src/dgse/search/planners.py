@@ -37,6 +37,10 @@ what the paper leaves open:
 * ``sigma_c^2`` is the variance of ``log(1 + c)`` (the belief's
   ``log_conc_var``; DGSE-S's moment-matched ``sigma_c^2`` lives in that
   space, and in ppm^2 the term would swamp the others by orders of magnitude);
+* of a belief whose variance also holds a model error that readings do not
+  shrink (``dgse-phys``), only the part readings can reduce enters
+  (:attr:`~dgse.estimators.belief.Belief.wind_var_reducible`): a variance that
+  stays however often the robot measures says nothing about where to measure;
 * a belief without a wind or concentration variance (DGSE-O, most baselines)
   contributes 0 for that term;
 * ``dist_i`` is in metres by default (the paper does not give the unit;
@@ -355,10 +359,11 @@ class UtilityPlanner:
         if self.revisit_radius_m is not None and measured is not None and measured.shape == belief.shape:
             near = mass_within(measured.astype(np.float64), belief.resolution, self.revisit_radius_m)
             fresh = 1.0 / (1.0 + np.rint(near))
-        if belief.wind_var is not None and self.w_w:
-            gain = gain + self.w_w * belief.wind_var.sum(axis=0) * fresh
-        if belief.log_conc_var is not None and self.w_c:
-            gain = gain + self.w_c * belief.log_conc_var * fresh
+        wind_var, conc_var = belief.wind_var_to_explore, belief.log_conc_var_to_explore
+        if wind_var is not None and self.w_w:
+            gain = gain + self.w_w * wind_var.sum(axis=0) * fresh
+        if conc_var is not None and self.w_c:
+            gain = gain + self.w_c * conc_var * fresh
         ok = np.isfinite(d) & belief.free
         scale = 1.0 / belief.resolution if self.distance_unit == "cell" else 1.0
         u = np.full(belief.shape, -np.inf)
