@@ -181,3 +181,35 @@ def test_multi_room_200x200_converges_and_conserves_mass():
     assert inflow == pytest.approx(v * sum(o.width_m for o in layout.inlets), rel=0.1)
     assert np.abs(st.F.sum(axis=1)).max() < 1e-3 * inflow  # every cell's net face flux ~ 0
     assert st.F[mesh.ft == OUTLET].sum() == pytest.approx(inflow, rel=1e-3)
+
+
+def test_galerkin_map_gives_the_coarse_operators():
+    """The precomputed map from fine values to coarse ones equals R A P for a new matrix of the
+    same pattern, level after level."""
+    import pyamg
+
+    from dgse.physics.fv import StencilMatrix
+    from dgse.physics.rans import GalerkinMap
+
+    mesh = build_mesh(two_rooms(60, 40))
+    rng = np.random.default_rng(3)
+    st = StencilMatrix(mesh)
+
+    def laplacian():
+        a = np.where(mesh.nb >= 0, rng.uniform(0.5, 1.5, (mesh.n, 4)), 0.0)
+        a = 0.5 * (a + np.where(mesh.nb >= 0, a[np.maximum(mesh.nb, 0), [1, 0, 3, 2]], 0.0))  # symmetric
+        return st.assemble(a.sum(axis=1) + 1e-3, a).tocsr()
+
+    ml = pyamg.ruge_stuben_solver(laplacian(), max_coarse=50)
+    assert len(ml.levels) >= 3
+    maps, pattern = [], laplacian()
+    for lvl in ml.levels[:-1]:
+        maps.append(GalerkinMap(pattern, lvl.R, lvl.P))
+        pattern = maps[-1].pattern()
+    A = laplacian()
+    fine = A
+    for g, lvl in zip(maps, ml.levels[:-1], strict=True):
+        coarse = g.apply(fine.data)
+        ref = (lvl.R @ fine @ lvl.P).tocsr()
+        assert abs(coarse - ref).max() <= 1e-12 * abs(ref).max()
+        fine = coarse

@@ -323,11 +323,7 @@ def gauss_seidel(aP, a, b, nb, x, rel_tol, max_sweeps, short_chain=False):
                         s += a[c, d] * x[j, k]
                 est[k] += abs(s - aP[c] * x[c, k])
                 x[c, k] = s / aP[c]
-        done = True
-        for k in range(m):
-            if est[k] > rel_tol * r0[k]:
-                done = False
-        if done and sweeps > 0:
+        if sweeps > 0 and _settled(est, r0, rel_tol):
             break
         for c in range(n - 1, -1, -1):
             for k in range(m):
@@ -339,6 +335,15 @@ def gauss_seidel(aP, a, b, nb, x, rel_tol, max_sweeps, short_chain=False):
                 x[c, k] = s / aP[c]
         sweeps += 1
     return sweeps, initial
+
+
+@_jit
+def _settled(est, r0, rel_tol):
+    """Every column's residual estimate ``est`` fell to ``rel_tol`` of its initial ``r0``."""
+    for k in range(est.shape[0]):
+        if est[k] > rel_tol * r0[k]:
+            return False
+    return True
 
 
 @_jit
@@ -362,11 +367,7 @@ def _sweeps_short_chain(aP, a, b, nb, x, rel_tol, max_sweeps, r0):
                     s += a[c, 1] * x[j, k]
                 est[k] += abs(s - aP[c] * x[c, k])
                 x[c, k] = s * inv[c]
-        done = True
-        for k in range(m):
-            if est[k] > rel_tol * r0[k]:
-                done = False
-        if done and sweeps > 0:
+        if sweeps > 0 and _settled(est, r0, rel_tol):
             break
         for c in range(n - 1, -1, -1):
             for k in range(m):
