@@ -110,8 +110,8 @@ class FlowSettings:
     ser_max_sweeps: int = 10
     #: Gauss-Seidel's short-chain arithmetic (``short_chain`` of
     #: :func:`~dgse.physics.fv.gauss_seidel`): faster sweeps, the same solution up to
-    #: rounding.  False gives the flows of the results recorded before 2026-11-26 bit for
-    #: bit (on paper-size maps; larger ones had it already)
+    #: rounding.  False: the plain division in the sweeps' natural order (the flows of
+    #: results recorded before 2026-11-26 also differ in the k-epsilon kernels' last bits)
     short_chain: bool = True
 
 
