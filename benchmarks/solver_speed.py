@@ -455,30 +455,30 @@ inlet 4.07 m/s, unless stated.
   and stalls at 401 iterations; the retry (relaxation 0.7, no SER, same coarse
   start) converges: 1121 fine iterations in all.  A stronger SER back-off (step
   cut by (r_min / r)^2) did not stop the oscillation.
-* **Cost per iteration (2026-11-26, idle machine, timings of one setting alternated
-  with the other's; the machine's own noise is +-10-15 %).**  Profile of 300 x 300
-  seed 7 before: Gauss-Seidel 32 %, the AMG's coarse operators `R A P` (two sparse
-  matrix products per level, every solve) 13 %, k-epsilon's NumPy work 8 %, gradients
-  5 %.  (1) `R A P` is linear in `A`'s values and `A`'s pattern is the mesh's stencil:
-  a sparse matrix from the fine values to the coarse ones, built once per hierarchy
-  (0.34 s at 200 x 200), gives all levels in 2.8 ms against 13.5 ms (`GalerkinMap`;
-  the same operators to 1e-15 relative).  (2) Gauss-Seidel adds the neighbour just
-  updated (west going forward, east going back) last and multiplies by the
-  reciprocal diagonal: the dependency chain from one cell to the next loses three
-  additions.  Per symmetric sweep on 89k cells: one right-hand side 1.05-1.11 ms
-  (division, the old paper-size arithmetic: 2.04-2.17; reciprocal only: 1.44-1.52),
-  two 1.23-1.6 ms (2.08-2.5; 1.6-2.3).  Not faster: a padded branch-free neighbour
-  loop (2.0 / 3.4 ms) and two half-domain sweeps interleaved (3.4 / 6.4 ms).  Paper-size
-  maps now use it too (flows agree with the old arithmetic to 1e-11 - 3e-5 relative;
-  in-process flow 0.72-1.13 s against 0.82-1.26 s on random 1001, 1002).  (3) The
-  k-epsilon production and wall values in one kernel.  Together, 200 x 200 seed 7:
-  24.2-26.0 s against 28.9 s (same iterations); 300 x 300 seed 7, flow alone: 71 s
-  (540 fine iterations, 107 ms each) against 79 s (510, 136 ms).  Tried and not kept:
-  AMG on paper-size maps (1.16-1.46 s against 0.82-1.18 s with the stale LU), a
-  forward/backward instead of symmetric AMG smoother (200 x 200: 20.9-23.5 s against
-  20.0-24.5 s, within the noise), a turbulence sweep cap of 20 instead of 10 (200 x
-  200 seed 7: 248 fine iterations, 16 s, against 399, 24 s; but 300 x 300 seed 7 took
-  more iterations with 20 than with 10 above: the cap's effect depends on the map).
+* **Cost per iteration (2026-11-26, idle machine; the machine's own noise is +-10-15 %).**
+  Profile of 300 x 300 seed 7 before: Gauss-Seidel 32 %, the AMG's coarse operators
+  `R A P` (two sparse matrix products per level, every solve) 13 %, k-epsilon's NumPy
+  work 8 %, gradients 5 %.  (1) `R A P` is linear in `A`'s values and `A`'s pattern is
+  the mesh's stencil: a sparse matrix from the fine values to the coarse ones, built
+  once per hierarchy, gives every level (`GalerkinMap`; the same operators to 1e-12
+  relative, tested).  (2) Gauss-Seidel adds the neighbour just updated (west going
+  forward, east going back) last and multiplies by the reciprocal diagonal: the
+  dependency chain from one cell to the next loses three additions; paper-size maps use
+  it too.  (3) The k-epsilon production and wall values in one kernel.  Kernels alone
+  (`python benchmarks/solver_kernels.py`, `benchmarks/results/solver_kernels.json`,
+  best of 5): a symmetric sweep on 89k cells 1.05 ms against 2.05 ms with the division
+  (one right-hand side), 1.42 against 2.10 ms (two); the coarse operators at 200 x 200
+  (5 levels) 1.8 ms against 8.0 ms by products (map built in 0.30 s); paper-size flows
+  0.81 / 0.71 s against 0.90 / 0.76 s (random 1001 / 1002; winds 7e-8 and 4e-11
+  apart).  Timed with throwaway scripts (not kept): whole solves, old and new code
+  alternated, 200 x 200 seed 7: 24.2-26.0 s against 28.9 s (same iterations); 300 x
+  300 seed 7: 71 s (540 fine iterations) against 79 s (510); slower kernel variants: a
+  padded branch-free neighbour loop and two half-domain sweeps interleaved; not kept
+  either: AMG on paper-size maps (1.16-1.46 s against 0.82-1.18 s with the stale LU), a
+  forward/backward AMG smoother (within the noise), a turbulence sweep cap of 20
+  instead of 10 (200 x 200 seed 7: 248 fine iterations against 399; but 300 x 300
+  seed 7 took more iterations with 20 than with 10 above: the cap's effect depends on
+  the map).
 * **Start-up.**  `get_engine(name)` imports only that engine's module (before, both:
   `dgse solve --engine openfoam` loaded numba and SciPy's sparse solvers it never
   used), and each worker of this benchmark imports only its engine, so the OpenFOAM

@@ -469,15 +469,12 @@ def turbulence_production(gux, gy, nut, yplus, nutw, ux, uy, k, wall_cell, nu, c
     eps_w = np.zeros(n)  # only wall cells use it
     for c in range(n):
         if wall_cell[c]:
-            log_region = yplus[c] > ypl
-            if log_region:
+            if yplus[c] > ypl:  # log region
                 eps_w[c] = cmu75 * k[c] * math.sqrt(k[c]) / (kappa * y)
-            else:
-                eps_w[c] = 2.0 * k[c] * nu / y**2
-            if log_region:
                 umag = math.hypot(ux[c], uy[c])
                 G[c] = (nutw[c] + nu) * (umag / y) * cmu25 * math.sqrt(k[c]) / (kappa * y)
             else:
+                eps_w[c] = 2.0 * k[c] * nu / y**2
                 G[c] = 0.0
         else:
             div = gux[c, 0] + gy[c, 1]
