@@ -147,7 +147,7 @@ from dgse import threads
 from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators.belief import Belief
 from dgse.estimators.knowledge import Knowledge, KnowledgeUser, Level
-from dgse.localization import check_inputs, log_moments_from_ppm, map_key
+from dgse.localization import censored_kernel, check_inputs, log_moments_from_ppm, map_key
 from dgse.options import options_from
 from dgse.physics.builtin import flow_and_transport
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
@@ -414,29 +414,6 @@ CENSORED_Q_PIECES = (0.0, 1.0 / 512, 1.0 / 64, 1.0 / 8, 1.0)
 CENSORED_TAIL = 1e-4
 
 
-def _truncnorm_ppf(u: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Quantiles ``u`` ``(k,)`` of the standard normal truncated to ``[lo, hi]`` ``(n,)``: ``(k, n)``.
-
-    Stable in both tails; the bounds' log CDFs are taken once per column.
-    """
-    u = np.asarray(u, dtype=np.float64)[:, None]
-    lo = np.asarray(lo, dtype=np.float64)
-    hi = np.asarray(hi, dtype=np.float64)
-    out = np.empty((u.shape[0], lo.size))
-    upper = lo >= 0  # mass in the right tail: work with survival functions
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        # left/middle: F = Phi(lo) + u (Phi(hi) - Phi(lo)), in logs
-        a, b = special.log_ndtr(lo[~upper]), special.log_ndtr(hi[~upper])
-        d = np.exp(a - b)  # Phi(lo) / Phi(hi) <= 1
-        out[:, ~upper] = special.ndtri_exp(b + np.log(d + u * (1.0 - d)))
-        a, b = special.log_ndtr(-lo[upper]), special.log_ndtr(-hi[upper])
-        d = np.exp(b - a)  # Phi(-hi) / Phi(-lo) <= 1
-        out[:, upper] = -special.ndtri_exp(a + np.log(1.0 - u * (1.0 - d)))
-    narrow = ~np.isfinite(out) | (hi - lo < 1e-9 * (1.0 + np.abs(lo)))
-    out = np.where(narrow, lo + u * np.minimum(hi - lo, 1e300), out)
-    return np.clip(out, lo, hi)
-
-
 @functools.cache
 def _censored_nodes(
     q_nodes: int, q_pieces: tuple[float, ...], tau_nodes: int
@@ -479,98 +456,36 @@ def _censored_log_factor(
     be says the noise is large), so the integral over ``log tau`` is adaptive: Newton steps
     find the mode of the integrand (rate at its conditional mean), then Gauss-Hermite nodes
     around it; at each node, composite Gauss-Legendre nodes over the rate's conditional CDF.
+    Every node enters through ``lambda = q sqrt(tau)`` and ``G(lambda) = sum_i log Phi(-lambda
+    B_i)``, one analytic function per candidate (linear at 0, quadratic far out): it is
+    evaluated exactly at ``CENSORED_CHEBYSHEV_POINTS`` Chebyshev points of ``[0, max
+    lambda]`` and interpolated to the nodes (Clenshaw's recurrence), far below the
+    quadrature's error.  The loop over candidates is compiled
+    (:func:`dgse.localization.censored_kernel.censored_log_factor`).
     """
     u, log_wu, xh, wh = _censored_nodes(CENSORED_Q_NODES, CENSORED_Q_PIECES, CENSORED_TAU_NODES)
-    qmax = np.inf if q_max is None else q_max
-    qc = np.clip(qhat, 0.0, qmax)
-    # mode of psi(t) = alpha_n t - beta_n e^t + sum log Phi(-qc B e^(t/2)) over t = log tau
-    t0 = np.log(alpha_n / beta_n)
-    t = t0.copy()
-    qb = qc[None, :] * B  # (c, n)
-
-    def derivatives(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(psi'(t), psi''(t))``."""
-        x = qb * np.exp(0.5 * t)[None, :]
-        lam = np.exp(-0.5 * x * x - special.log_ndtr(-x)) / math.sqrt(2.0 * math.pi)  # phi / Phi(-x)
-        d1 = alpha_n - beta_n * np.exp(t) - 0.5 * (lam * x).sum(axis=0)
-        d2 = -beta_n * np.exp(t) - 0.25 * ((lam * (lam - x) * x + lam) * x).sum(axis=0)
-        return d1, d2
-
-    for _ in range(CENSORED_NEWTON_STEPS):
-        d1, d2 = derivatives(t)
-        t = np.clip(t - np.clip(d1 / np.minimum(d2, -1e-6), -3.0, 3.0), t0 - 60.0, t0 + 20.0)
-    _, d2 = derivatives(t)
-    t = np.where(np.isfinite(t), t, t0)
-    width = np.clip(1.0 / np.sqrt(np.maximum(-d2, 1e-6)), 1e-3, 10.0)  # Laplace sd in log tau
-    width = np.where(np.isfinite(width), width, 1.0)
-    log_gamma_norm = alpha_n * np.log(beta_n) - special.gammaln(alpha_n)
-    # every (tau, q) node: lambda = q sqrt(tau) enters the zeros' factor as
-    # G(lambda) = sum_i log Phi(-lambda B_i), one smooth function per candidate: it is
-    # evaluated exactly at Chebyshev points of [0, max lambda] and interpolated to the nodes
-    nodes = []
-    for xk in xh:
-        tk = t + math.sqrt(2.0) * width * xk
-        tau = np.exp(tk)
-        sd = 1.0 / np.sqrt(np.maximum(tau * aa, 1e-300))
-        lo = -qhat / sd
-        hi = (qmax - qhat) / sd
-        lmass = _log_t_interval_normal(lo, hi)  # log P(0 <= q <= q_max | tau)
-        q = qhat[None, :] + sd[None, :] * _truncnorm_ppf(u, lo, hi)  # (k, n)
-        q = np.clip(q, 0.0, qmax)
-        nodes.append((tk, tau, lmass, q * np.sqrt(tau)[None, :]))
-    lam = np.stack([nd[3] for nd in nodes])  # (tau nodes, q nodes, n)
-    lam_max = np.maximum(lam.max(axis=(0, 1)), 1e-300)
-    G = _chebyshev_sum_log_ndtr(B, lam / lam_max, lam_max)
-    terms = []
-    for (tk, tau, lmass, _), wk, g in zip(nodes, wh, G, strict=True):
-        g_top = g.max(axis=0)
-        log_eq = g_top + np.log(np.exp(log_wu[:, None] + g - g_top).sum(axis=0))  # log E_q[factor | tau]
-        # log of the integrand over t (Gamma density of tau times tau) plus the GH weight
-        log_f = log_gamma_norm + alpha_n * tk - beta_n * tau + lmass + log_eq
-        terms.append(math.log(wk) + log_f)
-    T = np.stack(terms) + (xh**2)[:, None]
-    T = np.where(np.isnan(T), -np.inf, T)
-    top = T.max(axis=0)
-    safe = np.isfinite(top)
-    top = np.where(safe, top, 0.0)
-    with np.errstate(divide="ignore"):
-        log_num = top + np.log(np.exp(T - top).sum(axis=0)) + np.log(math.sqrt(2.0) * width)
-    out = np.minimum(log_num - log_mass, 0.0)
-    # a candidate whose integrand vanished everywhere: the zeros rule it out (finite, so that
-    # a posterior of only such candidates stays defined)
-    return np.where(safe & np.isfinite(out), out, CENSORED_FLOOR)
+    return censored_kernel.censored_log_factor(
+        np.ascontiguousarray(B, dtype=np.float64),
+        np.ascontiguousarray(qhat, dtype=np.float64),
+        np.ascontiguousarray(aa, dtype=np.float64),
+        np.ascontiguousarray(beta_n, dtype=np.float64),
+        float(alpha_n),
+        math.inf if q_max is None else float(q_max),
+        np.ascontiguousarray(log_mass, dtype=np.float64),
+        u,
+        log_wu,
+        xh,
+        wh,
+        _chebyshev_coefficient_matrix(CENSORED_CHEBYSHEV_POINTS),
+        CENSORED_NEWTON_STEPS,
+        CENSORED_FLOOR,
+    )
 
 
 #: The zeros' factor (nats) of a candidate whose integrand underflows everywhere.
 CENSORED_FLOOR = -1e4
 #: Chebyshev points for the zeros' factor as a function of ``lambda = q sqrt(tau)``.
 CENSORED_CHEBYSHEV_POINTS = 10
-
-
-def _chebyshev_sum_log_ndtr(B: np.ndarray, x: np.ndarray, lam_max: np.ndarray) -> np.ndarray:
-    """``sum_i log Phi(-x lam_max B_i)`` per candidate for ``x`` in ``[0, 1]``, by Chebyshev interpolation.
-
-    Args:
-        B: ``(c, n)``; x: ``(..., n)`` points in ``[0, 1]``; lam_max: ``(n,)``.
-
-    The sum is an analytic function of ``lambda`` (linear at 0, quadratic far out), so the
-    polynomial through ``CENSORED_CHEBYSHEV_POINTS`` Chebyshev points of the second kind
-    reproduces it to far below the quadrature's error at a fraction of the cost of
-    evaluating it at every node: its Chebyshev coefficients come from the values by one
-    small matrix product, and Clenshaw's recurrence evaluates it at the nodes.
-    """
-    k = CENSORED_CHEBYSHEV_POINTS
-    theta = np.pi * np.arange(k) / (k - 1)
-    cheb = 0.5 * (1.0 - np.cos(theta))  # points in [0, 1], 0 and 1 included (y = -cos theta)
-    lam = cheb[:, None, None] * lam_max[None, None, :]
-    vals = special.log_ndtr(-lam * B[None, :, :]).sum(axis=1)  # (k, n)
-    coef = _chebyshev_coefficient_matrix(k) @ vals  # (k, n), in y = 2 x - 1
-    y2 = 2.0 * (2.0 * x - 1.0)
-    b1 = np.zeros(x.shape)
-    b2 = np.zeros(x.shape)
-    for j in range(k - 1, 0, -1):
-        b1, b2 = coef[j] + y2 * b1 - b2, b1
-    return coef[0] + 0.5 * y2 * b1 - b2
 
 
 @functools.cache
@@ -587,18 +502,6 @@ def _chebyshev_coefficient_matrix(k: int) -> np.ndarray:
     M = T * w[None, :]
     M[[0, -1]] *= 0.5
     return M
-
-
-def _log_t_interval_normal(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """``log(Phi(hi) - Phi(lo))`` for ``lo <= hi``, stable in both tails."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        right = lo >= 0
-        out = np.empty(np.shape(lo))
-        a, b = special.log_ndtr(-lo[right]), special.log_ndtr(-hi[right])
-        out[right] = a + np.log1p(-np.exp(b - a))
-        a, b = special.log_ndtr(hi[~right]), special.log_ndtr(lo[~right])
-        out[~right] = a + np.log1p(-np.exp(b - a))
-    return out
 
 
 def censored_correction(

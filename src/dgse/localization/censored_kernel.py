@@ -1,0 +1,275 @@
+"""Compiled kernel of the censored readings' factor (:func:`dgse.localization.adjoint.censored_correction`).
+
+The factor of each candidate source is a small two-dimensional quadrature (over the
+log noise precision and the release rate) whose nodes depend on the candidate: done
+with NumPy it is a few dozen passes over ``(nodes, candidates)`` arrays and their
+temporaries, most of a search step's cost (issue 12).  Here one loop over the
+candidates does the same arithmetic in registers.  The normal distribution's
+``log Phi`` and its inverse are written out, as numba cannot call SciPy's ufuncs:
+
+* :func:`log_ndtr` follows SciPy's ``log_ndtr``: ``log1p(-Phi(-a))`` in the right
+  tail, ``log(erfc)`` in the middle, the asymptotic series below ``-20``;
+* :func:`ndtri_exp` starts from Acklam's rational approximation of the normal
+  quantile (relative error below ``1.2e-9``; in the tails written in ``sqrt(-2
+  log p)``, which needs no ``exp`` and so reaches ``log p`` far below double
+  precision's ``p``) and takes a Newton step on ``log Phi(x) = y``.
+
+Both are tested against SciPy (``tests/localization/test_censored_kernel.py``).
+Pure functions of arrays; compiled on first use and cached on disk, like
+:mod:`dgse.physics.fv`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+_jit = numba.njit(cache=True, nogil=True)
+
+_LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
+_SQRT_2PI = math.sqrt(2.0 * math.pi)
+_SQRT_HALF = math.sqrt(0.5)
+_LOG_HALF = math.log(0.5)
+
+# Acklam's coefficients of the normal quantile (central region and tails)
+_A = np.array(
+    [-3.969683028665376e01, 2.209460984245205e02, -2.759285104469687e02,
+     1.383577518672690e02, -3.066479806614716e01, 2.506628277459239e00]
+)  # fmt: skip
+_B = np.array(
+    [-5.447609879822406e01, 1.615858368580409e02, -1.556989798598866e02,
+     6.680131188771972e01, -1.328068155288572e01]
+)  # fmt: skip
+_C = np.array(
+    [-7.784894002430293e-03, -3.223964580411365e-01, -2.400758277161838e00,
+     -2.549732539343734e00, 4.374664141464968e00, 2.938163982698783e00]
+)  # fmt: skip
+_D = np.array([7.784695709041462e-03, 3.224671290700398e-01, 2.445134137142996e00, 3.754408661907416e00])
+_P_LOW = 0.02425
+_LOG_P_LOW = math.log(_P_LOW)
+
+
+@_jit
+def log_ndtr(a: float) -> float:
+    """``log Phi(a)``, accurate in both tails (``-inf`` at ``-inf``, 0 at ``inf``)."""
+    if a > 0.0:
+        return math.log1p(-0.5 * math.erfc(a * _SQRT_HALF))
+    if a > -20.0:
+        return math.log(0.5 * math.erfc(-a * _SQRT_HALF))
+    if a == -math.inf:
+        return -math.inf
+    # asymptotic series of the Mills ratio, summed until it no longer changes
+    log_lhs = -0.5 * a * a - math.log(-a) - _LOG_SQRT_2PI
+    rhs = 1.0
+    last = 0.0
+    term = 1.0
+    inv2 = 1.0 / (a * a)
+    i = 0
+    while abs(last - rhs) > 1e-16 and i < 50:
+        i += 1
+        last = rhs
+        term *= -(2.0 * i - 1.0) * inv2
+        rhs += term
+    return log_lhs + math.log(rhs)
+
+
+@_jit
+def _quantile_start(y: float) -> float:
+    """Acklam's approximation of the normal quantile of ``p = exp(y)``, ``y <= log(1/2)``."""
+    if y < _LOG_P_LOW:
+        q = math.sqrt(-2.0 * y)
+        num = ((((_C[0] * q + _C[1]) * q + _C[2]) * q + _C[3]) * q + _C[4]) * q + _C[5]
+        return num / ((((_D[0] * q + _D[1]) * q + _D[2]) * q + _D[3]) * q + 1.0)
+    q = math.exp(y) - 0.5
+    r = q * q
+    num = (((((_A[0] * r + _A[1]) * r + _A[2]) * r + _A[3]) * r + _A[4]) * r + _A[5]) * q
+    return num / (((((_B[0] * r + _B[1]) * r + _B[2]) * r + _B[3]) * r + _B[4]) * r + 1.0)
+
+
+@_jit
+def _ndtri_exp_left(y: float) -> float:
+    """``x <= 0`` with ``log Phi(x) = y`` for ``y <= log(1/2)``."""
+    x = _quantile_start(y)
+    # Newton on log Phi(x) = y (slope phi(x) / Phi(x), positive and slowly growing): one step
+    # takes Acklam's 1e-9 to double precision, which the rate nodes need (``qhat + sd x``
+    # cancels when the positive readings hardly see a candidate); two far in the tail, where
+    # the rational fit is extrapolated
+    for _ in range(2 if y < -700.0 else 1):
+        lx = log_ndtr(x)
+        x -= (lx - y) * math.exp(lx + 0.5 * x * x + _LOG_SQRT_2PI)
+    return x
+
+
+@_jit
+def ndtri_exp(y: float) -> float:
+    """``x`` with ``log Phi(x) = y`` (``y <= 0``; ``inf`` at 0, ``-inf`` at ``-inf``, nan above 0)."""
+    if not (y <= 0.0):
+        return math.nan
+    if y == 0.0:
+        return math.inf
+    if y == -math.inf:
+        return -math.inf
+    if y > _LOG_HALF:
+        # the right half: the quantile of the complement, 1 - exp(y), taken without cancellation
+        return -_ndtri_exp_left(math.log(-math.expm1(y)))
+    return _ndtri_exp_left(y)
+
+
+@_jit
+def censored_log_factor(
+    B: np.ndarray,
+    qhat: np.ndarray,
+    aa: np.ndarray,
+    beta_n: np.ndarray,
+    alpha_n: float,
+    qmax: float,
+    log_mass: np.ndarray,
+    u: np.ndarray,
+    log_wu: np.ndarray,
+    xh: np.ndarray,
+    wh: np.ndarray,
+    cheb_matrix: np.ndarray,
+    newton_steps: int,
+    floor: float,
+) -> np.ndarray:
+    """The zeros' log factor per candidate; the arithmetic of ``adjoint._censored_log_factor``.
+
+    Args:
+        B: ``(c, n)`` zeros' responses over their noise weights; qhat, aa, beta_n,
+            log_mass: ``(n,)`` (see the caller); alpha_n: the noise posterior's shape;
+            qmax: the rate prior's upper end (``inf``: unbounded).
+        u, log_wu: ``(k,)`` the rate's nodes in its conditional CDF and their log weights;
+        xh, wh: Gauss-Hermite nodes and weights over ``log tau``;
+        cheb_matrix: ``(p, p)`` values at Chebyshev points to coefficients;
+        newton_steps: Newton steps to the mode over ``log tau``;
+        floor: the value of a candidate whose integrand vanishes everywhere.
+    """
+    c, n = B.shape
+    nt, nq, npts = xh.size, u.size, cheb_matrix.shape[0]
+    out = np.empty(n)
+    cheb = np.empty(npts)
+    for j in range(npts):
+        cheb[j] = 0.5 * (1.0 - math.cos(math.pi * j / (npts - 1)))
+    vals = np.empty(npts)
+    coef = np.empty(npts)
+    lam = np.empty((nt, nq))
+    tks = np.empty(nt)
+    taus = np.empty(nt)
+    lmass = np.empty(nt)
+    terms = np.empty(nt)
+    g = np.empty(nq)
+    lgamma_alpha = math.lgamma(alpha_n)
+    for s in range(n):
+        qc = min(max(qhat[s], 0.0), qmax)
+        bn = beta_n[s]
+        log_gamma_norm = alpha_n * math.log(bn) - lgamma_alpha
+        t0 = math.log(alpha_n / bn)
+        t = t0
+        d2 = 0.0
+        # Newton steps to the mode of alpha_n t - beta_n e^t + sum_i log Phi(-qc B_i e^(t/2)),
+        # then the curvature there (Laplace width)
+        for it in range(newton_steps + 1):
+            e = math.exp(0.5 * t)
+            s1 = 0.0
+            s2 = 0.0
+            for i in range(c):
+                x = qc * B[i, s] * e
+                lm = math.exp(-0.5 * x * x - log_ndtr(-x)) / _SQRT_2PI
+                s1 += lm * x
+                s2 += (lm * (lm - x) * x + lm) * x
+            d1 = alpha_n - bn * e * e - 0.5 * s1
+            d2 = -bn * e * e - 0.25 * s2
+            if it == newton_steps:
+                break
+            step = min(max(d1 / min(d2, -1e-6), -3.0), 3.0)
+            t = min(max(t - step, t0 - 60.0), t0 + 20.0)
+        if not math.isfinite(t):
+            t = t0
+        width = 1.0
+        if not math.isnan(d2):
+            width = min(max(1.0 / math.sqrt(max(-d2, 1e-6)), 1e-3), 10.0)
+        # the nodes (tau, q): lambda = q sqrt(tau), and the truncation mass per tau
+        lam_max = 1e-300
+        for k in range(nt):
+            tk = t + math.sqrt(2.0) * width * xh[k]
+            tau = math.exp(tk)
+            tks[k] = tk
+            taus[k] = tau
+            sd = 1.0 / math.sqrt(max(tau * aa[s], 1e-300))
+            lo = -qhat[s] / sd
+            hi = (qmax - qhat[s]) / sd
+            upper = lo >= 0.0
+            if upper:
+                a = log_ndtr(-lo)
+                b = log_ndtr(-hi)
+            else:
+                a = log_ndtr(hi)
+                b = log_ndtr(lo)
+            # log(Phi(hi) - Phi(lo)), from the tail the interval lies in
+            d = math.exp(b - a)  # Phi(-hi) / Phi(-lo), or Phi(lo) / Phi(hi)
+            lmass[k] = a + math.log1p(-d)
+            narrow_width = hi - lo < 1e-9 * (1.0 + abs(lo))
+            rt = math.sqrt(tau)
+            for j in range(nq):
+                if upper:
+                    x = -ndtri_exp(a + math.log(1.0 - u[j] * (1.0 - d)))
+                else:
+                    x = ndtri_exp(a + math.log(d + u[j] * (1.0 - d)))
+                if narrow_width or not math.isfinite(x):
+                    x = lo + u[j] * min(hi - lo, 1e300)
+                x = min(max(x, lo), hi)
+                q = min(max(qhat[s] + sd * x, 0.0), qmax)
+                lv = q * rt
+                lam[k, j] = lv
+                if lv > lam_max:
+                    lam_max = lv
+        # G(lambda) = sum_i log Phi(-lambda B_i), exact at Chebyshev points of [0, lam_max]
+        for p in range(npts):
+            acc = 0.0
+            for i in range(c):
+                acc += log_ndtr(-cheb[p] * lam_max * B[i, s])
+            vals[p] = acc
+        for p in range(npts):
+            acc = 0.0
+            for r in range(npts):
+                acc += cheb_matrix[p, r] * vals[r]
+            coef[p] = acc
+        top = -math.inf
+        for k in range(nt):
+            g_top = -math.inf
+            for j in range(nq):
+                y2 = 2.0 * (2.0 * (lam[k, j] / lam_max) - 1.0)
+                b1 = 0.0
+                b2 = 0.0
+                for p in range(npts - 1, 0, -1):
+                    b1, b2 = coef[p] + y2 * b1 - b2, b1
+                gv = coef[0] + 0.5 * y2 * b1 - b2
+                g[j] = gv
+                if gv > g_top:
+                    g_top = gv
+            if g_top == -math.inf or not math.isfinite(g_top):
+                terms[k] = -math.inf
+                continue
+            acc = 0.0
+            for j in range(nq):
+                acc += math.exp(log_wu[j] + g[j] - g_top)
+            log_eq = g_top + math.log(acc)
+            # the Gamma density of tau times tau, the truncation mass, the zeros' mean factor
+            log_f = log_gamma_norm + alpha_n * tks[k] - bn * taus[k] + lmass[k] + log_eq
+            term = math.log(wh[k]) + log_f + xh[k] * xh[k]
+            if math.isnan(term):
+                term = -math.inf
+            terms[k] = term
+            if term > top:
+                top = term
+        if not math.isfinite(top):
+            out[s] = floor
+            continue
+        acc = 0.0
+        for k in range(nt):
+            acc += math.exp(terms[k] - top)
+        val = top + math.log(acc) + math.log(math.sqrt(2.0) * width) - log_mass[s]
+        out[s] = min(val, 0.0) if math.isfinite(val) else floor
+    return out
