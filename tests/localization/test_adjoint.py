@@ -152,6 +152,23 @@ def test_oracle_noiseless_linear_forward_peaks_at_the_source() -> None:
     assert b.info["release_rate_at_map_gps"] == pytest.approx(0.2, rel=1e-3)
 
 
+def test_cached_fields_keep_the_cells_in_use(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The field cache drops the least recently used cell, and a cached field is the solved one."""
+    import dgse.localization.adjoint as adjoint
+
+    case = channel_case()
+    fm = flow_model(case.layout, case.inlet_velocity)
+    monkeypatch.setattr(adjoint, "MAX_CACHED_FIELDS", 3)
+    fm._fields.clear()
+    first = fm.forward(np.array([[8, 8]]), [1.0])
+    fm.forward(np.array([[8, 9], [8, 10]]), [1.0, 1.0])
+    again = fm.forward(np.array([[8, 8]]), [2.0])  # used again: now the most recent
+    np.testing.assert_allclose(again, 2.0 * first)
+    fm.forward(np.array([[8, 11]]), [1.0])
+    assert set(fm._fields) == {(8, 8), (8, 10), (8, 11)}
+    fm._fields.clear()
+
+
 def test_oracle_on_the_case_and_registry() -> None:
     import dgse.localization.register  # noqa: F401
 

@@ -221,7 +221,7 @@ class FlowModel:
 
         Adjoint rows of the linear (``linearUpwind``) operator, computed in
         one batch for the cells not seen before and cached (the last
-        :data:`MAX_CACHED_ROWS` cells), clipped at 0: a release cannot lower a
+        :data:`MAX_CACHED_ROWS` cells used), clipped at 0: a release cannot lower a
         reading, but the second-order upwind scheme undershoots next to a
         point source: a row dips below zero for sources a cell or two
         downstream of the sensor (to minus 0.18 of its peak on test 2005).  Left
@@ -238,7 +238,9 @@ class FlowModel:
                 self._rows[k] = row
         n = self.mesh.n
         out = np.stack([self._rows[k] for k in keys]) if keys else np.zeros((0, n))
-        while len(self._rows) > MAX_CACHED_ROWS:  # oldest first
+        for k in keys:  # the cells just used move to the end: the least recently used go first
+            self._rows[k] = self._rows.pop(k)
+        while len(self._rows) > MAX_CACHED_ROWS:  # least recently used first
             del self._rows[next(iter(self._rows))]
         return out
 
@@ -247,7 +249,7 @@ class FlowModel:
 
         The operator is linear: the field per g/s of each source cell is solved
         once (in one batch for the cells not seen before) and cached, the last
-        :data:`MAX_CACHED_FIELDS` cells; clipped at 0 like :meth:`responses`.
+        :data:`MAX_CACHED_FIELDS` cells used; clipped at 0 like :meth:`responses`.
         """
         m = self.mesh
         ts = self.transport
@@ -262,7 +264,9 @@ class FlowModel:
             for k, col in zip(new, X.T, strict=True):
                 self._fields[k] = col
         out = np.stack([self._fields[k] for k in keys]) if keys else np.zeros((0, m.n))
-        while len(self._fields) > MAX_CACHED_FIELDS:  # oldest first
+        for k in keys:
+            self._fields[k] = self._fields.pop(k)
+        while len(self._fields) > MAX_CACHED_FIELDS:  # least recently used first
             del self._fields[next(iter(self._fields))]
         return out * np.asarray(rates, dtype=np.float64).reshape(-1, 1)
 
@@ -340,7 +344,15 @@ def _log_t_interval(lo: np.ndarray, hi: np.ndarray, nu: float) -> np.ndarray:
             a, b = np.log(cdf(nu, hi[left])), np.log(cdf(nu, lo[left]))
             out[left] = a + np.log1p(-np.exp(b - a))
         if mid.any():
-            out[mid] = np.log1p(-(cdf(nu, lo[mid]) + cdf(nu, -hi[mid])))
+            # the upper tail's mass only where it can register (beyond the 1e-13 quantile
+            # it is below the last bit of 1 - T(lo) >= 1/2): half the CDF calls when q_max
+            # lies far out, as it does for most candidates
+            lo_m, hi_m = lo[mid], hi[mid]
+            far = -float(special.stdtrit(nu, 1e-13))
+            upper = np.zeros(lo_m.shape)
+            near = hi_m <= far
+            upper[near] = cdf(nu, -hi_m[near])
+            out[mid] = np.log1p(-(cdf(nu, lo_m) + upper))
         width = hi - lo
         narrow = np.isfinite(width) & ((width < 1e-7 * (1.0 + np.abs(lo) + np.abs(hi))) | ~np.isfinite(out))
         if narrow.any():
