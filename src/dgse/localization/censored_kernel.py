@@ -12,7 +12,8 @@ candidates does the same arithmetic in registers.  The normal distribution's
 * :func:`ndtri_exp` starts from Acklam's rational approximation of the normal
   quantile (relative error below ``1.2e-9``; in the tails written in ``sqrt(-2
   log p)``, which needs no ``exp`` and so reaches ``log p`` far below double
-  precision's ``p``) and takes a Newton step on ``log Phi(x) = y``.
+  precision's ``p``) and takes a Newton step on ``log Phi(x) = y`` (in the kernel only
+  where the rate nodes need more than Acklam's precision).
 
 Both are tested against SciPy (``tests/localization/test_censored_kernel.py``).
 Pure functions of arrays; compiled on first use and cached on disk, like
@@ -76,30 +77,55 @@ def log_ndtr(a: float) -> float:
 
 
 @_jit
-def _quantile_start(y: float) -> float:
-    """Acklam's approximation of the normal quantile of ``p = exp(y)``, ``y <= log(1/2)``."""
-    if y < _LOG_P_LOW:
-        q = math.sqrt(-2.0 * y)
-        num = ((((_C[0] * q + _C[1]) * q + _C[2]) * q + _C[3]) * q + _C[4]) * q + _C[5]
-        return num / ((((_D[0] * q + _D[1]) * q + _D[2]) * q + _D[3]) * q + 1.0)
-    q = math.exp(y) - 0.5
-    r = q * q
-    num = (((((_A[0] * r + _A[1]) * r + _A[2]) * r + _A[3]) * r + _A[4]) * r + _A[5]) * q
-    return num / (((((_B[0] * r + _B[1]) * r + _B[2]) * r + _B[3]) * r + _B[4]) * r + 1.0)
+def _acklam(p: float, y: float) -> float:
+    """Acklam's approximation of the normal quantile of ``p <= 1/2`` (``y = log p``, or nan to
+    take it from ``p`` when needed; ``p`` may underflow to 0 when ``y`` is given)."""
+    if p >= _P_LOW:
+        q = p - 0.5
+        r = q * q
+        num = (((((_A[0] * r + _A[1]) * r + _A[2]) * r + _A[3]) * r + _A[4]) * r + _A[5]) * q
+        return num / (((((_B[0] * r + _B[1]) * r + _B[2]) * r + _B[3]) * r + _B[4]) * r + 1.0)
+    if math.isnan(y):
+        y = math.log(p)
+    q = math.sqrt(-2.0 * y)
+    num = ((((_C[0] * q + _C[1]) * q + _C[2]) * q + _C[3]) * q + _C[4]) * q + _C[5]
+    return num / ((((_D[0] * q + _D[1]) * q + _D[2]) * q + _D[3]) * q + 1.0)
+
+
+@_jit
+def _newton(x: float, y: float) -> float:
+    """Newton steps on ``log Phi(x) = y`` from Acklam's ``x`` (slope ``phi / Phi``, positive and
+    slowly growing): one takes his ``1e-9`` to double precision; two far in the tail, where
+    his rational fit is extrapolated."""
+    for _ in range(2 if y < -700.0 else 1):
+        lx = log_ndtr(x)
+        x -= (lx - y) * math.exp(lx + 0.5 * x * x + _LOG_SQRT_2PI)
+    return x
 
 
 @_jit
 def _ndtri_exp_left(y: float) -> float:
     """``x <= 0`` with ``log Phi(x) = y`` for ``y <= log(1/2)``."""
-    x = _quantile_start(y)
-    # Newton on log Phi(x) = y (slope phi(x) / Phi(x), positive and slowly growing): one step
-    # takes Acklam's 1e-9 to double precision, which the rate nodes need (``qhat + sd x``
-    # cancels when the positive readings hardly see a candidate); two far in the tail, where
-    # the rational fit is extrapolated
-    for _ in range(2 if y < -700.0 else 1):
-        lx = log_ndtr(x)
-        x -= (lx - y) * math.exp(lx + 0.5 * x * x + _LOG_SQRT_2PI)
-    return x
+    p = math.exp(y) if y > -700.0 else 0.0
+    return _newton(_acklam(p, y), y)
+
+
+@_jit
+def _share_quantile(a: float, pa: float, f: float, fc: float) -> tuple[float, float, float, float]:
+    """Acklam's ``x`` with ``Phi(x) = e^a f`` (``pa = e^a``, ``fc = 1 - f`` given exactly).
+
+    Returns ``(x_left, p_left, y_left, sign)``: ``x = sign * x_left`` where ``x_left <= 0``
+    has ``Phi(x_left) = p_left``, ``log p_left = y_left`` (nan where Acklam did not need it:
+    take ``log(p_left)``), for :func:`_newton` where the caller needs full precision.
+    """
+    p = pa * f
+    if p > 0.5:
+        # the right half: its complement 1 - e^a f = (1 - e^a) + e^a fc, without cancellation
+        comp = -math.expm1(a) + pa * fc
+        y = math.log(comp) if comp < _P_LOW else math.nan
+        return _acklam(comp, y), comp, y, -1.0
+    y = a + math.log(f) if p < _P_LOW else math.nan
+    return _acklam(p, y), p, y, 1.0
 
 
 @_jit
@@ -212,11 +238,25 @@ def censored_log_factor(
             lmass[k] = a + math.log1p(-d)
             narrow_width = hi - lo < 1e-9 * (1.0 + abs(lo))
             rt = math.sqrt(tau)
+            pa = math.exp(a)
             for j in range(nq):
+                # the node's quantile: Phi(x) = e^a f (of -x in the right tail, ``upper``)
                 if upper:
-                    x = -ndtri_exp(a + math.log(1.0 - u[j] * (1.0 - d)))
+                    fc = u[j] * (1.0 - d)
+                    f = 1.0 - fc
                 else:
-                    x = ndtri_exp(a + math.log(d + u[j] * (1.0 - d)))
+                    fc = (1.0 - u[j]) * (1.0 - d)
+                    f = d + u[j] * (1.0 - d)
+                xl, pl, yl, sign = _share_quantile(a, pa, f, fc)
+                # Acklam's 1e-9 moves q = qhat + sd x by 1e-9 |x| sd, against a spread of the
+                # nodes of about sd min(hi - lo, 1 / |lo|): Newton's step only where that
+                # ratio could exceed 1e-7 (a candidate the positive readings hardly see: a
+                # narrow interval far out) or far in the tail
+                if hi - lo < 1.0 or abs(xl) * max(1.0, abs(lo)) > 100.0 or yl < -700.0:
+                    xl = _newton(xl, math.log(pl) if math.isnan(yl) else yl)
+                x = sign * xl
+                if upper:
+                    x = -x
                 if narrow_width or not math.isfinite(x):
                     x = lo + u[j] * min(hi - lo, 1e300)
                 x = min(max(x, lo), hi)
