@@ -37,3 +37,12 @@ def test_ndtri_exp_ends(y: float, expected: float) -> None:
 
 def test_ndtri_exp_above_zero_is_nan() -> None:
     assert math.isnan(ndtri_exp(0.5))
+
+
+def test_mills_ratio_by_series_near_zero_and_by_log_ndtr_beyond() -> None:
+    from dgse.localization.censored_kernel import _mills
+
+    x = np.concatenate([np.linspace(-3e-3, 3e-3, 61), np.linspace(-5.0, 30.0, 71)])
+    ours = np.array([_mills(float(v)) for v in x])
+    ref = np.exp(-0.5 * x * x - special.log_ndtr(-x)) / math.sqrt(2.0 * math.pi)
+    np.testing.assert_allclose(ours, ref, rtol=1e-12)

@@ -477,7 +477,7 @@ def _censored_log_factor(
     """
     u, log_wu, xh, wh = _censored_nodes(CENSORED_Q_NODES, CENSORED_Q_PIECES, CENSORED_TAU_NODES)
     return censored_kernel.censored_log_factor(
-        np.ascontiguousarray(B, dtype=np.float64),
+        np.ascontiguousarray(np.asarray(B, dtype=np.float64).T),
         np.ascontiguousarray(qhat, dtype=np.float64),
         np.ascontiguousarray(aa, dtype=np.float64),
         np.ascontiguousarray(beta_n, dtype=np.float64),

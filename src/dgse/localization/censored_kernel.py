@@ -33,6 +33,9 @@ _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
 _SQRT_2PI = math.sqrt(2.0 * math.pi)
 _SQRT_HALF = math.sqrt(0.5)
 _LOG_HALF = math.log(0.5)
+_PHI0 = 1.0 / math.sqrt(2.0 * math.pi)
+#: Below this, :func:`log_ndtr` and :func:`_mills` use their series.
+_SMALL = 1e-3
 
 # Acklam's coefficients of the normal quantile (central region and tails)
 _A = np.array(
@@ -55,6 +58,12 @@ _LOG_P_LOW = math.log(_P_LOW)
 @_jit
 def log_ndtr(a: float) -> float:
     """``log Phi(a)``, accurate in both tails (``-inf`` at ``-inf``, 0 at ``inf``)."""
+    if abs(a) < _SMALL:
+        # near 0 by series, without erfc and log: Phi(a) = (1 + y) / 2 with
+        # y = 2 phi(0) (a - a^3 / 6), and log1p(y) to y^5 (|y| < 8e-4: error below 1e-19);
+        # a zero a candidate does not reach (response 0) lands here, most of them
+        y = 2.0 * _PHI0 * a * (1.0 - a * a / 6.0)
+        return _LOG_HALF + y * (1.0 - y * (0.5 - y * (1.0 / 3.0 - y * (0.25 - 0.2 * y))))
     if a > 0.0:
         return math.log1p(-0.5 * math.erfc(a * _SQRT_HALF))
     if a > -20.0:
@@ -90,6 +99,15 @@ def _acklam(p: float, y: float) -> float:
     q = math.sqrt(-2.0 * y)
     num = ((((_C[0] * q + _C[1]) * q + _C[2]) * q + _C[3]) * q + _C[4]) * q + _C[5]
     return num / ((((_D[0] * q + _D[1]) * q + _D[2]) * q + _D[3]) * q + 1.0)
+
+
+@_jit
+def _mills(x: float) -> float:
+    """``phi(x) / Phi(-x)``; by series near 0 (``x`` below ``_SMALL``: error below 1e-16)."""
+    if abs(x) < _SMALL:
+        x2 = x * x
+        return _PHI0 * (1.0 - 0.5 * x2 * (1.0 - 0.25 * x2)) / (0.5 - _PHI0 * x * (1.0 - x2 / 6.0))
+    return math.exp(-0.5 * x * x - log_ndtr(-x)) / _SQRT_2PI
 
 
 @_jit
@@ -145,7 +163,7 @@ def ndtri_exp(y: float) -> float:
 
 @_jit
 def censored_log_factor(
-    B: np.ndarray,
+    Bt: np.ndarray,
     qhat: np.ndarray,
     aa: np.ndarray,
     beta_n: np.ndarray,
@@ -163,7 +181,8 @@ def censored_log_factor(
     """The zeros' log factor per candidate; the arithmetic of ``adjoint._censored_log_factor``.
 
     Args:
-        B: ``(c, n)`` zeros' responses over their noise weights; qhat, aa, beta_n,
+        Bt: ``(n, c)`` zeros' responses over their noise weights, a row per candidate (the
+            transpose of the caller's ``B``, so that a candidate's zeros are adjacent); qhat, aa, beta_n,
             log_mass: ``(n,)`` (see the caller); alpha_n: the noise posterior's shape;
             qmax: the rate prior's upper end (``inf``: unbounded).
         u, log_wu: ``(k,)`` the rate's nodes in its conditional CDF and their log weights;
@@ -172,7 +191,7 @@ def censored_log_factor(
         newton_steps: Newton steps to the mode over ``log tau``;
         floor: the value of a candidate whose integrand vanishes everywhere.
     """
-    c, n = B.shape
+    n, c = Bt.shape
     nt, nq, npts = xh.size, u.size, cheb_matrix.shape[0]
     out = np.empty(n)
     cheb = np.empty(npts)
@@ -201,8 +220,8 @@ def censored_log_factor(
             s1 = 0.0
             s2 = 0.0
             for i in range(c):
-                x = qc * B[i, s] * e
-                lm = math.exp(-0.5 * x * x - log_ndtr(-x)) / _SQRT_2PI
+                x = qc * Bt[s, i] * e
+                lm = _mills(x)
                 s1 += lm * x
                 s2 += (lm * (lm - x) * x + lm) * x
             d1 = alpha_n - bn * e * e - 0.5 * s1
@@ -269,7 +288,7 @@ def censored_log_factor(
         for p in range(npts):
             acc = 0.0
             for i in range(c):
-                acc += log_ndtr(-cheb[p] * lam_max * B[i, s])
+                acc += log_ndtr(-cheb[p] * lam_max * Bt[s, i])
             vals[p] = acc
         for p in range(npts):
             acc = 0.0
