@@ -87,9 +87,8 @@ RULES: dict[str, dict[str, Any]] = {
 
 def cases_dir(out: Path, name: str, limit: int | None = None) -> Path:
     """The generated scenarios of a set (the first ``limit``) as case files (made once)."""
-    from dgse.physics.scenario import random_cases
-
     from dgse.errors import ConvergenceError
+    from dgse.physics.scenario import random_cases
 
     seeds = list(SETS[name])[:limit]
     d = out / (f"_cases_{name}" if limit is None else f"_cases_{name}_{len(seeds)}")

@@ -148,6 +148,7 @@ from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators.belief import Belief
 from dgse.estimators.knowledge import Knowledge, KnowledgeUser, Level
 from dgse.localization import censored_kernel, check_inputs, log_moments_from_ppm, map_key
+from dgse.localization.student_t import log_interval
 from dgse.options import options_from
 from dgse.physics.builtin import flow_and_transport
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
@@ -325,48 +326,6 @@ def clear_flow_cache() -> None:
 
 
 # -- the posterior ----------------------------------------------------------------------------
-def _log_t_interval(lo: np.ndarray, hi: np.ndarray, nu: float) -> np.ndarray:
-    """``log(T_nu(hi) - T_nu(lo))`` for ``lo <= hi`` (``hi`` may be ``inf``), stable in both tails."""
-    lo = np.asarray(lo, dtype=np.float64)
-    hi = np.asarray(hi, dtype=np.float64)
-    lo, hi = np.broadcast_arrays(lo, hi)
-    # Student-t CDF from scipy.special (the frozen scipy.stats distribution costs ~10x more per call)
-    cdf = special.stdtr
-    out = np.empty(lo.shape)
-    right = lo >= 0  # both in the right tail: survival functions
-    left = hi <= 0  # both in the left tail: CDFs
-    mid = ~(right | left)
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        if right.any():
-            a, b = np.log(cdf(nu, -lo[right])), np.log(cdf(nu, -hi[right]))
-            out[right] = a + np.log1p(-np.exp(b - a))
-        if left.any():
-            a, b = np.log(cdf(nu, hi[left])), np.log(cdf(nu, lo[left]))
-            out[left] = a + np.log1p(-np.exp(b - a))
-        if mid.any():
-            # the upper tail's mass only where it can register (beyond the 1e-13 quantile
-            # it is below the last bit of 1 - T(lo) >= 1/2): half the CDF calls when q_max
-            # lies far out, as it does for most candidates
-            lo_m, hi_m = lo[mid], hi[mid]
-            far = -float(special.stdtrit(nu, 1e-13))
-            upper = np.zeros(lo_m.shape)
-            near = hi_m <= far
-            upper[near] = cdf(nu, -hi_m[near])
-            out[mid] = np.log1p(-(cdf(nu, lo_m) + upper))
-        width = hi - lo
-        narrow = np.isfinite(width) & ((width < 1e-7 * (1.0 + np.abs(lo) + np.abs(hi))) | ~np.isfinite(out))
-        if narrow.any():
-            c = 0.5 * (lo[narrow] + hi[narrow])
-            log_pdf = (
-                special.gammaln(0.5 * (nu + 1.0))
-                - special.gammaln(0.5 * nu)
-                - 0.5 * math.log(nu * math.pi)
-                - 0.5 * (nu + 1.0) * np.log1p(c * c / nu)
-            )
-            out[narrow] = log_pdf + np.log(np.maximum(width[narrow], 1e-300))
-    return out
-
-
 def _evidence(
     A: np.ndarray,
     A2: np.ndarray,
@@ -391,7 +350,7 @@ def _evidence(
         scale = np.sqrt(beta_n / (alpha_n * aa))
     logl = -np.log(r).sum() - 0.5 * np.log(aa) - alpha_n * np.log(beta_n)
     # the truncation term (<= 0) only where it can matter: candidates within TRUNC_NATS of
-    # the best truncated one (the Student-t CDF costs about a microsecond a candidate); the
+    # the best truncated one (:func:`~dgse.localization.student_t.log_interval`); the
     # rest, TRUNC_NATS below, keep the untruncated value, an upper bound
     # where both ends lie beyond the t quantile of 1e-13 the term is 0 to double precision
     far = -float(special.stdtrit(nu, 1e-13))
@@ -406,7 +365,7 @@ def _evidence(
             break
         q_, s_ = qhat[todo], scale[todo]
         hi = np.full(q_.shape, np.inf) if q_max is None else (q_max - q_) / s_
-        logl[todo] += _log_t_interval(-q_ / s_, hi, nu)
+        logl[todo] += log_interval(-q_ / s_, hi, nu)
         done |= todo
         best = float(logl[done].max())
     return logl, qhat, alpha_n
@@ -597,7 +556,7 @@ def censored_correction(
         with np.errstate(over="ignore"):  # a candidate no positive reading sees: scale inf
             scale = np.sqrt(beta_n[idx] / (alpha_n * aa[idx]))
         hi = np.full(idx.shape, np.inf) if q_max is None else (q_max - qh[idx]) / scale
-        log_mass = _log_t_interval(-qh[idx] / scale, hi, 2.0 * alpha_n)
+        log_mass = log_interval(-qh[idx] / scale, hi, 2.0 * alpha_n)
         return _censored_log_factor(Bc[:, idx], qh[idx], aa[idx], beta_n[idx], alpha_n, q_max, log_mass)
 
     # chunks down the ranking, as many at once as there are worker threads (the special
