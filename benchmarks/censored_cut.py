@@ -63,9 +63,9 @@ def main() -> None:
     evaluated = [0]
     factor = adjoint._censored_log_factor
 
-    def count(B, *a):
-        evaluated[0] += B.shape[1]
-        return factor(B, *a)
+    def count(Bt, *a):
+        evaluated[0] += Bt.shape[0]
+        return factor(Bt, *a)
 
     adjoint._censored_log_factor = count
     rows = []

@@ -46,3 +46,13 @@ def test_mills_ratio_by_series_near_zero_and_by_log_ndtr_beyond() -> None:
     ours = np.array([_mills(float(v)) for v in x])
     ref = np.exp(-0.5 * x * x - special.log_ndtr(-x)) / math.sqrt(2.0 * math.pi)
     np.testing.assert_allclose(ours, ref, rtol=1e-12)
+
+
+def test_plug_in_factor_is_the_sum_of_log_phi() -> None:
+    from dgse.localization.censored_kernel import plug_in_log_factor
+
+    rng = np.random.default_rng(3)
+    Bt = rng.exponential(1.0, (50, 7)) * (rng.random((50, 7)) < 0.6)  # zeros a candidate does not reach
+    lam = rng.exponential(2.0, 50)
+    want = special.log_ndtr(-lam[:, None] * Bt).sum(axis=1)
+    np.testing.assert_allclose(plug_in_log_factor(Bt, lam), want, rtol=1e-13)

@@ -401,7 +401,7 @@ def _censored_nodes(
 
 
 def _censored_log_factor(
-    B: np.ndarray,
+    Bt: np.ndarray,
     qhat: np.ndarray,
     aa: np.ndarray,
     beta_n: np.ndarray,
@@ -412,8 +412,8 @@ def _censored_log_factor(
     """``log E[prod_i Phi(-q B_i sqrt(tau))]`` under the posterior of ``(q, tau)`` from the positive readings.
 
     Args:
-        B: ``(c, n)`` censored readings' responses over their noise weights (``a_i / r_i``)
-            for ``n`` candidate sources.
+        Bt: ``(n, c)`` censored readings' responses over their noise weights (``a_i / r_i``),
+            a row for each of ``n`` candidate sources.
         qhat, aa, beta_n: ``(n,)`` the uncensored readings' least-squares rate, weighted
             ``sum a^2`` and the noise posterior's rate.
         alpha_n: the noise posterior's shape.
@@ -436,7 +436,7 @@ def _censored_log_factor(
     """
     u, log_wu, xh, wh = _censored_nodes(CENSORED_Q_NODES, CENSORED_Q_PIECES, CENSORED_TAU_NODES)
     return censored_kernel.censored_log_factor(
-        np.ascontiguousarray(np.asarray(B, dtype=np.float64).T),
+        np.ascontiguousarray(Bt, dtype=np.float64),
         np.ascontiguousarray(qhat, dtype=np.float64),
         np.ascontiguousarray(aa, dtype=np.float64),
         np.ascontiguousarray(beta_n, dtype=np.float64),
@@ -519,7 +519,8 @@ def censored_correction(
     zp = z[pos]
     zz = float(w @ zp**2)
     alpha_n = alpha0 + 0.5 * (int(pos.sum()) - 1)
-    Bc = A[cen] / r[cen][:, None]
+    # the zeros' responses over their noise weights, a row per candidate
+    Bt = np.ascontiguousarray((A[cen] / r[cen][:, None]).T)
     qmax = np.inf if q_max is None else q_max
     # a plug-in pass over every candidate (rate and noise at their estimates) orders the
     # candidates and stands in for the exact factor where the mass is negligible
@@ -528,12 +529,12 @@ def censored_correction(
     qh = az / aa
     beta_n = beta0 + 0.5 * np.maximum(zz - az * qh, 0.0)
     lam = np.clip(qh, 0.0, qmax) * np.sqrt(alpha_n / beta_n)
-    out = special.log_ndtr(-lam[None, :] * Bc).sum(axis=0)
+    out = censored_kernel.plug_in_log_factor(Bt, np.ascontiguousarray(lam))
     key = logl + out
     # the ranking and the stop: the plug-in value, or an upper bound of the factor (see above)
     ranking = CENSORED_RANKING if ranking is None else ranking
     if ranking == "bound":
-        rank_key = logl - math.log(2.0) * (Bc >= 0.0).sum(axis=0)
+        rank_key = logl - math.log(2.0) * (Bt >= 0.0).sum(axis=1)
     elif ranking == "plug-in":
         rank_key = key
     else:
@@ -547,7 +548,7 @@ def censored_correction(
     got = 0.0
     if math.isfinite(qmax):
         tau_hi = special.gammainccinv(alpha_n, 1e-12) / beta_n
-        faint = qmax * np.sqrt(tau_hi) * np.maximum(Bc, 0.0).sum(axis=0) < CENSORED_FAINT
+        faint = qmax * np.sqrt(tau_hi) * np.maximum(Bt, 0.0).sum(axis=1) < CENSORED_FAINT
         got = float(np.exp(key[faint] - top).sum())
         order = order[~faint[order]]
     rest = np.cumsum(np.exp(rank_key[order] - top)[::-1])[::-1]  # ranked mass from position k on
@@ -557,7 +558,7 @@ def censored_correction(
             scale = np.sqrt(beta_n[idx] / (alpha_n * aa[idx]))
         hi = np.full(idx.shape, np.inf) if q_max is None else (q_max - qh[idx]) / scale
         log_mass = log_interval(-qh[idx] / scale, hi, 2.0 * alpha_n)
-        return _censored_log_factor(Bc[:, idx], qh[idx], aa[idx], beta_n[idx], alpha_n, q_max, log_mass)
+        return _censored_log_factor(Bt[idx], qh[idx], aa[idx], beta_n[idx], alpha_n, q_max, log_mass)
 
     # chunks down the ranking, as many at once as there are worker threads (the special
     # functions release the GIL), until the rest of the ranking holds a negligible share
@@ -576,7 +577,7 @@ def censored_correction(
             break
     # each zero with a non-negative response has probability at most 1/2: a bound the
     # quadrature can overshoot by a few hundredths of a nat when the posterior is broad
-    return np.minimum(out, -math.log(2.0) * (Bc >= 0.0).sum(axis=0))
+    return np.minimum(out, -math.log(2.0) * (Bt >= 0.0).sum(axis=1))
 
 
 #: Nats within which the plug-in zeros' factor stands for the integrated one of a candidate the

@@ -162,6 +162,20 @@ def ndtri_exp(y: float) -> float:
 
 
 @_jit
+def plug_in_log_factor(Bt: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """``sum_i log Phi(-lam_s Bt[s, i])`` per candidate ``s``: the zeros' factor with the rate and
+    the noise at their estimates (``lam = q sqrt(tau)``), ``Bt`` ``(n, c)``."""
+    n, c = Bt.shape
+    out = np.empty(n)
+    for s in range(n):
+        acc = 0.0
+        for i in range(c):
+            acc += log_ndtr(-lam[s] * Bt[s, i])
+        out[s] = acc
+    return out
+
+
+@_jit
 def censored_log_factor(
     Bt: np.ndarray,
     qhat: np.ndarray,
