@@ -27,7 +27,9 @@ Stop rules (``--rule``):
   of the time limit is left (``deadline_margin_s``); such stops are counted apart
   (``deadline_stops``);
 * ``mass1m90-disk1m-deadline60s-revisit0.5m``: and the variance terms of a cell are divided by
-  one plus the cells measured within 0.5 m of it (``revisit_radius_m``).
+  one plus the cells measured within 0.5 m of it (``revisit_radius_m``);
+* ``...-revisit0.5m-twice``: and the mass test must pass at two readings in a row, the mode
+  staying within 1 m (``stop_readings=2``).
 
 Every finished episode is journaled beside the JSON, so an interrupted run resumes::
 
@@ -75,6 +77,15 @@ RULES: dict[str, dict[str, Any]] = {
         "source_radius_m": 1.0,
         "deadline_margin_s": 60.0,
         "revisit_radius_m": 0.5,
+    },
+    "mass1m90-disk1m-deadline60s-revisit0.5m-twice": {
+        "min_observations": 5,
+        "mass_radius_m": 1.0,
+        "mass_level": 0.9,
+        "source_radius_m": 1.0,
+        "deadline_margin_s": 60.0,
+        "revisit_radius_m": 0.5,
+        "stop_readings": 2,
     },
     "mass1m90-disk0.5m": {
         "min_observations": 5,

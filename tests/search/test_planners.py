@@ -308,3 +308,35 @@ def test_registry():
         register_planner("test-stay", UtilityPlanner)
     register_planner("test-lazy", "dgse.search.planners:UtilityPlanner")
     assert isinstance(get_planner("test-lazy", w_d=0.2), UtilityPlanner)
+
+
+def test_a_stop_needs_the_test_to_pass_at_readings_in_a_row():
+    """stop_readings: the mass test must hold at consecutive readings with a mode that stays put."""
+    occ = np.zeros((20, 20), np.uint8)
+    graph = FreeSpaceGraph(occ, 0.1)
+
+    def sharp(i, j):
+        p = np.full((20, 20), 1e-9)
+        p[i, j] = 1.0
+        return _belief(occ, p, res=0.1)
+
+    def at_step(step):
+        h = _history(graph)
+        h.step = step
+        return h
+
+    planner = UtilityPlanner(mass_radius_m=0.5, stop_readings=2)
+    assert not planner.should_stop(sharp(10, 10), at_step(1))
+    assert not planner.should_stop(sharp(10, 10), at_step(1))  # asked again: still one pass
+    assert planner.should_stop(sharp(10, 12), at_step(2))  # 0.2 m away: the same mode
+    planner.reset()
+    assert not planner.should_stop(sharp(10, 10), at_step(1))
+    assert not planner.should_stop(sharp(2, 2), at_step(2))  # the mode jumped: start again
+    assert planner.should_stop(sharp(2, 3), at_step(3))
+    planner.reset()
+    assert not planner.should_stop(sharp(10, 10), at_step(1))
+    assert not planner.should_stop(sharp(10, 10), at_step(3))  # a reading in between failed
+    assert UtilityPlanner(mass_radius_m=0.5).should_stop(sharp(10, 10), at_step(1))
+    for bad in (0, 1.5, True):
+        with pytest.raises(InputDataError, match="stop_readings"):
+            UtilityPlanner(stop_readings=bad)

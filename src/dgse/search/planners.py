@@ -237,6 +237,10 @@ class UtilityPlanner:
             place) the predicted variance stays high however often the robot measures
             there, and the paper's terms keep it measuring cell after cell along that
             edge; measured neighbourhoods lose that pull, the source term keeps its own.
+        stop_readings: the stop test (entropy or mass) must pass at this many readings in a
+            row, the posterior's mode staying within ``mass_radius_m`` (1 m without it) of
+            where it first passed: a posterior that one or two readings have sharpened on a
+            wrong spot is given the next reading to contradict it.  1: the paper's rule.
     """
 
     w_d: float = 0.1
@@ -255,7 +259,9 @@ class UtilityPlanner:
     source_radius_m: float | None = None
     deadline_margin_s: float | None = None
     revisit_radius_m: float | None = None
+    stop_readings: int = 1
     name: str = field(default="utility", init=False)
+    _streak: list[tuple[int, int, int]] = field(default_factory=list, init=False, repr=False)
 
     def __post_init__(self) -> None:
         for k in ("w_d", "w_w", "w_c", "w_s"):
@@ -286,6 +292,11 @@ class UtilityPlanner:
         self.mass_level = float(self.mass_level)
         self.source_radius_m = _radius_or_none("source_radius_m", self.source_radius_m)
         self.revisit_radius_m = _radius_or_none("revisit_radius_m", self.revisit_radius_m)
+        if isinstance(self.stop_readings, bool) or int(self.stop_readings) != self.stop_readings:
+            raise InputDataError(f"stop_readings must be an integer, got {self.stop_readings!r}")
+        if self.stop_readings < 1:
+            raise InputDataError(f"stop_readings must be >= 1, got {self.stop_readings}")
+        self.stop_readings = int(self.stop_readings)
         if self.deadline_margin_s is not None:
             m = float(self.deadline_margin_s)
             if not (math.isfinite(m) and m >= 0):
@@ -295,7 +306,8 @@ class UtilityPlanner:
             raise InputDataError(f"distance_unit must be 'm' or 'cell', got {self.distance_unit!r}")
 
     def reset(self) -> None:
-        """Stateless: nothing to reset."""
+        """Forget the stop test's run of passes (``stop_readings``)."""
+        self._streak = []
 
     def should_stop(self, belief: Belief, history: SearchHistory | None = None) -> bool:
         """``H(pi_s) <= eta log N`` (``N``: free cells or ``entropy_cells``); a one-cell map stops at once.
@@ -306,9 +318,30 @@ class UtilityPlanner:
             return False
         if self.deadline_reached(history):
             return True
-        if not self._entropy_passes(belief):
+        if not self._passes_in_a_row(belief, history):
             return False
         return history is None or self._unconfirmed_mode(belief, history) is None
+
+    def _passes_in_a_row(self, belief: Belief, history: SearchHistory | None) -> bool:
+        """The stop test has passed at the last ``stop_readings`` readings, the posterior's mode
+        staying within ``mass_radius_m`` (1 m without it) of where it first passed."""
+        passes = self._entropy_passes(belief)
+        if self.stop_readings == 1 or history is None:
+            return passes
+        step = int(history.step)
+        # asked again at the same step, or a new episode without reset(): forget those passes
+        self._streak = [e for e in self._streak if e[0] < step]
+        if not passes:
+            self._streak = []
+            return False
+        i, j = np.unravel_index(int(np.argmax(belief.source_probs)), belief.shape)
+        radius = 1.0 if self.mass_radius_m is None else self.mass_radius_m
+        if self._streak:
+            _, i0, j0 = self._streak[0]
+            if math.hypot(i - i0, j - j0) * belief.resolution > radius or self._streak[-1][0] != step - 1:
+                self._streak = []
+        self._streak.append((step, int(i), int(j)))
+        return len(self._streak) >= self.stop_readings
 
     def deadline_reached(self, history: SearchHistory | None) -> bool:
         """True when ``deadline_margin_s`` is set and less than it is left of the time limit.
