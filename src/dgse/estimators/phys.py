@@ -128,6 +128,9 @@ LEARNED_READINGS = 50.0
 #:   edge the flows cannot place, whose predicted variance never fell, until the deadline
 #:   (3.1 m off); with the discount it found that source and the one of 917, but stopped 3.1 m
 #:   off on 918 (same success on seeds 900-923; the searches end sooner).
+#:
+#: Not adopted: the mass test at two readings in a row (``stop_readings=2``, rule ``...-twice``):
+#: on validation 924-963 the same 31 of 38, its two wrong stops (945, 963) one reading later.
 SEARCH_PLANNER: dict[str, float] = {
     "mass_radius_m": 1.0,
     "mass_level": 0.9,
