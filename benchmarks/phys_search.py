@@ -78,21 +78,16 @@ RULES: dict[str, dict[str, Any]] = {
         "deadline_margin_s": 60.0,
         "revisit_radius_m": 0.5,
     },
-    "mass1m90-disk1m-deadline60s-revisit0.5m-twice": {
-        "min_observations": 5,
-        "mass_radius_m": 1.0,
-        "mass_level": 0.9,
-        "source_radius_m": 1.0,
-        "deadline_margin_s": 60.0,
-        "revisit_radius_m": 0.5,
-        "stop_readings": 2,
-    },
     "mass1m90-disk0.5m": {
         "min_observations": 5,
         "mass_radius_m": 1.0,
         "mass_level": 0.9,
         "source_radius_m": 0.5,
     },
+}
+RULES["mass1m90-disk1m-deadline60s-revisit0.5m-twice"] = {
+    **RULES["mass1m90-disk1m-deadline60s-revisit0.5m"],
+    "stop_readings": 2,
 }
 
 
