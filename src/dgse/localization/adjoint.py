@@ -560,8 +560,8 @@ def censored_correction(
         log_mass = log_interval(-qh[idx] / scale, hi, 2.0 * alpha_n)
         return _censored_log_factor(Bt[idx], qh[idx], aa[idx], beta_n[idx], alpha_n, q_max, log_mass)
 
-    # chunks down the ranking, as many at once as there are worker threads (the special
-    # functions release the GIL), until the rest of the ranking holds a negligible share
+    # chunks down the ranking, as many at once as there are worker threads (the compiled
+    # kernel releases the GIL), until the rest of the ranking holds a negligible share
     done = 0
     chunk = CENSORED_CHUNK
     while done < order.size:
