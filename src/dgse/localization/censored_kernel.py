@@ -8,7 +8,8 @@ candidates does the same arithmetic in registers.  The normal distribution's
 ``log Phi`` and its inverse are written out, as numba cannot call SciPy's ufuncs:
 
 * :func:`log_ndtr` follows SciPy's ``log_ndtr``: ``log1p(-Phi(-a))`` in the right
-  tail, ``log(erfc)`` in the middle, the asymptotic series below ``-20``;
+  tail, ``log(erfc)`` in the middle, the asymptotic series below ``-20``, and a power
+  series within ``1e-3`` of 0 (a zero that a candidate hardly reaches lands there);
 * :func:`ndtri_exp` starts from Acklam's rational approximation of the normal
   quantile (relative error below ``1.2e-9``; in the tails written in ``sqrt(-2
   log p)``, which needs no ``exp`` and so reaches ``log p`` far below double
@@ -195,9 +196,9 @@ def censored_log_factor(
     """The zeros' log factor per candidate; the arithmetic of ``adjoint._censored_log_factor``.
 
     Args:
-        Bt: ``(n, c)`` zeros' responses over their noise weights, a row per candidate (the
-            transpose of the caller's ``B``, so that a candidate's zeros are adjacent); qhat, aa, beta_n,
-            log_mass: ``(n,)`` (see the caller); alpha_n: the noise posterior's shape;
+        Bt: ``(n, c)`` zeros' responses over their noise weights, a row per candidate (so
+            that a candidate's zeros are adjacent in memory); qhat, aa, beta_n, log_mass:
+            ``(n,)`` (see the caller); alpha_n: the noise posterior's shape;
             qmax: the rate prior's upper end (``inf``: unbounded).
         u, log_wu: ``(k,)`` the rate's nodes in its conditional CDF and their log weights;
         xh, wh: Gauss-Hermite nodes and weights over ``log tau``;
