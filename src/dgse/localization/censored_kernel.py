@@ -323,7 +323,7 @@ def censored_log_factor(
                 g[j] = gv
                 if gv > g_top:
                     g_top = gv
-            if g_top == -math.inf or not math.isfinite(g_top):
+            if not math.isfinite(g_top):
                 terms[k] = -math.inf
                 continue
             acc = 0.0

@@ -334,13 +334,13 @@ class UtilityPlanner:
         if not passes:
             self._streak = []
             return False
-        i, j = np.unravel_index(int(np.argmax(belief.source_probs)), belief.shape)
+        i, j = belief.most_likely_cell()
         radius = 1.0 if self.mass_radius_m is None else self.mass_radius_m
         if self._streak:
             _, i0, j0 = self._streak[0]
             if math.hypot(i - i0, j - j0) * belief.resolution > radius or self._streak[-1][0] != step - 1:
                 self._streak = []
-        self._streak.append((step, int(i), int(j)))
+        self._streak.append((step, i, j))
         return len(self._streak) >= self.stop_readings
 
     def deadline_reached(self, history: SearchHistory | None) -> bool:
@@ -365,13 +365,13 @@ class UtilityPlanner:
         """The posterior's mode if fewer than ``confirm_readings`` readings lie near it, else None."""
         if self.confirm_radius_m is None:
             return None
-        mode = np.unravel_index(int(np.argmax(belief.source_probs)), belief.shape)
+        mode = belief.most_likely_cell()
         cells = history.observations.cells
         if len(cells):
             d = np.hypot(cells[:, 0] - mode[0], cells[:, 1] - mode[1]) * belief.resolution
             if int((d <= self.confirm_radius_m + 1e-9).sum()) >= self.confirm_readings:
                 return None
-        return int(mode[0]), int(mode[1])
+        return mode
 
     def utility(
         self, belief: Belief, distances: np.ndarray, history: SearchHistory | None = None
