@@ -85,6 +85,49 @@ def test_censored_evidence_matches_brute_force_integration(seed: int) -> None:
     assert np.abs(d_exact).max() > 0.2
 
 
+@pytest.mark.parametrize("seed", [3, 8])
+def test_censored_evidence_for_candidates_the_positive_readings_hardly_see(seed: int) -> None:
+    """Candidates 1 and 2 respond 20-200 times less than the source at the positive readings
+    (their rate estimate lies far above q_max) but strongly at the zeros: the zeros pull
+    their rate to near 0, away from the mode a Gauss-Hermite rule around the clipped rate
+    would look at (7-11 nats off there before the fallback scan)."""
+    rng = np.random.default_rng(seed)
+    m, n = 20, 4
+    A = rng.uniform(0, 1, (m, n)) * (rng.uniform(0, 1, (m, n)) < 0.7)
+    z = np.maximum(rng.uniform(0.5, 4) * A[:, 0] + rng.uniform(0.1, 1.0) * rng.standard_normal(m), 0.0)
+    zeros = rng.choice(m, 3, replace=False)
+    z[zeros] = 0.0
+    A[z > 0, 1:3] *= rng.uniform(0.005, 0.05)
+    A[zeros, 1:3] += 0.5
+    logl, det = adjoint_log_evidence(A, z, q_max=5.0, kappas=(0.0,), alpha0=1.0)
+    brute = np.array(
+        [_censored_brute_force(A[:, s], z, 5.0, 1.0, det["s0"] ** 2, shift=0.5 * m) for s in range(n)]
+    )
+    d = (logl - brute) - (logl - brute)[np.argmax(brute)]
+    assert np.abs(d).max() < 0.05
+
+
+def test_censored_factor_of_a_candidate_no_positive_reading_sees() -> None:
+    """Zero response at every positive reading: the rate's posterior is its flat prior on
+    [0, q_max] and the noise precision's is Gamma(alpha_n + 1/2, beta_n); the zeros' factor
+    is E[prod_i Phi(-q b_i sqrt(tau))] under those (it was the floor, -1e4, before)."""
+    alpha_n, beta_n, q_max = 2.5, 3.0, 5.0
+    b = np.array([1.1, 0.4])
+    A = np.concatenate([np.zeros((4, 1)), b[:, None]])  # 4 positive readings, 2 zeros
+    z = np.array([0.5, 0.9, 0.7, 0.3, 0.0, 0.0])
+    r = np.ones(6)
+    beta0 = beta_n - 0.5 * float(z[:4] @ z[:4])
+    assert beta0 > 0.0
+    out = censored_correction(A, z, r, np.zeros(1), q_max=q_max, alpha0=alpha_n - 1.5, beta0=beta0, tail=0.0)
+
+    def f(q: float, tau: float) -> float:
+        zeros = float(special.log_ndtr(-q * b * math.sqrt(tau)).sum())
+        return math.exp(zeros) * stats.gamma.pdf(tau, alpha_n + 0.5, scale=1.0 / beta_n) / q_max
+
+    ref, _ = integrate.dblquad(f, 0.0, np.inf, 0.0, q_max, epsabs=0.0, epsrel=1e-9)
+    assert out[0] == pytest.approx(math.log(ref), abs=0.01)
+
+
 def test_censored_evidence_without_zeros_is_the_gaussian_one() -> None:
     rng = np.random.default_rng(0)
     A = rng.uniform(0.1, 2.0, size=(15, 40))

@@ -450,11 +450,17 @@ def _censored_log_factor(
         _chebyshev_coefficient_matrix(CENSORED_CHEBYSHEV_POINTS),
         CENSORED_NEWTON_STEPS,
         CENSORED_FLOOR,
+        CENSORED_SCAN_MARGIN,
+        np.zeros(len(qhat), dtype=np.uint8),
     )
 
 
 #: The zeros' factor (nats) of a candidate whose integrand underflows everywhere.
 CENSORED_FLOOR = -1e4
+#: Where a probe of the zeros' integrand at the positive readings' noise precision says the
+#: Gauss-Hermite value misses this much (nats), the candidate's integral is scanned instead
+#: (see :func:`dgse.localization.censored_kernel.censored_log_factor`).
+CENSORED_SCAN_MARGIN = 0.5
 #: Chebyshev points for the zeros' factor as a function of ``lambda = q sqrt(tau)``.
 CENSORED_CHEBYSHEV_POINTS = 10
 

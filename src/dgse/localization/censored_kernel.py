@@ -37,6 +37,19 @@ _LOG_HALF = math.log(0.5)
 _PHI0 = 1.0 / math.sqrt(2.0 * math.pi)
 #: Below this, :func:`log_ndtr` and :func:`_mills` use their series.
 _SMALL = 1e-3
+#: Below this width (in standard deviations) a normal interval's mass is taken by the midpoint
+#: rule (:func:`_truncation_mass`).
+_NARROW = 1e-5
+#: Where the censored factor probes its integrand over ``log tau``, from t0 (the positive
+#: readings' estimate of it): at t0 and below, where a small ``alpha_n`` leaves a long tail.
+_PROBES = np.array([0.0, -2.0])
+#: The fallback scan of the integral over ``log tau`` (:func:`_scan_log_integral`): how far
+#: beyond the Newton mode and t0 it looks for the peak, the step of its central differences,
+#: how far the integrand must fall before the walk stops, and the most steps each way.
+_SCAN_REACH = 8.0
+_FD = 1e-2
+_SCAN_DROP = 20.0
+_SCAN_MAX_STEPS = 400
 
 # Acklam's coefficients of the normal quantile (central region and tails)
 _A = np.array(
@@ -163,6 +176,172 @@ def ndtri_exp(y: float) -> float:
 
 
 @_jit
+def _truncation_mass(lo: float, hi: float) -> tuple[float, float, float, bool]:
+    """``log(Phi(hi) - Phi(lo))`` from the tail the interval lies in.
+
+    Returns ``(log mass, log Phi of the interval's end nearer the mode, d, upper)``: in the
+    right half (``upper``, ``lo >= 0``) the mass is ``Phi(-lo) (1 - d)`` with ``d = Phi(-hi) /
+    Phi(-lo)``, otherwise ``Phi(hi) (1 - d)`` with ``d = Phi(lo) / Phi(hi)``.
+    """
+    upper = lo >= 0.0
+    if upper:
+        a = log_ndtr(-lo)
+        b = log_ndtr(-hi)
+    else:
+        a = log_ndtr(hi)
+        b = log_ndtr(lo)
+    d = math.exp(b - a)
+    if hi - lo < _NARROW:
+        # 1 - d is lost to rounding (d is 1 for a candidate no positive reading sees: the
+        # rate's conditional is flat, sd near 1e150): the midpoint rule, relative error
+        # about (hi - lo)^2 (1 + mid^2) / 24
+        mid = 0.5 * (lo + hi)
+        return math.log(hi - lo) - 0.5 * mid * mid - _LOG_SQRT_2PI, a, d, upper
+    return a + math.log1p(-d), a, d, upper
+
+
+@_jit
+def _rate_nodes(t: float, qhat: float, aa: float, qmax: float, u: np.ndarray, lam: np.ndarray) -> float:
+    """Fill ``lam`` with ``q_j sqrt(tau)`` at the rate's nodes given ``tau = e^t`` (``q`` is
+    ``N(qhat, 1 / (tau aa))`` truncated to ``[0, qmax]``, node ``j`` at its CDF's ``u[j]``);
+    return the truncation's log mass."""
+    # 1 / sd = sqrt(tau aa), as a product of roots: aa sits at 1e-300 for a candidate that
+    # no positive reading sees, where tau aa would underflow
+    rt = math.exp(0.5 * t)
+    rs = rt * math.sqrt(aa)
+    sd = 1.0 / rs
+    lo = -qhat * rs
+    hi = (qmax - qhat) * rs
+    lmass, a, d, upper = _truncation_mass(lo, hi)
+    narrow_width = hi - lo < 1e-9 * (1.0 + abs(lo))
+    pa = math.exp(a)
+    for j in range(u.size):
+        # the node's quantile: Phi(x) = e^a f (of -x in the right tail, ``upper``)
+        if upper:
+            fc = u[j] * (1.0 - d)
+            f = 1.0 - fc
+        else:
+            fc = (1.0 - u[j]) * (1.0 - d)
+            f = d + u[j] * (1.0 - d)
+        xl, pl, yl, sign = _share_quantile(a, pa, f, fc)
+        # Acklam's 1e-9 moves q = qhat + sd x by 1e-9 |x| sd, against a spread of the
+        # nodes of about sd min(hi - lo, 1 / |lo|): Newton's step only where that
+        # ratio could exceed 1e-7 (a candidate the positive readings hardly see: a
+        # narrow interval far out) or far in the tail
+        if hi - lo < 1.0 or abs(xl) * max(1.0, abs(lo)) > 100.0 or yl < -700.0:
+            xl = _newton(xl, math.log(pl) if math.isnan(yl) else yl)
+        x = sign * xl
+        if upper:
+            x = -x
+        if narrow_width or not math.isfinite(x):
+            x = lo + u[j] * min(hi - lo, 1e300)
+        x = min(max(x, lo), hi)
+        q = min(max(qhat + sd * x, 0.0), qmax)
+        lam[j] = q * rt
+    return lmass
+
+
+@_jit
+def _log_integrand(
+    t: float,
+    b: np.ndarray,
+    qhat: float,
+    aa: float,
+    bn: float,
+    alpha_n: float,
+    log_gamma_norm: float,
+    qmax: float,
+    u: np.ndarray,
+    log_wu: np.ndarray,
+    lam: np.ndarray,
+    g: np.ndarray,
+) -> float:
+    """The integrand over ``t = log tau`` of one candidate (zeros' responses ``b``), the rate
+    integrated at its nodes with the zeros' factor summed directly (no interpolation)."""
+    lmass = _rate_nodes(t, qhat, aa, qmax, u, lam)
+    top = -math.inf
+    for j in range(u.size):
+        acc = 0.0
+        for i in range(b.size):
+            acc += log_ndtr(-lam[j] * b[i])
+        g[j] = log_wu[j] + acc
+        if g[j] > top:
+            top = g[j]
+    if not (math.isfinite(top) and math.isfinite(lmass)):
+        return -math.inf
+    acc = 0.0
+    for j in range(u.size):
+        acc += math.exp(g[j] - top)
+    return log_gamma_norm + alpha_n * t - bn * math.exp(t) + lmass + top + math.log(acc)
+
+
+@_jit
+def _scan_log_integral(
+    t_lo: float,
+    t_hi: float,
+    b: np.ndarray,
+    qhat: float,
+    aa: float,
+    bn: float,
+    alpha_n: float,
+    log_gamma_norm: float,
+    qmax: float,
+    u: np.ndarray,
+    log_wu: np.ndarray,
+    lam: np.ndarray,
+    g: np.ndarray,
+) -> float:
+    """``log`` of the integral over ``t`` in ``[t_lo, t_hi]`` of :func:`_log_integrand`, without
+    trusting a guessed mode: a scan at unit steps finds the peak, Newton steps (central
+    differences) refine it, and the trapezoid rule at a third of the peak's Laplace width
+    walks out from it until the integrand has fallen by ``_SCAN_DROP`` nats."""
+    args = (b, qhat, aa, bn, alpha_n, log_gamma_norm, qmax, u, log_wu, lam, g)
+    best = -math.inf
+    tb = t_hi
+    t = t_hi
+    while t >= t_lo:
+        f = _log_integrand(t, *args)
+        if f > best:
+            best = f
+            tb = t
+        t -= 1.0
+    if not math.isfinite(best):
+        return -math.inf
+    t = tb
+    d2 = -1.0
+    for _ in range(12):
+        f0 = _log_integrand(t, *args)
+        fp = _log_integrand(t + _FD, *args)
+        fm = _log_integrand(t - _FD, *args)
+        if not (math.isfinite(f0) and math.isfinite(fp) and math.isfinite(fm)):
+            break
+        d1 = (fp - fm) / (2.0 * _FD)
+        d2 = (fp - 2.0 * f0 + fm) / (_FD * _FD)
+        step = d1 / d2 if d2 < 0.0 else math.copysign(0.5, -d1)
+        step = min(max(step, -0.5), 0.5)
+        t = min(max(t - step, t_lo), t_hi)
+        if abs(step) < 1e-3:
+            break
+    width = min(max(1.0 / math.sqrt(-d2), 1e-3), 10.0) if d2 < 0.0 else 1.0
+    h = width / 1.5
+    peak = _log_integrand(t, *args)
+    top = max(peak, best)
+    acc = math.exp(peak - top) if math.isfinite(peak) else 0.0
+    for direction in (1.0, -1.0):
+        for k in range(1, _SCAN_MAX_STEPS + 1):
+            f = _log_integrand(t + direction * k * h, *args)
+            if not math.isfinite(f):
+                break
+            if f > top:
+                acc *= math.exp(top - f)
+                top = f
+            acc += math.exp(f - top)
+            if f < top - _SCAN_DROP:
+                break
+    return top + math.log(acc) + math.log(h)
+
+
+@_jit
 def plug_in_log_factor(Bt: np.ndarray, lam: np.ndarray) -> np.ndarray:
     """``sum_i log Phi(-lam_s Bt[s, i])`` per candidate ``s``: the zeros' factor with the rate and
     the noise at their estimates (``lam = q sqrt(tau)``), ``Bt`` ``(n, c)``."""
@@ -192,6 +371,8 @@ def censored_log_factor(
     cheb_matrix: np.ndarray,
     newton_steps: int,
     floor: float,
+    scan_margin: float,
+    scanned: np.ndarray,
 ) -> np.ndarray:
     """The zeros' log factor per candidate; the arithmetic of ``adjoint._censored_log_factor``.
 
@@ -205,6 +386,9 @@ def censored_log_factor(
         cheb_matrix: ``(p, p)`` values at Chebyshev points to coefficients;
         newton_steps: Newton steps to the mode over ``log tau``;
         floor: the value of a candidate whose integrand vanishes everywhere.
+        scan_margin: how far (nats) the probe's estimate of the integral may exceed the
+            Gauss-Hermite one before the candidate's integral is scanned instead;
+        scanned: ``(n,)`` set to 1 where it was (written, not read).
     """
     n, c = Bt.shape
     nt, nq, npts = xh.size, u.size, cheb_matrix.shape[0]
@@ -214,11 +398,13 @@ def censored_log_factor(
         cheb[j] = 0.5 * (1.0 - math.cos(math.pi * j / (npts - 1)))
     vals = np.empty(npts)
     coef = np.empty(npts)
-    lam = np.empty((nt, nq))
-    tks = np.empty(nt)
-    taus = np.empty(nt)
-    lmass = np.empty(nt)
-    terms = np.empty(nt)
+    # the Gauss-Hermite nodes over log tau, and a probe at t0 (below)
+    nk = nt + _PROBES.size
+    lam = np.empty((nk, nq))
+    tks = np.empty(nk)
+    taus = np.empty(nk)
+    lmass = np.empty(nk)
+    terms = np.empty(nk)
     g = np.empty(nq)
     lgamma_alpha = math.lgamma(alpha_n)
     for s in range(n):
@@ -252,53 +438,14 @@ def censored_log_factor(
             width = min(max(1.0 / math.sqrt(max(-d2, 1e-6)), 1e-3), 10.0)
         # the nodes (tau, q): lambda = q sqrt(tau), and the truncation mass per tau
         lam_max = 1e-300
-        for k in range(nt):
-            tk = t + math.sqrt(2.0) * width * xh[k]
-            tau = math.exp(tk)
+        for k in range(nk):
+            tk = t + math.sqrt(2.0) * width * xh[k] if k < nt else t0 + _PROBES[k - nt]
             tks[k] = tk
-            taus[k] = tau
-            sd = 1.0 / math.sqrt(max(tau * aa[s], 1e-300))
-            lo = -qhat[s] / sd
-            hi = (qmax - qhat[s]) / sd
-            upper = lo >= 0.0
-            if upper:
-                a = log_ndtr(-lo)
-                b = log_ndtr(-hi)
-            else:
-                a = log_ndtr(hi)
-                b = log_ndtr(lo)
-            # log(Phi(hi) - Phi(lo)), from the tail the interval lies in
-            d = math.exp(b - a)  # Phi(-hi) / Phi(-lo), or Phi(lo) / Phi(hi)
-            lmass[k] = a + math.log1p(-d)
-            narrow_width = hi - lo < 1e-9 * (1.0 + abs(lo))
-            rt = math.sqrt(tau)
-            pa = math.exp(a)
+            taus[k] = math.exp(tk)
+            lmass[k] = _rate_nodes(tk, qhat[s], aa[s], qmax, u, lam[k])
             for j in range(nq):
-                # the node's quantile: Phi(x) = e^a f (of -x in the right tail, ``upper``)
-                if upper:
-                    fc = u[j] * (1.0 - d)
-                    f = 1.0 - fc
-                else:
-                    fc = (1.0 - u[j]) * (1.0 - d)
-                    f = d + u[j] * (1.0 - d)
-                xl, pl, yl, sign = _share_quantile(a, pa, f, fc)
-                # Acklam's 1e-9 moves q = qhat + sd x by 1e-9 |x| sd, against a spread of the
-                # nodes of about sd min(hi - lo, 1 / |lo|): Newton's step only where that
-                # ratio could exceed 1e-7 (a candidate the positive readings hardly see: a
-                # narrow interval far out) or far in the tail
-                if hi - lo < 1.0 or abs(xl) * max(1.0, abs(lo)) > 100.0 or yl < -700.0:
-                    xl = _newton(xl, math.log(pl) if math.isnan(yl) else yl)
-                x = sign * xl
-                if upper:
-                    x = -x
-                if narrow_width or not math.isfinite(x):
-                    x = lo + u[j] * min(hi - lo, 1e300)
-                x = min(max(x, lo), hi)
-                q = min(max(qhat[s] + sd * x, 0.0), qmax)
-                lv = q * rt
-                lam[k, j] = lv
-                if lv > lam_max:
-                    lam_max = lv
+                if lam[k, j] > lam_max:
+                    lam_max = lam[k, j]
         # G(lambda) = sum_i log Phi(-lambda B_i), exact at Chebyshev points of [0, lam_max]
         for p in range(npts):
             acc = 0.0
@@ -311,7 +458,7 @@ def censored_log_factor(
                 acc += cheb_matrix[p, r] * vals[r]
             coef[p] = acc
         top = -math.inf
-        for k in range(nt):
+        for k in range(nk):
             g_top = -math.inf
             for j in range(nq):
                 y2 = 2.0 * (2.0 * (lam[k, j] / lam_max) - 1.0)
@@ -332,18 +479,49 @@ def censored_log_factor(
             log_eq = g_top + math.log(acc)
             # the Gamma density of tau times tau, the truncation mass, the zeros' mean factor
             log_f = log_gamma_norm + alpha_n * tks[k] - bn * taus[k] + lmass[k] + log_eq
+            if k >= nt:
+                terms[k] = log_f
+                continue
             term = math.log(wh[k]) + log_f + xh[k] * xh[k]
             if math.isnan(term):
                 term = -math.inf
             terms[k] = term
             if term > top:
                 top = term
-        if not math.isfinite(top):
-            out[s] = floor
-            continue
-        acc = 0.0
-        for k in range(nt):
-            acc += math.exp(terms[k] - top)
-        val = top + math.log(acc) + math.log(math.sqrt(2.0) * width) - log_mass[s]
-        out[s] = min(val, 0.0) if math.isfinite(val) else floor
+        val = -math.inf
+        if math.isfinite(top):
+            acc = 0.0
+            for k in range(nt):
+                acc += math.exp(terms[k] - top)
+            val = top + math.log(acc) + math.log(math.sqrt(2.0) * width)
+        # The mode above takes the rate at its estimate from the positive readings.  Where
+        # those leave a rate near 0 plausible and the zeros see the candidate well, the
+        # integrand's mass sits at a rate near 0 and a noise precision near the positive
+        # readings' t0, away from that mode (also where they put the rate above q_max): the
+        # probe at t0 times the width of log tau's posterior there (1 / sqrt(alpha_n)) then
+        # exceeds the Gauss-Hermite value, and the integral is scanned instead
+        probe = -math.inf
+        for k in range(nt, nk):
+            probe = max(probe, terms[k])
+        probe += 0.5 * math.log(2.0 * math.pi / alpha_n)
+        outside = qhat[s] > qmax or qhat[s] < 0.0
+        if math.isfinite(probe) and (outside or not (probe <= val + scan_margin)):
+            scanned[s] = 1
+            val = _scan_log_integral(
+                min(t, t0) - _SCAN_REACH,
+                max(t, t0) + _SCAN_REACH,
+                Bt[s],
+                qhat[s],
+                aa[s],
+                bn,
+                alpha_n,
+                log_gamma_norm,
+                qmax,
+                u,
+                log_wu,
+                lam[0],
+                g,
+            )
+        val -= log_mass[s]
+        out[s] = min(max(val, floor), 0.0) if math.isfinite(val) else floor
     return out
