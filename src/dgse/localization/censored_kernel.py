@@ -44,12 +44,15 @@ _NARROW = 1e-5
 #: readings' estimate of it): at t0 and below, where a small ``alpha_n`` leaves a long tail.
 _PROBES = np.array([0.0, -2.0])
 #: The fallback scan of the integral over ``log tau`` (:func:`_scan_log_integral`): how far
-#: beyond the Newton mode and t0 it looks for the peak, the step of its central differences,
-#: how far the integrand must fall before the walk stops, and the most steps each way.
+#: beyond the Newton mode and t0 it may look for the peak, the step of its central
+#: differences, how far the integrand must fall before the walk stops, the most Newton
+#: steps, the uniform steps each side of the peak, and the most growing steps beyond.
 _SCAN_REACH = 8.0
 _FD = 1e-2
 _SCAN_DROP = 20.0
-_SCAN_MAX_STEPS = 400
+_SCAN_NEWTON = 12
+_SCAN_UNIFORM = 6
+_SCAN_MAX_STEPS = 60
 
 # Acklam's coefficients of the normal quantile (central region and tails)
 _A = np.array(
@@ -277,6 +280,7 @@ def _log_integrand(
 
 @_jit
 def _scan_log_integral(
+    t_start: float,
     t_lo: float,
     t_hi: float,
     b: np.ndarray,
@@ -291,25 +295,30 @@ def _scan_log_integral(
     lam: np.ndarray,
     g: np.ndarray,
 ) -> float:
-    """``log`` of the integral over ``t`` in ``[t_lo, t_hi]`` of :func:`_log_integrand`, without
-    trusting a guessed mode: a scan at unit steps finds the peak, Newton steps (central
-    differences) refine it, and the trapezoid rule at a third of the peak's Laplace width
-    walks out from it until the integrand has fallen by ``_SCAN_DROP`` nats."""
+    """``log`` of the integral over ``t`` of :func:`_log_integrand`, without trusting a
+    Laplace guess.
+
+    Newton steps (central differences, within ``[t_lo, t_hi]``) climb from ``t_start`` (or,
+    where the integrand vanishes there, from the best of a scan at unit steps) to the peak;
+    the trapezoid rule at 2/3 of the peak's Laplace width covers four widths each side, and
+    beyond them segments that grow by half at each step, integrated exactly for a
+    log-linear integrand (the tails over ``log tau`` are exponential), until the integrand
+    has fallen by ``_SCAN_DROP`` nats.
+    """
     args = (b, qhat, aa, bn, alpha_n, log_gamma_norm, qmax, u, log_wu, lam, g)
-    best = -math.inf
-    tb = t_hi
-    t = t_hi
-    while t >= t_lo:
-        f = _log_integrand(t, *args)
-        if f > best:
-            best = f
-            tb = t
-        t -= 1.0
-    if not math.isfinite(best):
-        return -math.inf
-    t = tb
+    t = t_start
+    if not math.isfinite(_log_integrand(t, *args)):
+        # nothing at the start: the best of a scan at unit steps
+        best = -math.inf
+        x = t_hi
+        while x >= t_lo:
+            f = _log_integrand(x, *args)
+            if f > best:
+                best = f
+                t = x
+            x -= 1.0
     d2 = -1.0
-    for _ in range(12):
+    for _ in range(_SCAN_NEWTON):
         f0 = _log_integrand(t, *args)
         fp = _log_integrand(t + _FD, *args)
         fm = _log_integrand(t - _FD, *args)
@@ -317,28 +326,55 @@ def _scan_log_integral(
             break
         d1 = (fp - fm) / (2.0 * _FD)
         d2 = (fp - 2.0 * f0 + fm) / (_FD * _FD)
-        step = d1 / d2 if d2 < 0.0 else math.copysign(0.5, -d1)
-        step = min(max(step, -0.5), 0.5)
+        step = d1 / d2 if d2 < 0.0 else math.copysign(2.0, -d1)
+        step = min(max(step, -2.0), 2.0)
         t = min(max(t - step, t_lo), t_hi)
         if abs(step) < 1e-3:
             break
     width = min(max(1.0 / math.sqrt(-d2), 1e-3), 10.0) if d2 < 0.0 else 1.0
     h = width / 1.5
-    peak = _log_integrand(t, *args)
-    top = max(peak, best)
-    acc = math.exp(peak - top) if math.isfinite(peak) else 0.0
+    top = _log_integrand(t, *args)
+    if not math.isfinite(top):
+        return -math.inf
+    # sum of exp(f - top) times its weight: the trapezoid's interior nodes weigh h
+    acc = h
     for direction in (1.0, -1.0):
-        for k in range(1, _SCAN_MAX_STEPS + 1):
-            f = _log_integrand(t + direction * k * h, *args)
+        x = t
+        f_prev = top
+        for k in range(1, _SCAN_UNIFORM + 1):
+            x = t + direction * k * h
+            f = _log_integrand(x, *args)
+            if not math.isfinite(f):
+                f_prev = -math.inf
+                break
+            if f > top:
+                acc *= math.exp(top - f)
+                top = f
+            acc += (h if k < _SCAN_UNIFORM else 0.5 * h) * math.exp(f - top)
+            f_prev = f
+        if not math.isfinite(f_prev):
+            continue
+        step = h
+        for _ in range(_SCAN_MAX_STEPS):
+            if f_prev < top - _SCAN_DROP:
+                break
+            step *= 1.5
+            x += direction * step
+            f = _log_integrand(x, *args)
             if not math.isfinite(f):
                 break
             if f > top:
                 acc *= math.exp(top - f)
                 top = f
-            acc += math.exp(f - top)
-            if f < top - _SCAN_DROP:
-                break
-    return top + math.log(acc) + math.log(h)
+            # the segment's integral of exp(linear interpolant), exactly
+            df = f - f_prev
+            if abs(df) < 1e-8:
+                seg = step * math.exp(f - top)
+            else:
+                seg = step * (math.exp(f - top) - math.exp(f_prev - top)) / df
+            acc += seg
+            f_prev = f
+    return top + math.log(acc)
 
 
 @_jit
@@ -501,13 +537,21 @@ def censored_log_factor(
         # probe at t0 times the width of log tau's posterior there (1 / sqrt(alpha_n)) then
         # exceeds the Gauss-Hermite value, and the integral is scanned instead
         probe = -math.inf
-        for k in range(nt, nk):
-            probe = max(probe, terms[k])
+        t_best = t0
+        f_best = -math.inf
+        for k in range(nk):
+            lf = terms[k] if k >= nt else terms[k] - math.log(wh[k]) - xh[k] * xh[k]
+            if k >= nt:
+                probe = max(probe, lf)
+            if lf > f_best:
+                f_best = lf
+                t_best = tks[k]
         probe += 0.5 * math.log(2.0 * math.pi / alpha_n)
         outside = qhat[s] > qmax or qhat[s] < 0.0
         if math.isfinite(probe) and (outside or not (probe <= val + scan_margin)):
             scanned[s] = 1
             val = _scan_log_integral(
+                t_best,
                 min(t, t0) - _SCAN_REACH,
                 max(t, t0) + _SCAN_REACH,
                 Bt[s],
