@@ -56,3 +56,39 @@ def test_plug_in_factor_is_the_sum_of_log_phi() -> None:
     lam = rng.exponential(2.0, 50)
     want = special.log_ndtr(-lam[:, None] * Bt).sum(axis=1)
     np.testing.assert_allclose(plug_in_log_factor(Bt, lam), want, rtol=1e-13)
+
+
+def _factor(Bt, qhat, aa, beta_n, alpha_n, margin):
+    """The kernel on its own, with the censored correction's rules and a given scan margin."""
+    from dgse.localization import adjoint, censored_kernel
+
+    u, log_wu, xh, wh = adjoint._censored_nodes(
+        adjoint.CENSORED_Q_NODES, adjoint.CENSORED_Q_PIECES, adjoint.CENSORED_TAU_NODES
+    )
+    n = qhat.size
+    scanned = np.zeros(n, dtype=np.uint8)
+    out = censored_kernel.censored_log_factor(
+        Bt, qhat, aa, beta_n, alpha_n, 5.0, np.zeros(n), u, log_wu, xh, wh,
+        adjoint._chebyshev_coefficient_matrix(adjoint.CENSORED_CHEBYSHEV_POINTS),
+        adjoint.CENSORED_NEWTON_STEPS, adjoint.CENSORED_FLOOR, margin, scanned,
+    )  # fmt: skip
+    return out, scanned
+
+
+def test_scan_agrees_with_gauss_hermite_where_that_is_right_and_takes_over_where_not() -> None:
+    """Two candidates the positive readings see well (rate 2 of at most 5, a narrow noise
+    posterior), one they put far above q_max while the zeros see it: Gauss-Hermite and
+    the scan agree on the first two; the default margin scans the third, where the
+    Gauss-Hermite value around the clipped rate is nats too low."""
+    Bt = np.array([[0.3, 0.1, 0.0], [0.05, 0.2, 0.1], [1.1, 0.6, 0.0]])
+    qhat = np.array([2.0, 1.5, 18.0])
+    aa = np.array([40.0, 25.0, 0.011])
+    beta_n = np.array([4.0, 4.0, 2.1])
+    gh, none = _factor(Bt, qhat, aa, beta_n, 7.5, math.inf)
+    scan, every = _factor(Bt, qhat, aa, beta_n, 7.5, -math.inf)
+    default, which = _factor(Bt, qhat, aa, beta_n, 7.5, 0.5)
+    assert not none.any() and every.all()
+    np.testing.assert_allclose(gh[:2], scan[:2], atol=0.01)
+    assert list(which) == [0, 0, 1]
+    assert default[2] == scan[2]
+    assert gh[2] < scan[2] - 1.0

@@ -423,7 +423,8 @@ def censored_log_factor(
         newton_steps: Newton steps to the mode over ``log tau``;
         floor: the value of a candidate whose integrand vanishes everywhere.
         scan_margin: how far (nats) the probe's estimate of the integral may exceed the
-            Gauss-Hermite one before the candidate's integral is scanned instead;
+            Gauss-Hermite one before the candidate's integral is scanned instead (a rate
+            estimate outside ``[0, qmax]`` is scanned at any finite margin; ``inf``: never);
         scanned: ``(n,)`` set to 1 where it was (written, not read).
     """
     n, c = Bt.shape
@@ -548,7 +549,7 @@ def censored_log_factor(
                 t_best = tks[k]
         probe += 0.5 * math.log(2.0 * math.pi / alpha_n)
         outside = qhat[s] > qmax or qhat[s] < 0.0
-        if math.isfinite(probe) and (outside or not (probe <= val + scan_margin)):
+        if scan_margin < math.inf and math.isfinite(probe) and (outside or not (probe <= val + scan_margin)):
             scanned[s] = 1
             val = _scan_log_integral(
                 t_best,
