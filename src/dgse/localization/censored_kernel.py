@@ -17,6 +17,14 @@ candidates does the same arithmetic in registers.  The normal distribution's
   where the rate nodes need more than Acklam's precision).
 
 Both are tested against SciPy (``tests/localization/test_censored_kernel.py``).
+
+The integral over ``log tau`` is Gauss-Hermite around a Newton mode found with the rate at
+its estimate from the positive readings.  Where those leave a rate near 0 plausible (few
+of them, or an estimate above ``q_max``) and the zeros see the candidate, the mass sits at
+a small rate, away from that mode; a probe of the integrand near the positive readings'
+noise precision detects it, and :func:`_scan_log_integral` integrates such a candidate
+without a guessed mode (``benchmarks/censored_accuracy.py`` measures both against a
+brute-force integral).
 Pure functions of arrays; compiled on first use and cached on disk, like
 :mod:`dgse.physics.fv`.
 """
