@@ -443,7 +443,7 @@ def censored_log_factor(
         cheb[j] = 0.5 * (1.0 - math.cos(math.pi * j / (npts - 1)))
     vals = np.empty(npts)
     coef = np.empty(npts)
-    # the Gauss-Hermite nodes over log tau, and a probe at t0 (below)
+    # the Gauss-Hermite nodes over log tau, and the probes from t0 (below)
     nk = nt + _PROBES.size
     lam = np.empty((nk, nq))
     tks = np.empty(nk)
@@ -489,9 +489,10 @@ def censored_log_factor(
             taus[k] = math.exp(tk)
             lmass[k] = _rate_nodes(tk, qhat[s], aa[s], qmax, u, lam[k])
             for j in range(nq):
-                if lam[k, j] > lam_max:
+                if k < nt and lam[k, j] > lam_max:
                     lam_max = lam[k, j]
         # G(lambda) = sum_i log Phi(-lambda B_i), exact at Chebyshev points of [0, lam_max]
+        # (the Gauss-Hermite nodes' range; a probe's node beyond it is summed directly)
         for p in range(npts):
             acc = 0.0
             for i in range(c):
@@ -506,12 +507,17 @@ def censored_log_factor(
         for k in range(nk):
             g_top = -math.inf
             for j in range(nq):
-                y2 = 2.0 * (2.0 * (lam[k, j] / lam_max) - 1.0)
-                b1 = 0.0
-                b2 = 0.0
-                for p in range(npts - 1, 0, -1):
-                    b1, b2 = coef[p] + y2 * b1 - b2, b1
-                gv = coef[0] + 0.5 * y2 * b1 - b2
+                if lam[k, j] > lam_max:
+                    gv = 0.0
+                    for i in range(c):
+                        gv += log_ndtr(-lam[k, j] * Bt[s, i])
+                else:
+                    y2 = 2.0 * (2.0 * (lam[k, j] / lam_max) - 1.0)
+                    b1 = 0.0
+                    b2 = 0.0
+                    for p in range(npts - 1, 0, -1):
+                        b1, b2 = coef[p] + y2 * b1 - b2, b1
+                    gv = coef[0] + 0.5 * y2 * b1 - b2
                 g[j] = gv
                 if gv > g_top:
                     g_top = gv
@@ -542,9 +548,9 @@ def censored_log_factor(
         # The mode above takes the rate at its estimate from the positive readings.  Where
         # those leave a rate near 0 plausible and the zeros see the candidate well, the
         # integrand's mass sits at a rate near 0 and a noise precision near the positive
-        # readings' t0, away from that mode (also where they put the rate above q_max): the
-        # probe at t0 times the width of log tau's posterior there (1 / sqrt(alpha_n)) then
-        # exceeds the Gauss-Hermite value, and the integral is scanned instead
+        # readings' t0 or below it, away from that mode (also where they put the rate above
+        # q_max): the best probe times the width of log tau's posterior there (1 /
+        # sqrt(alpha_n)) then exceeds the Gauss-Hermite value, and the integral is scanned
         probe = -math.inf
         t_best = t0
         f_best = -math.inf
