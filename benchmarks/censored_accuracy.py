@@ -26,12 +26,10 @@ import time
 from pathlib import Path
 
 import numpy as np
-from phys_search import cases_dir
+from phys_search import cases_dir, record_calls
 from scipy import special
 
-from dgse.estimators.phys import SEARCH_PLANNER
 from dgse.localization import adjoint, censored_kernel
-from dgse.search.campaign import run_trials
 
 WAYS = {"gauss-hermite": math.inf, "default": adjoint.CENSORED_SCAN_MARGIN, "scan": -math.inf}
 
@@ -63,29 +61,6 @@ def brute_force(call: list, s: int) -> float:
     return float(m + math.log(np.trapezoid(np.exp(r - m), ts)) - log_mass[s])
 
 
-def _record(path: Path, every: int) -> list[list]:
-    """The arguments of every ``every``-th kernel call of one search episode on ``path``."""
-    original = censored_kernel.censored_log_factor
-    kept: list[list] = []
-    n = [0]
-
-    def keep(*a):
-        if n[0] % every == 0:
-            kept.append([x.copy() if isinstance(x, np.ndarray) else x for x in a])
-        n[0] += 1
-        return original(*a)
-
-    censored_kernel.censored_log_factor = keep
-    try:
-        run_trials(
-            path, "dgse-phys", "utility", trials=1, knowledge="openings",
-            planner_options={"min_observations": 5, **SEARCH_PLANNER},
-        )  # fmt: skip
-    finally:
-        censored_kernel.censored_log_factor = original
-    return kept
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", type=int, default=2)
@@ -97,7 +72,7 @@ def main() -> None:
     report = []
     rng = np.random.default_rng(0)
     for path in sorted(d.glob("*.npz")):
-        kept = _record(path, args.every)
+        kept = [list(a) for a, _ in record_calls(censored_kernel, "censored_log_factor", path, args.every)]
         # no positive reading yet: beta_n at the prior's floor
         proper = [c for c in kept if c[3].min() > 1e-12]
         vals, secs, shares = {}, {}, {}

@@ -21,12 +21,10 @@ import json
 from pathlib import Path
 
 import numpy as np
-from phys_search import cases_dir
+from phys_search import cases_dir, record_calls
 
 import dgse.estimators.phys as phys
-from dgse.estimators.phys import SEARCH_PLANNER
 from dgse.localization import adjoint
-from dgse.search.campaign import run_trials
 
 
 def _posterior(logl: np.ndarray, factor: np.ndarray) -> np.ndarray:
@@ -42,24 +40,9 @@ def main() -> None:
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results"))
     args = ap.parse_args()
     path = cases_dir(args.out / "phys_search", "test", None) / f"{args.case}.npz"
-    kept: list[dict] = []
-    calls = [0]
-    original = phys.censored_correction
-
-    def keep(**kw):
-        if calls[0] % args.every == 0:
-            kept.append({k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in kw.items()})
-        calls[0] += 1
-        return original(**kw)
-
-    phys.censored_correction = keep  # the estimator calls it by keyword
-    try:
-        run_trials(
-            path, "dgse-phys", "utility", trials=1, knowledge="openings",
-            planner_options={"min_observations": 5, **SEARCH_PLANNER},
-        )  # fmt: skip
-    finally:
-        phys.censored_correction = original
+    # the estimator calls it by keyword; the ranking and the tail are what is compared here
+    calls = record_calls(phys, "censored_correction", path, args.every)
+    kept = [{k: v for k, v in kw.items() if k not in ("ranking", "tail")} for _, kw in calls]
     evaluated = [0]
     factor = adjoint._censored_log_factor
 

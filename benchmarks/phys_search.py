@@ -112,6 +112,35 @@ def cases_dir(out: Path, name: str, limit: int | None = None) -> Path:
     return d
 
 
+def record_calls(owner: Any, name: str, path: Path, every: int) -> list[tuple[tuple, dict]]:
+    """The arguments (arrays copied) of every ``every``-th call of ``owner.name`` during one
+    dgse-phys search episode on ``path`` (knowledge ``openings``, ``SEARCH_PLANNER``)."""
+    from dgse.estimators.phys import SEARCH_PLANNER
+
+    original = getattr(owner, name)
+    kept: list[tuple[tuple, dict]] = []
+    n = [0]
+
+    def copy(v: Any) -> Any:
+        return v.copy() if hasattr(v, "copy") and hasattr(v, "shape") else v
+
+    def keep(*a: Any, **kw: Any) -> Any:
+        if n[0] % every == 0:
+            kept.append((tuple(copy(v) for v in a), {k: copy(v) for k, v in kw.items()}))
+        n[0] += 1
+        return original(*a, **kw)
+
+    setattr(owner, name, keep)
+    try:
+        run_trials(
+            path, "dgse-phys", "utility", trials=1, knowledge="openings",
+            planner_options={"min_observations": 5, **SEARCH_PLANNER},
+        )  # fmt: skip
+    finally:
+        setattr(owner, name, original)
+    return kept
+
+
 def stop_quality(result: dict[str, Any]) -> dict[str, Any]:
     """Entropy stops (episodes that terminated) and the share of them within 2 m of the source."""
     rows = [t for c in result["per_case"] for t in c["trials"]]

@@ -287,22 +287,7 @@ def _log_integrand(
 
 
 @_jit
-def _scan_log_integral(
-    t_start: float,
-    t_lo: float,
-    t_hi: float,
-    b: np.ndarray,
-    qhat: float,
-    aa: float,
-    bn: float,
-    alpha_n: float,
-    log_gamma_norm: float,
-    qmax: float,
-    u: np.ndarray,
-    log_wu: np.ndarray,
-    lam: np.ndarray,
-    g: np.ndarray,
-) -> float:
+def _scan_log_integral(t_start: float, t_lo: float, t_hi: float, args: tuple) -> float:
     """``log`` of the integral over ``t`` of :func:`_log_integrand`, without trusting a
     Laplace guess.
 
@@ -311,9 +296,9 @@ def _scan_log_integral(
     the trapezoid rule at 2/3 of the peak's Laplace width covers four widths each side, and
     beyond them segments that grow by half at each step, integrated exactly for a
     log-linear integrand (the tails over ``log tau`` are exponential), until the integrand
-    has fallen by ``_SCAN_DROP`` nats.
+    has fallen by ``_SCAN_DROP`` nats.  ``args``: :func:`_log_integrand`'s arguments after
+    ``t``.
     """
-    args = (b, qhat, aa, bn, alpha_n, log_gamma_norm, qmax, u, log_wu, lam, g)
     t = t_start
     if not math.isfinite(_log_integrand(t, *args)):
         # nothing at the start: the best of a scan at unit steps
@@ -565,22 +550,8 @@ def censored_log_factor(
         outside = qhat[s] > qmax or qhat[s] < 0.0
         if scan_margin < math.inf and math.isfinite(probe) and (outside or not (probe <= val + scan_margin)):
             scanned[s] = 1
-            val = _scan_log_integral(
-                t_best,
-                min(t, t0) - _SCAN_REACH,
-                max(t, t0) + _SCAN_REACH,
-                Bt[s],
-                qhat[s],
-                aa[s],
-                bn,
-                alpha_n,
-                log_gamma_norm,
-                qmax,
-                u,
-                log_wu,
-                lam[0],
-                g,
-            )
+            args = (Bt[s], qhat[s], aa[s], bn, alpha_n, log_gamma_norm, qmax, u, log_wu, lam[0], g)
+            val = _scan_log_integral(t_best, min(t, t0) - _SCAN_REACH, max(t, t0) + _SCAN_REACH, args)
         val -= log_mass[s]
         out[s] = min(max(val, floor), 0.0) if math.isfinite(val) else floor
     return out
