@@ -192,6 +192,40 @@ def ndtri_exp(y: float) -> float:
 
 
 @_jit
+def _log_phi_sum(lam: float, b: np.ndarray) -> float:
+    """``G(lambda) = sum_i log Phi(-lambda b_i)``: the zeros' log factor at ``lambda = q sqrt(tau)``."""
+    acc = 0.0
+    for i in range(b.size):
+        acc += log_ndtr(-lam * b[i])
+    return acc
+
+
+@_jit
+def _log_f(
+    t: float,
+    lmass: float,
+    g: np.ndarray,
+    log_wu: np.ndarray,
+    alpha_n: float,
+    bn: float,
+    log_gamma_norm: float,
+) -> float:
+    """The integrand over ``t = log tau`` at one node: the Gamma density of ``tau`` times ``tau``,
+    the rate's truncation mass ``lmass``, and the mean of ``exp(G)`` over the rate's nodes
+    (``g``: ``G`` there, ``log_wu``: their log weights); ``-inf`` where it vanishes."""
+    top = -math.inf
+    for j in range(g.size):
+        top = max(top, g[j])
+    if not math.isfinite(top):
+        return -math.inf
+    acc = 0.0
+    for j in range(g.size):
+        acc += math.exp(log_wu[j] + g[j] - top)
+    v = log_gamma_norm + alpha_n * t - bn * math.exp(t) + lmass + top + math.log(acc)
+    return -math.inf if math.isnan(v) else v
+
+
+@_jit
 def _truncation_mass(lo: float, hi: float) -> tuple[float, float, float, bool]:
     """``log(Phi(hi) - Phi(lo))`` from the tail the interval lies in.
 
@@ -275,20 +309,9 @@ def _log_integrand(
     """The integrand over ``t = log tau`` of one candidate (zeros' responses ``b``), the rate
     integrated at its nodes with the zeros' factor summed directly (no interpolation)."""
     lmass = _rate_nodes(t, qhat, aa, qmax, u, lam)
-    top = -math.inf
     for j in range(u.size):
-        acc = 0.0
-        for i in range(b.size):
-            acc += log_ndtr(-lam[j] * b[i])
-        g[j] = log_wu[j] + acc
-        if g[j] > top:
-            top = g[j]
-    if not (math.isfinite(top) and math.isfinite(lmass)):
-        return -math.inf
-    acc = 0.0
-    for j in range(u.size):
-        acc += math.exp(g[j] - top)
-    return log_gamma_norm + alpha_n * t - bn * math.exp(t) + lmass + top + math.log(acc)
+        g[j] = _log_phi_sum(lam[j], b)
+    return _log_f(t, lmass, g, log_wu, alpha_n, bn, log_gamma_norm)
 
 
 @_jit
@@ -379,13 +402,10 @@ def _scan_log_integral(t_start: float, t_lo: float, t_hi: float, args: tuple) ->
 def plug_in_log_factor(Bt: np.ndarray, lam: np.ndarray) -> np.ndarray:
     """``sum_i log Phi(-lam_s Bt[s, i])`` per candidate ``s``: the zeros' factor with the rate and
     the noise at their estimates (``lam = q sqrt(tau)``), ``Bt`` ``(n, c)``."""
-    n, c = Bt.shape
+    n = Bt.shape[0]
     out = np.empty(n)
     for s in range(n):
-        acc = 0.0
-        for i in range(c):
-            acc += log_ndtr(-lam[s] * Bt[s, i])
-        out[s] = acc
+        out[s] = _log_phi_sum(lam[s], Bt[s])
     return out
 
 
@@ -438,7 +458,6 @@ def censored_log_factor(
     nk = nt + _PROBES.size
     lam = np.empty((nk, nq))
     tks = np.empty(nk)
-    taus = np.empty(nk)
     lmass = np.empty(nk)
     terms = np.empty(nk)
     g = np.empty(nq)
@@ -477,7 +496,6 @@ def censored_log_factor(
         for k in range(nk):
             tk = t + math.sqrt(2.0) * width * xh[k] if k < nt else t0 + _PROBES[k - nt]
             tks[k] = tk
-            taus[k] = math.exp(tk)
             lmass[k] = _rate_nodes(tk, qhat[s], aa[s], qmax, u, lam[k])
             for j in range(nq):
                 if k < nt and lam[k, j] > lam_max:
@@ -485,10 +503,7 @@ def censored_log_factor(
         # G(lambda) = sum_i log Phi(-lambda B_i), exact at Chebyshev points of [0, lam_max]
         # (the Gauss-Hermite nodes' range; a probe's node beyond it is summed directly)
         for p in range(npts):
-            acc = 0.0
-            for i in range(c):
-                acc += log_ndtr(-cheb[p] * lam_max * Bt[s, i])
-            vals[p] = acc
+            vals[p] = _log_phi_sum(cheb[p] * lam_max, Bt[s])
         for p in range(npts):
             acc = 0.0
             for r in range(npts):
@@ -496,40 +511,22 @@ def censored_log_factor(
             coef[p] = acc
         top = -math.inf
         for k in range(nk):
-            g_top = -math.inf
             for j in range(nq):
                 if lam[k, j] > lam_max:
-                    gv = 0.0
-                    for i in range(c):
-                        gv += log_ndtr(-lam[k, j] * Bt[s, i])
+                    g[j] = _log_phi_sum(lam[k, j], Bt[s])
                 else:
                     y2 = 2.0 * (2.0 * (lam[k, j] / lam_max) - 1.0)
                     b1 = 0.0
                     b2 = 0.0
                     for p in range(npts - 1, 0, -1):
                         b1, b2 = coef[p] + y2 * b1 - b2, b1
-                    gv = coef[0] + 0.5 * y2 * b1 - b2
-                g[j] = gv
-                if gv > g_top:
-                    g_top = gv
-            if not math.isfinite(g_top):
-                terms[k] = -math.inf
-                continue
-            acc = 0.0
-            for j in range(nq):
-                acc += math.exp(log_wu[j] + g[j] - g_top)
-            log_eq = g_top + math.log(acc)
-            # the Gamma density of tau times tau, the truncation mass, the zeros' mean factor
-            log_f = log_gamma_norm + alpha_n * tks[k] - bn * taus[k] + lmass[k] + log_eq
+                    g[j] = coef[0] + 0.5 * y2 * b1 - b2
+            log_f = _log_f(tks[k], lmass[k], g, log_wu, alpha_n, bn, log_gamma_norm)
             if k >= nt:
                 terms[k] = log_f
                 continue
-            term = math.log(wh[k]) + log_f + xh[k] * xh[k]
-            if math.isnan(term):
-                term = -math.inf
-            terms[k] = term
-            if term > top:
-                top = term
+            terms[k] = math.log(wh[k]) + log_f + xh[k] * xh[k]
+            top = max(top, terms[k])
         val = -math.inf
         if math.isfinite(top):
             acc = 0.0
