@@ -11,7 +11,13 @@ from scipy import integrate, special, stats
 from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators import get_estimator
 from dgse.estimators.knowledge import Knowledge
-from dgse.localization.adjoint import AdjointEstimator, adjoint_log_evidence, censored_correction, flow_model
+from dgse.localization.adjoint import (
+    AdjointEstimator,
+    adjoint_log_evidence,
+    censored_correction,
+    flow_model,
+    noise_scale_floor,
+)
 from dgse.sensing.sensors import Observations
 from tests.localization import cell_distance, channel_case, dense_readings
 
@@ -225,6 +231,42 @@ def test_oracle_on_the_case_and_registry() -> None:
     conc = b.conc_mean_ppm
     assert conc is not None and conc[case.source_cell] > 0.3 * case.concentration.max()
     assert b.info["method"] == "adjoint-oracle" and b.info["seconds"] > 0
+
+
+def test_zero_readings_alone_do_not_rule_out_what_their_sensors_barely_see() -> None:
+    """Six zeros and no positive reading (the start of test 2014's search, seed 1).
+
+    Without a prior noise scale (``s0 = 0.25 mean(z)`` is 0) every zero ruled out each
+    candidate it saw however faintly, so the posterior piled onto the candidates no sensor
+    sees at all and the search stopped 2.8 m off after six readings.  With the floor a
+    candidate that could not lift any reading above a tenth of it, even at ``q_max``, keeps
+    its prior weight; one the sensors see strongly does not.
+    """
+    case = channel_case()
+    fm = flow_model(case.layout, case.inlet_velocity)
+    cells = np.array([[0, 8], [8, 8]])
+    np.testing.assert_allclose(
+        fm.mean_concentrations[fm.mesh.index[cells[:, 0], cells[:, 1]]],
+        fm.forward(cells, [1.0, 1.0]).mean(axis=1),
+        rtol=0.03,  # forward fields are clipped at 0 cell by cell, the mean after averaging
+    )
+    free = np.argwhere(case.occupancy == 0)
+    sensors = free[free[:, 1] == case.occupancy.shape[1] // 2][:6]
+    obs = Observations(sensors, np.zeros(len(sensors)), case.wind[:, sensors[:, 0], sensors[:, 1]].T)
+    floor = noise_scale_floor([fm], 5.0, 0.25)
+    assert floor > 0
+    reach = 5.0 * fm.responses(sensors).max(axis=0)  # the largest reading a candidate could cause
+    unseen, faint, strong = reach == 0, (reach > 0) & (reach < 0.1 * floor), reach > 10 * floor
+    assert unseen.sum() > 10 and faint.sum() > 10 and strong.sum() > 10
+    ratios = {}
+    for prior in (False, True):
+        know = Knowledge.from_case(case, "wind")
+        est = get_estimator("adjoint-oracle", knowledge=know, noise_floor_prior=prior)
+        p = fm.mesh.values(est.estimate(case.occupancy, case.resolution, obs).source_probs)
+        ratios[prior] = p[faint] / p[unseen].mean(), p[strong] / p[unseen].mean()
+    assert ratios[False][0].min() < 1e-6  # the failure: faintly seen candidates ruled out
+    assert ratios[True][0].min() > 0.9
+    assert ratios[True][1].max() < 0.5
 
 
 def test_estimated_wind_fits_the_inlet_speed() -> None:

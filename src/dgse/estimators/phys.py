@@ -76,6 +76,7 @@ from dgse.localization.adjoint import (
     adjoint_log_evidence,
     censored_correction,
     flow_model,
+    noise_scale_floor,
     sigma_floor,
 )
 from dgse.options import options_from
@@ -340,6 +341,9 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         wind_noise_floor: absolute wind noise (and model error) floor, m/s.
         q_max, kappas, alpha0, sigma0_fraction: the gas evidence's priors
             (:func:`~dgse.localization.adjoint.adjoint_log_evidence`).
+        noise_floor_prior: the prior noise scale is at least ``sigma0_fraction`` of the
+            prior-predictive mean concentration over the hypotheses' flows
+            (:func:`~dgse.localization.adjoint.noise_scale_floor`); False: from the readings alone.
         conc_components: sources per hypothesis in the concentration estimate (drawn from
             its source posterior by :func:`predictive_sources`).
         min_weight: hypotheses below this posterior weight are left out of the predictive.
@@ -395,6 +399,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     kappas: Sequence[float] = DEFAULT_KAPPAS
     alpha0: float = 1.0
     sigma0_fraction: float = 0.25
+    noise_floor_prior: bool = True
     conc_components: int = 32
     min_weight: float = 1e-4
     temperature: float = 1.0
@@ -621,6 +626,11 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             log_prior.append(math.log(h.prior) + lw)
         # flows the wind readings rule out (WIND_HOPELESS_NATS below the best) get no gas evidence
         lp_best = max(log_prior)
+        s0_floor = (
+            noise_scale_floor([h.flow for h in hyps], self.q_max, self.sigma0_fraction)
+            if self.noise_floor_prior
+            else 0.0
+        )
 
         def evidence(h: FlowHypothesis) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
             A = h.flow.responses(cells)
@@ -631,6 +641,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
                 kappas=self.kappas,
                 alpha0=self.alpha0,
                 sigma0_fraction=self.sigma0_fraction,
+                sigma0_floor=s0_floor,
                 censored="deferred" if self.censored else False,
             )
             return A, logl, det

@@ -178,6 +178,9 @@ FLOW_CACHE_SIZE = 16
 MAX_CACHED_ROWS = 1024
 #: Forward fields per unit release kept per flow model (one float per free cell each).
 MAX_CACHED_FIELDS = 256
+#: The quantile over a map's sources of their mean concentration that sets the least prior
+#: noise scale (:func:`noise_scale_floor`).
+NOISE_FLOOR_QUANTILE = 0.01
 DEFAULT_SPEEDS = (0.5, 1.0, 2.0, 3.5, 5.0)
 #: Candidates this many nats below the best one skip the evidence's truncation term.
 TRUNC_NATS = 60.0
@@ -206,6 +209,23 @@ class FlowModel:
     solved: FlowField | None = field(default=None, repr=False)
     _rows: dict[tuple[int, int], np.ndarray] = field(default_factory=dict, repr=False)
     _fields: dict[tuple[int, int], np.ndarray] = field(default_factory=dict, repr=False)
+    _mean_concentrations: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def mean_concentrations(self) -> np.ndarray:
+        """``float64 (n_free,)`` ppm per g/s: the concentration averaged over the free cells,
+        for a source in each free cell (one transposed solve, cached).
+
+        Times the release rate it is the ``c_bar`` that Table I scales the noise floor
+        ``sigma_env`` by.  It spans orders of magnitude over the sources of one map (a
+        source in a quiet room fills it, one by the outlet leaves at once).
+        """
+        if self._mean_concentrations is None:
+            m, ts = self.mesh, self.transport
+            e = np.full((m.n, 1), 1.0 / m.n)
+            x = ts.factor(ts.adjoint_scheme).solve(e, trans="T")[:, 0] / ts.physics.slab_depth
+            self._mean_concentrations = np.maximum(x, 0.0) * self.physics.ppm_per_gm3
+        return self._mean_concentrations
 
     @property
     def mesh(self):
@@ -318,6 +338,26 @@ def flow_model(
     while len(_FLOWS) > FLOW_CACHE_SIZE:
         _FLOWS.popitem(last=False)
     return fm
+
+
+def noise_scale_floor(flows: Sequence[FlowModel], q_max: float | None, fraction: float) -> float:
+    """The least prior noise scale ``s0``, ppm: ``fraction`` of a low prior ``c_bar``.
+
+    Table I draws the noise floor as ``sigma_env = U[0, 0.5] c_bar`` (mean ``0.25 c_bar``),
+    ``c_bar`` the mean concentration over the free cells, which depends on the unknown source:
+    :attr:`FlowModel.mean_concentrations` spans orders of magnitude over a map's sources.
+    The floor takes its :data:`NOISE_FLOOR_QUANTILE` quantile over the sources (averaged
+    over ``flows``, equal weights, so that one floor serves every flow hypothesis and their
+    evidences stay comparable) times the mean release rate (``q_max / 2``; 2.5 g/s without
+    ``q_max``): a scale the noise is unlikely to lie below.  Without a floor, readings that
+    are all zero (or nearly so) set the prior scale to nothing, and each zero then rules out
+    every candidate it sees however faintly (:func:`adjoint_log_evidence`).
+    """
+    if not flows:
+        return 0.0
+    q_mean = 2.5 if q_max is None else 0.5 * float(q_max)
+    low = [float(np.quantile(f.mean_concentrations, NOISE_FLOOR_QUANTILE)) for f in flows]
+    return float(fraction) * q_mean * float(np.mean(low))
 
 
 def clear_flow_cache() -> None:
@@ -614,6 +654,7 @@ def adjoint_log_evidence(
     kappas: Sequence[float] = DEFAULT_KAPPAS,
     alpha0: float = 1.0,
     sigma0_fraction: float = 0.25,
+    sigma0_floor: float = 0.0,
     censored: bool | Literal["deferred"] = True,
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """``log p(z | s)`` for every candidate source (columns of ``A``), release rate and noise integrated out.
@@ -626,6 +667,9 @@ def adjoint_log_evidence(
             ``(0,)`` gives a homoscedastic model.
         alpha0: shape of the Gamma prior on the noise precision.
         sigma0_fraction: prior noise scale ``s0 = sigma0_fraction * mean(z)`` (``beta0 = alpha0 s0^2``).
+        sigma0_floor: the least ``s0``, ppm (:func:`noise_scale_floor`: from the prior, not the
+            readings; 0: none).  With no or few positive readings ``mean(z)`` says nothing
+            of the noise, and ``s0`` near 0 makes every zero rule out each candidate it sees.
         censored: treat readings of 0 as censored (the sensor clips negatives: such a reading
             says only that the noisy concentration was at most 0, :func:`censored_correction`);
             False reads them as exact zeros; ``"deferred"`` returns the positive readings'
@@ -649,7 +693,9 @@ def adjoint_log_evidence(
     ks = [float(k) for k in kappas]
     if not ks or any(not (k >= 0 and math.isfinite(k)) for k in ks):
         raise InputDataError(f"kappas must be finite and >= 0, got {kappas}")
-    s0 = max(sigma0_fraction * float(z.mean()), 1e-9 * max(float(z.max()), 1.0), 1e-12)
+    if not (sigma0_floor >= 0 and math.isfinite(sigma0_floor)):
+        raise InputDataError(f"sigma0_floor must be a finite number of ppm >= 0, got {sigma0_floor}")
+    s0 = max(sigma0_fraction * float(z.mean()), float(sigma0_floor), 1e-9 * max(float(z.max()), 1.0), 1e-12)
     beta0 = alpha0 * s0**2
     ones = np.ones_like(z)
     # readings clipped at zero are censored: the Gaussian part takes the others, and the
@@ -773,6 +819,9 @@ class AdjointEstimator(KnowledgeUser):
         q_max: release-rate prior ``U[0, q_max]`` g/s (None: flat on ``q >= 0``).
         kappas: proportional-noise grid (``(0,)``: homoscedastic).
         alpha0, sigma0_fraction: the noise-precision prior.
+        noise_floor_prior: the prior noise scale is at least ``sigma0_fraction`` of the
+            prior-predictive mean concentration (:func:`noise_scale_floor`); False: from the
+            readings alone (``sigma0_fraction * mean(z)``).
         censored: read zero readings as censored (:func:`censored_correction`); False: as exact zeros.
         candidate_speeds: inlet speeds solved for the wind fit (estimated variant), m/s.
         refine_speed: solve once more at the fitted speed (else use the best candidate).
@@ -790,6 +839,7 @@ class AdjointEstimator(KnowledgeUser):
     kappas: Sequence[float] = DEFAULT_KAPPAS
     alpha0: float = 1.0
     sigma0_fraction: float = 0.25
+    noise_floor_prior: bool = True
     censored: bool = True
     candidate_speeds: Sequence[float] = DEFAULT_SPEEDS
     refine_speed: bool = True
@@ -929,6 +979,9 @@ class AdjointEstimator(KnowledgeUser):
         t_flow = time.perf_counter() - t0
         A = fm.responses(obs.cells)
         z = obs.gas
+        s0_floor = (
+            noise_scale_floor([fm], self.q_max, self.sigma0_fraction) if self.noise_floor_prior else 0.0
+        )
         logl, det = adjoint_log_evidence(
             A,
             z,
@@ -936,6 +989,7 @@ class AdjointEstimator(KnowledgeUser):
             kappas=self.kappas,
             alpha0=self.alpha0,
             sigma0_fraction=self.sigma0_fraction,
+            sigma0_floor=s0_floor,
             censored=self.censored,
         )
         post = np.exp(logl - logl.max())
