@@ -17,6 +17,7 @@ from dgse.localization.adjoint import (
     censored_correction,
     flow_model,
     noise_scale_floor,
+    prior_noise_floor,
 )
 from dgse.sensing.sensors import Observations
 from tests.localization import cell_distance, channel_case, dense_readings
@@ -259,14 +260,23 @@ def test_zero_readings_alone_do_not_rule_out_what_their_sensors_barely_see() -> 
     unseen, faint, strong = reach == 0, (reach > 0) & (reach < 0.1 * floor), reach > 10 * floor
     assert unseen.sum() > 10 and faint.sum() > 10 and strong.sum() > 10
     ratios = {}
-    for prior in (False, True):
+    for prior in ("never", "unscaled"):
         know = Knowledge.from_case(case, "wind")
         est = get_estimator("adjoint-oracle", knowledge=know, noise_floor_prior=prior)
         p = fm.mesh.values(est.estimate(case.occupancy, case.resolution, obs).source_probs)
         ratios[prior] = p[faint] / p[unseen].mean(), p[strong] / p[unseen].mean()
-    assert ratios[False][0].min() < 1e-6  # the failure: faintly seen candidates ruled out
-    assert ratios[True][0].min() > 0.9
-    assert ratios[True][1].max() < 0.5
+    assert ratios["never"][0].min() < 1e-6  # the failure: faintly seen candidates ruled out
+    assert ratios["unscaled"][0].min() > 0.9
+    assert ratios["unscaled"][1].max() < 0.5
+    # two positive readings give the noise a scale: "unscaled" then leaves s0 to the readings
+    z = np.array([0.0, 5.0, 0.0, 7.0])
+    assert prior_noise_floor([fm], z, 5.0, 0.25, "unscaled") == 0.0
+    assert prior_noise_floor([fm], z, 5.0, 0.25, "always") == pytest.approx(floor)
+    assert prior_noise_floor([fm], z[:2], 5.0, 0.25, "unscaled") == pytest.approx(floor)
+    with pytest.raises(InputDataError, match="noise_floor_prior"):
+        prior_noise_floor([fm], z, 5.0, 0.25, "sometimes")
+    with pytest.raises(InputDataError, match="noise_floor_prior"):
+        get_estimator("dgse-phys", noise_floor_prior=True)
 
 
 def test_estimated_wind_fits_the_inlet_speed() -> None:

@@ -71,12 +71,13 @@ from dgse.localization.adjoint import (
     CENSORED_RANKING,
     CENSORED_RANKINGS,
     DEFAULT_KAPPAS,
+    NOISE_FLOOR_MODES,
     AdjointResponseModel,
     FlowModel,
     adjoint_log_evidence,
     censored_correction,
     flow_model,
-    noise_scale_floor,
+    prior_noise_floor,
     sigma_floor,
 )
 from dgse.options import options_from
@@ -341,9 +342,9 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         wind_noise_floor: absolute wind noise (and model error) floor, m/s.
         q_max, kappas, alpha0, sigma0_fraction: the gas evidence's priors
             (:func:`~dgse.localization.adjoint.adjoint_log_evidence`).
-        noise_floor_prior: the prior noise scale is at least ``sigma0_fraction`` of the
-            prior-predictive mean concentration over the hypotheses' flows
-            (:func:`~dgse.localization.adjoint.noise_scale_floor`); False: from the readings alone.
+        noise_floor_prior: when the prior noise scale is kept at least the floor of the
+            hypotheses' flows (:func:`~dgse.localization.adjoint.prior_noise_floor`:
+            ``"always"``, ``"unscaled"`` while fewer than two readings are positive, ``"never"``).
         conc_components: sources per hypothesis in the concentration estimate (drawn from
             its source posterior by :func:`predictive_sources`).
         min_weight: hypotheses below this posterior weight are left out of the predictive.
@@ -399,7 +400,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     kappas: Sequence[float] = DEFAULT_KAPPAS
     alpha0: float = 1.0
     sigma0_fraction: float = 0.25
-    noise_floor_prior: bool = True
+    noise_floor_prior: str = "never"
     conc_components: int = 32
     min_weight: float = 1e-4
     temperature: float = 1.0
@@ -425,6 +426,10 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     _learned: Any = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
+        if self.noise_floor_prior not in NOISE_FLOOR_MODES:
+            raise InputDataError(
+                f"noise_floor_prior must be one of {NOISE_FLOOR_MODES}, got {self.noise_floor_prior!r}"
+            )
         speeds = [float(v) for v in self.speeds]
         if not speeds or any(not (v > 0 and math.isfinite(v)) for v in speeds):
             raise InputDataError(f"speeds must be positive numbers of m/s, got {self.speeds}")
@@ -626,10 +631,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             log_prior.append(math.log(h.prior) + lw)
         # flows the wind readings rule out (WIND_HOPELESS_NATS below the best) get no gas evidence
         lp_best = max(log_prior)
-        s0_floor = (
-            noise_scale_floor([h.flow for h in hyps], self.q_max, self.sigma0_fraction)
-            if self.noise_floor_prior
-            else 0.0
+        s0_floor = prior_noise_floor(
+            [h.flow for h in hyps], z, self.q_max, self.sigma0_fraction, self.noise_floor_prior
         )
 
         def evidence(h: FlowHypothesis) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:

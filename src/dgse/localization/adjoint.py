@@ -360,6 +360,26 @@ def noise_scale_floor(flows: Sequence[FlowModel], q_max: float | None, fraction:
     return float(fraction) * q_mean * float(np.mean(low))
 
 
+#: When the noise-scale floor applies (:func:`prior_noise_floor`).
+NOISE_FLOOR_MODES = ("always", "unscaled", "never")
+
+
+def prior_noise_floor(
+    flows: Sequence[FlowModel], z: np.ndarray, q_max: float | None, fraction: float, mode: str
+) -> float:
+    """The ``sigma0_floor`` of :func:`adjoint_log_evidence` for readings ``z`` under ``mode``.
+
+    ``"always"``: :func:`noise_scale_floor`; ``"unscaled"``: that floor only while fewer than
+    two readings are positive (the readings then say nothing of the noise scale, and
+    ``0.25 mean(z)`` is 0 or one reading's share); ``"never"``: 0.
+    """
+    if mode not in NOISE_FLOOR_MODES:
+        raise InputDataError(f"noise_floor_prior must be one of {NOISE_FLOOR_MODES}, got {mode!r}")
+    if mode == "never" or (mode == "unscaled" and int((np.asarray(z) > 0).sum()) >= 2):
+        return 0.0
+    return noise_scale_floor(flows, q_max, fraction)
+
+
 def clear_flow_cache() -> None:
     """Forget the cached flows."""
     _FLOWS.clear()
@@ -819,9 +839,10 @@ class AdjointEstimator(KnowledgeUser):
         q_max: release-rate prior ``U[0, q_max]`` g/s (None: flat on ``q >= 0``).
         kappas: proportional-noise grid (``(0,)``: homoscedastic).
         alpha0, sigma0_fraction: the noise-precision prior.
-        noise_floor_prior: the prior noise scale is at least ``sigma0_fraction`` of the
-            prior-predictive mean concentration (:func:`noise_scale_floor`); False: from the
-            readings alone (``sigma0_fraction * mean(z)``).
+        noise_floor_prior: when the prior noise scale is kept at least
+            :func:`noise_scale_floor` (:func:`prior_noise_floor`: ``"always"``,
+            ``"unscaled"`` while fewer than two readings are positive, ``"never"``: from
+            the readings alone, ``sigma0_fraction * mean(z)``).
         censored: read zero readings as censored (:func:`censored_correction`); False: as exact zeros.
         candidate_speeds: inlet speeds solved for the wind fit (estimated variant), m/s.
         refine_speed: solve once more at the fitted speed (else use the best candidate).
@@ -839,7 +860,7 @@ class AdjointEstimator(KnowledgeUser):
     kappas: Sequence[float] = DEFAULT_KAPPAS
     alpha0: float = 1.0
     sigma0_fraction: float = 0.25
-    noise_floor_prior: bool = True
+    noise_floor_prior: str = "never"
     censored: bool = True
     candidate_speeds: Sequence[float] = DEFAULT_SPEEDS
     refine_speed: bool = True
@@ -852,6 +873,10 @@ class AdjointEstimator(KnowledgeUser):
     def __post_init__(self) -> None:
         if self.wind not in ("oracle", "estimated"):
             raise InputDataError(f"wind must be 'oracle' or 'estimated', got {self.wind!r}")
+        if self.noise_floor_prior not in NOISE_FLOOR_MODES:
+            raise InputDataError(
+                f"noise_floor_prior must be one of {NOISE_FLOOR_MODES}, got {self.noise_floor_prior!r}"
+            )
         if self.q_max is not None:
             q = float(self.q_max)
             if not (q > 0 and math.isfinite(q)):
@@ -979,9 +1004,7 @@ class AdjointEstimator(KnowledgeUser):
         t_flow = time.perf_counter() - t0
         A = fm.responses(obs.cells)
         z = obs.gas
-        s0_floor = (
-            noise_scale_floor([fm], self.q_max, self.sigma0_fraction) if self.noise_floor_prior else 0.0
-        )
+        s0_floor = prior_noise_floor([fm], z, self.q_max, self.sigma0_fraction, self.noise_floor_prior)
         logl, det = adjoint_log_evidence(
             A,
             z,
