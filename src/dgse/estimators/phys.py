@@ -59,7 +59,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 
@@ -400,7 +400,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     kappas: Sequence[float] = DEFAULT_KAPPAS
     alpha0: float = 1.0
     sigma0_fraction: float = 0.25
-    noise_floor_prior: str = "never"
+    noise_floor_prior: Literal["always", "unscaled", "never"] = "never"
     conc_components: int = 32
     min_weight: float = 1e-4
     temperature: float = 1.0

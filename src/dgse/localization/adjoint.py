@@ -860,7 +860,7 @@ class AdjointEstimator(KnowledgeUser):
     kappas: Sequence[float] = DEFAULT_KAPPAS
     alpha0: float = 1.0
     sigma0_fraction: float = 0.25
-    noise_floor_prior: str = "never"
+    noise_floor_prior: Literal["always", "unscaled", "never"] = "never"
     censored: bool = True
     candidate_speeds: Sequence[float] = DEFAULT_SPEEDS
     refine_speed: bool = True
