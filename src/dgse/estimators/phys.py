@@ -71,11 +71,11 @@ from dgse.localization.adjoint import (
     CENSORED_RANKING,
     CENSORED_RANKINGS,
     DEFAULT_KAPPAS,
-    NOISE_FLOOR_MODES,
     AdjointResponseModel,
     FlowModel,
     adjoint_log_evidence,
     censored_correction,
+    check_noise_floor_mode,
     flow_model,
     prior_noise_floor,
     sigma_floor,
@@ -426,10 +426,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     _learned: Any = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
-        if self.noise_floor_prior not in NOISE_FLOOR_MODES:
-            raise InputDataError(
-                f"noise_floor_prior must be one of {NOISE_FLOOR_MODES}, got {self.noise_floor_prior!r}"
-            )
+        check_noise_floor_mode(self.noise_floor_prior)
         speeds = [float(v) for v in self.speeds]
         if not speeds or any(not (v > 0 and math.isfinite(v)) for v in speeds):
             raise InputDataError(f"speeds must be positive numbers of m/s, got {self.speeds}")

@@ -364,6 +364,12 @@ def noise_scale_floor(flows: Sequence[FlowModel], q_max: float | None, fraction:
 NOISE_FLOOR_MODES = ("always", "unscaled", "never")
 
 
+def check_noise_floor_mode(mode: object) -> None:
+    """Raise a clear :class:`InputDataError` unless ``mode`` is one of :data:`NOISE_FLOOR_MODES`."""
+    if mode not in NOISE_FLOOR_MODES:
+        raise InputDataError(f"noise_floor_prior must be one of {NOISE_FLOOR_MODES}, got {mode!r}")
+
+
 def prior_noise_floor(
     flows: Sequence[FlowModel], z: np.ndarray, q_max: float | None, fraction: float, mode: str
 ) -> float:
@@ -373,8 +379,7 @@ def prior_noise_floor(
     two readings are positive (the readings then say nothing of the noise scale, and
     ``0.25 mean(z)`` is 0 or one reading's share); ``"never"``: 0.
     """
-    if mode not in NOISE_FLOOR_MODES:
-        raise InputDataError(f"noise_floor_prior must be one of {NOISE_FLOOR_MODES}, got {mode!r}")
+    check_noise_floor_mode(mode)
     if mode == "never" or (mode == "unscaled" and int((np.asarray(z) > 0).sum()) >= 2):
         return 0.0
     return noise_scale_floor(flows, q_max, fraction)
@@ -873,10 +878,7 @@ class AdjointEstimator(KnowledgeUser):
     def __post_init__(self) -> None:
         if self.wind not in ("oracle", "estimated"):
             raise InputDataError(f"wind must be 'oracle' or 'estimated', got {self.wind!r}")
-        if self.noise_floor_prior not in NOISE_FLOOR_MODES:
-            raise InputDataError(
-                f"noise_floor_prior must be one of {NOISE_FLOOR_MODES}, got {self.noise_floor_prior!r}"
-            )
+        check_noise_floor_mode(self.noise_floor_prior)
         if self.q_max is not None:
             q = float(self.q_max)
             if not (q > 0 and math.isfinite(q)):
