@@ -29,11 +29,15 @@ Stop rules (``--rule``):
 * ``mass1m90-disk1m-deadline60s-revisit0.5m``: and the variance terms of a cell are divided by
   one plus the cells measured within 0.5 m of it (``revisit_radius_m``);
 * ``...-revisit0.5m-twice``: and the mass test must pass at two readings in a row, the mode
-  staying within 1 m (``stop_readings=2``).
+  staying within 1 m (``stop_readings=2``);
+* ``...-revisit0.5m-confirm1m``: and a stop needs 2 readings within 1 m of the mode (as ``confirm``).
 
 Every finished episode is journaled beside the JSON, so an interrupted run resumes::
 
     python benchmarks/phys_search.py --set validation --rule confirm --knowledge openings
+
+Episodes run apart (one ``--files`` case per process, on several machines or cores) are
+summed up into one result by ``--merge OUT.json EPISODE.json...``.
 """
 
 from __future__ import annotations
@@ -88,6 +92,11 @@ RULES: dict[str, dict[str, Any]] = {
 RULES["mass1m90-disk1m-deadline60s-revisit0.5m-twice"] = {
     **RULES["mass1m90-disk1m-deadline60s-revisit0.5m"],
     "stop_readings": 2,
+}
+RULES["mass1m90-disk1m-deadline60s-revisit0.5m-confirm1m"] = {
+    **RULES["mass1m90-disk1m-deadline60s-revisit0.5m"],
+    "confirm_radius_m": 1.0,
+    "confirm_readings": 2,
 }
 
 
@@ -171,6 +180,27 @@ def write_result(path: Path, result: dict[str, Any], label: str, extra: str = ""
     print(f"wrote {path}")
 
 
+def merge(paths: list[Path]) -> dict[str, Any]:
+    """One result of several runs' JSON files (their cases in the given order, their settings
+    checked equal but for ``set``; the aggregate and the stops recomputed)."""
+    from dgse.search.metrics import aggregate
+
+    results = [json.loads(p.read_text()) for p in paths]
+    settings = dict(results[0]["settings"])
+    for p, r in zip(paths, results, strict=True):
+        if {**r["settings"], "set": settings["set"]} != settings:
+            raise SystemExit(f"{p}: its settings differ from {paths[0]}'s")
+    per_case = [c for r in results for c in r["per_case"]]
+    out = {
+        "settings": settings,
+        "aggregate": aggregate([t["metrics"] for c in per_case for t in c["trials"]]),
+        "per_case": per_case,
+        "merged_from": [str(p) for p in paths],
+    }
+    out["stops"] = stop_quality(out)
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--set", choices=sorted(SETS), default="validation")
@@ -204,7 +234,20 @@ def main() -> None:
     )
     ap.add_argument("--tag", default="", help="appended to the output names (a variant's own files)")
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/phys_search"))
+    ap.add_argument(
+        "--merge",
+        type=Path,
+        nargs="+",
+        metavar=("OUT", "RESULT"),
+        help="write OUT.json from the RESULT JSON files of runs made apart; run nothing",
+    )
     args = ap.parse_args()
+    if args.merge:
+        if len(args.merge) < 2:
+            ap.error("--merge takes OUT and at least one RESULT")
+        result = merge(args.merge[1:])
+        write_result(args.merge[0], result, args.merge[0].stem, f", stops {result['stops']}")
+        return
     args.out.mkdir(parents=True, exist_ok=True)
     set_name = args.set if args.cases is None else f"{args.set}{args.cases}"
     if args.files:

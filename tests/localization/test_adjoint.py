@@ -92,6 +92,41 @@ def test_censored_evidence_matches_brute_force_integration(seed: int) -> None:
     assert np.abs(d_exact).max() > 0.2
 
 
+@pytest.mark.parametrize(("seed", "weights"), [(2, "candidate"), (5, "candidate"), (5, "larger")])
+def test_candidate_noise_weights_match_brute_force_integration(seed: int, weights: str) -> None:
+    """With noise weights of each candidate's own the evidence (positive readings and zeros)
+    is the brute-force integral of that candidate's model, weights included."""
+    rng = np.random.default_rng(seed)
+    m, n = 16, 5
+    A = rng.uniform(0, 1, (m, n)) * rng.uniform(0.2, 3, (1, n)) * (rng.uniform(0, 1, (m, n)) < 0.7)
+    c = rng.uniform(0.5, 4) * A[:, 0]
+    z = np.maximum(c + (0.3 + 0.5 * c) * rng.standard_normal(m), 0.0)
+    z[rng.choice(m, 2, replace=False)] = 0.0
+    logl, det = adjoint_log_evidence(A, z, q_max=5.0, kappas=(2.0,), alpha0=1.0, noise_weights=weights)
+    R = det["r"]
+    assert R.shape == (m, n) and np.ptp(R, axis=1).max() > 0.1  # the candidates' weights differ
+    pos = z > 0
+    brute = np.array(
+        [
+            _censored_brute_force(A[:, s] / R[:, s], z / R[:, s], 5.0, 1.0, det["s0"] ** 2, shift=0.5 * m)
+            - np.log(R[pos, s]).sum()
+            for s in range(n)
+        ]
+    )
+    d = (logl - brute) - (logl - brute)[np.argmax(brute)]
+    assert np.abs(d).max() < 0.05
+    # the plug-in weights are another model: they miss this one by more
+    plug, det_p = adjoint_log_evidence(A, z, q_max=5.0, kappas=(2.0,), alpha0=1.0)
+    assert det_p["r"].shape == (m,)
+    if weights == "larger":  # the larger of the plug-in and the candidate's own
+        own = adjoint_log_evidence(A, z, q_max=5.0, kappas=(2.0,), alpha0=1.0, noise_weights="candidate")[1]
+        assert np.allclose(R, np.maximum(own["r"], det_p["r"][:, None]), rtol=1e-12, atol=0.0)
+    d_plug = (plug - brute) - (plug - brute)[np.argmax(brute)]
+    assert np.abs(d_plug).max() > 0.2
+    with pytest.raises(InputDataError, match="noise_weights"):
+        adjoint_log_evidence(A, z, noise_weights="reading")  # type: ignore[arg-type]
+
+
 @pytest.mark.parametrize("seed", [3, 8])
 def test_censored_evidence_for_candidates_the_positive_readings_hardly_see(seed: int) -> None:
     """Candidates 1 and 2 respond 20-200 times less than the source at the positive readings
@@ -341,6 +376,8 @@ def test_bad_input_is_rejected() -> None:
         AdjointEstimator(wind="estimated").set_knowledge(wind_no_openings)
     with pytest.raises(InputDataError):
         AdjointEstimator(wind="sideways")  # type: ignore[arg-type]
+    with pytest.raises(InputDataError, match="noise_weights"):
+        AdjointEstimator(wind="estimated", noise_weights="reading")  # type: ignore[arg-type]
 
 
 def test_zeros_a_candidate_cannot_reach_leave_it_at_one_half_each() -> None:

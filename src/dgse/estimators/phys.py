@@ -76,6 +76,7 @@ from dgse.localization.adjoint import (
     adjoint_log_evidence,
     censored_correction,
     check_noise_floor_mode,
+    check_noise_weights,
     flow_model,
     prior_noise_floor,
     sigma_floor,
@@ -345,6 +346,9 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         noise_floor_prior: when the prior noise scale is kept at least the floor of the
             hypotheses' flows (:func:`~dgse.localization.adjoint.prior_noise_floor`:
             ``"always"``, ``"unscaled"`` while fewer than two readings are positive, ``"never"``).
+        noise_weights: the proportional noise's concentrations, ``"plug-in"``, each
+            candidate's own (``"candidate"``) or the larger (``"larger"``;
+            :func:`~dgse.localization.adjoint.adjoint_log_evidence`).
         conc_components: sources per hypothesis in the concentration estimate (drawn from
             its source posterior by :func:`predictive_sources`).
         min_weight: hypotheses below this posterior weight are left out of the predictive.
@@ -401,6 +405,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     alpha0: float = 1.0
     sigma0_fraction: float = 0.25
     noise_floor_prior: Literal["always", "unscaled", "never"] = "never"
+    noise_weights: Literal["plug-in", "candidate", "larger"] = "plug-in"
     conc_components: int = 32
     min_weight: float = 1e-4
     temperature: float = 1.0
@@ -427,6 +432,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
 
     def __post_init__(self) -> None:
         check_noise_floor_mode(self.noise_floor_prior)
+        check_noise_weights(self.noise_weights)
         speeds = [float(v) for v in self.speeds]
         if not speeds or any(not (v > 0 and math.isfinite(v)) for v in speeds):
             raise InputDataError(f"speeds must be positive numbers of m/s, got {self.speeds}")
@@ -643,6 +649,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
                 sigma0_fraction=self.sigma0_fraction,
                 sigma0_floor=s0_floor,
                 censored="deferred" if self.censored else False,
+                noise_weights=self.noise_weights,
             )
             return A, logl, det
 
@@ -695,13 +702,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         best_h = int(np.argmax(hw))
         A_b, det_b = details[best_h]
         best = int(np.argmax(post))
-        chat = det_b.get("chat")
-        r_best = (
-            np.ones_like(z)
-            if chat is None or det_b["kappa"] == 0
-            else 1.0 + det_b["kappa"] * chat / det_b["cbar"]
-        )
-        sig = sigma_floor(A_b, z, r_best, best, self.alpha0, self.alpha0 * det_b["s0"] ** 2)
+        sig = sigma_floor(A_b, z, det_b["r"], best, self.alpha0, self.alpha0 * det_b["s0"] ** 2)
         qmap_b = np.clip(det_b["qhat"], 0.0, qmax)
         model = AdjointResponseModel(
             hyps[best_h].flow, qmap_b, sig, float(det_b["kappa"]), float(det_b.get("cbar", 1.0))

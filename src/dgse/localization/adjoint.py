@@ -165,6 +165,7 @@ __all__ = [
     "FlowModel",
     "adjoint_log_evidence",
     "censored_correction",
+    "check_noise_weights",
     "clear_flow_cache",
     "flow_model",
     "make_adjoint",
@@ -362,12 +363,20 @@ def noise_scale_floor(flows: Sequence[FlowModel], q_max: float | None, fraction:
 
 #: When the noise-scale floor applies (:func:`prior_noise_floor`).
 NOISE_FLOOR_MODES = ("always", "unscaled", "never")
+#: Where the proportional noise weights of :func:`adjoint_log_evidence` take their concentrations.
+NOISE_WEIGHTS = ("plug-in", "candidate", "larger")
 
 
 def check_noise_floor_mode(mode: object) -> None:
     """Raise a clear :class:`InputDataError` unless ``mode`` is one of :data:`NOISE_FLOOR_MODES`."""
     if mode not in NOISE_FLOOR_MODES:
         raise InputDataError(f"noise_floor_prior must be one of {NOISE_FLOOR_MODES}, got {mode!r}")
+
+
+def check_noise_weights(mode: object) -> None:
+    """Raise a clear :class:`InputDataError` unless ``mode`` is one of :data:`NOISE_WEIGHTS`."""
+    if mode not in NOISE_WEIGHTS:
+        raise InputDataError(f"noise_weights must be one of {NOISE_WEIGHTS}, got {mode!r}")
 
 
 def prior_noise_floor(
@@ -391,6 +400,20 @@ def clear_flow_cache() -> None:
 
 
 # -- the posterior ----------------------------------------------------------------------------
+def _weighted_sums(
+    A: np.ndarray, A2: np.ndarray, z: np.ndarray, r: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | float]:
+    """``(aa, az, zz)``: ``sum_i w a_i^2``, ``sum_i w a_i z_i``, ``sum_i w z_i^2`` per column of ``A``.
+
+    ``w = 1 / r^2``; ``r`` is ``(m,)`` (the same noise weights for every candidate) or
+    ``(m, N)`` (each candidate's own); ``zz`` is then a float or ``(N,)``.
+    """
+    w = 1.0 / r**2
+    if w.ndim == 1:
+        return np.maximum(w @ A2, 1e-300), (w * z) @ A, float(w @ z**2)
+    return np.maximum((w * A2).sum(axis=0), 1e-300), z @ (w * A), (z * z) @ w
+
+
 def _evidence(
     A: np.ndarray,
     A2: np.ndarray,
@@ -400,12 +423,12 @@ def _evidence(
     alpha0: float,
     beta0: float,
 ) -> tuple[np.ndarray, np.ndarray, float]:
-    """``(log p(z | s) per column of A up to an (s, r)-independent constant, qhat, alpha_n)``."""
+    """``(log p(z | s) per column of A up to an (s, r)-independent constant, qhat, alpha_n)``.
+
+    ``r``: the noise weights, ``(m,)`` or ``(m, N)`` (:func:`_weighted_sums`).
+    """
     m = z.size
-    w = 1.0 / r**2
-    aa = np.maximum(w @ A2, 1e-300)
-    az = (w * z) @ A
-    zz = float(w @ z**2)
+    aa, az, zz = _weighted_sums(A, A2, z, r)
     qhat = az / aa
     S = np.maximum(zz - az * qhat, 0.0)
     alpha_n = alpha0 + 0.5 * (m - 1)
@@ -413,7 +436,7 @@ def _evidence(
     nu = 2.0 * alpha_n
     with np.errstate(over="ignore"):  # a candidate no reading sees (aa at its floor): scale inf
         scale = np.sqrt(beta_n / (alpha_n * aa))
-    logl = -np.log(r).sum() - 0.5 * np.log(aa) - alpha_n * np.log(beta_n)
+    logl = -np.log(r).sum(axis=0) - 0.5 * np.log(aa) - alpha_n * np.log(beta_n)
     # the truncation term (<= 0) only where it can matter: candidates within TRUNC_NATS of
     # the best truncated one (:func:`~dgse.localization.student_t.log_interval`); the
     # rest, TRUNC_NATS below, keep the untruncated value, an upper bound
@@ -578,7 +601,8 @@ def censored_correction(
 
     Args:
         A: ``(m, N)`` responses; z: ``(m,)`` readings (zeros are the censored ones);
-        r: ``(m,)`` noise weights; logl: ``(N,)`` the positive readings' log evidence.
+        r: ``(m,)`` noise weights, or ``(m, N)``: each candidate's own; logl: ``(N,)`` the
+        positive readings' log evidence.
     """
     cen = z <= 0.0
     out = np.zeros(logl.shape)
@@ -586,17 +610,15 @@ def censored_correction(
         return out
     pos = ~cen
     Ap = A[pos]
-    w = 1.0 / r[pos] ** 2
     zp = z[pos]
-    zz = float(w @ zp**2)
     alpha_n = alpha0 + 0.5 * (int(pos.sum()) - 1)
     # the zeros' responses over their noise weights, a row per candidate
-    Bt = np.ascontiguousarray((A[cen] / r[cen][:, None]).T)
+    rc = r[cen] if r.ndim == 2 else r[cen][:, None]
+    Bt = np.ascontiguousarray((A[cen] / rc).T)
     qmax = np.inf if q_max is None else q_max
     # a plug-in pass over every candidate (rate and noise at their estimates) orders the
     # candidates and stands in for the exact factor where the mass is negligible
-    aa = np.maximum(w @ (Ap * Ap), 1e-300)
-    az = (w * zp) @ Ap
+    aa, az, zz = _weighted_sums(Ap, Ap * Ap, zp, r[pos])
     qh = az / aa
     beta_n = beta0 + 0.5 * np.maximum(zz - az * qh, 0.0)
     lam = np.clip(qh, 0.0, qmax) * np.sqrt(alpha_n / beta_n)
@@ -681,6 +703,7 @@ def adjoint_log_evidence(
     sigma0_fraction: float = 0.25,
     sigma0_floor: float = 0.0,
     censored: bool | Literal["deferred"] = True,
+    noise_weights: Literal["plug-in", "candidate", "larger"] = "plug-in",
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """``log p(z | s)`` for every candidate source (columns of ``A``), release rate and noise integrated out.
 
@@ -701,12 +724,22 @@ def adjoint_log_evidence(
             evidence and leaves the zeros' factor to the caller (``details["censor"]``: the
             keyword arguments of :func:`censored_correction` besides ``logl``), for callers
             that skip it where it cannot matter.
+        noise_weights: where the proportional noise ``r_i = 1 + kappa c_i / cbar`` takes its
+            concentrations ``c_i`` (:data:`NOISE_WEIGHTS`): ``"plug-in"``, the posterior-predictive
+            mean of a first, homoscedastic pass (the same weights for every candidate);
+            ``"candidate"``, each candidate's own prediction ``clip(qhat, 0, q_max) a_i(s)``
+            of that pass (Table I's noise given that source: a candidate that predicts high
+            concentrations where the readings are low pays ``log r_i`` for each);
+            ``"larger"``, the larger of the two (such a candidate pays, and a high reading
+            that the plug-in expects does not rule out a candidate whose flow, maybe wrong,
+            predicts less there).
 
     Returns:
         ``(log_evidence (N,), details)`` with ``details``: ``qhat`` ``(N,)`` (least-squares
         rate of the most probable ``kappa``, g/s), ``kappa_weights`` (posterior weights of
         ``kappas``), ``kappa`` (the most probable), ``chat`` ``(m,)`` (plug-in concentrations),
-        ``sigma_floor`` (posterior-mean noise floor at the best cell, ppm).  The evidence is
+        ``sigma_floor`` (posterior-mean noise floor at the best cell, ppm), ``r`` (the most
+        probable ``kappa``'s noise weights, ``(m,)`` or ``(m, N)``).  The evidence is
         defined up to a constant independent of ``s`` (the same for every ``kappa``).
     """
     A = np.asarray(A, dtype=np.float64)
@@ -718,6 +751,7 @@ def adjoint_log_evidence(
     ks = [float(k) for k in kappas]
     if not ks or any(not (k >= 0 and math.isfinite(k)) for k in ks):
         raise InputDataError(f"kappas must be finite and >= 0, got {kappas}")
+    check_noise_weights(noise_weights)
     if not (sigma0_floor >= 0 and math.isfinite(sigma0_floor)):
         raise InputDataError(f"sigma0_floor must be a finite number of ppm >= 0, got {sigma0_floor}")
     s0 = max(sigma0_fraction * float(z.mean()), float(sigma0_floor), 1e-9 * max(float(z.max()), 1.0), 1e-12)
@@ -744,7 +778,7 @@ def adjoint_log_evidence(
     if ks == [0.0]:
         logl0 = _censored(logl0, ones)
         best = int(np.argmax(logl0))
-        details.update(qhat=qhat0, kappa_weights=np.ones(1), kappa=0.0, chat=None, best=best)
+        details.update(qhat=qhat0, kappa_weights=np.ones(1), kappa=0.0, chat=None, best=best, r=ones)
         return logl0, details
     # plug-in concentrations at the sensors from the homoscedastic pass (positive readings)
     post0 = np.exp(logl0 - logl0.max())
@@ -756,8 +790,18 @@ def adjoint_log_evidence(
     if not cbar > 0:
         ks = [0.0]
     logls, qhats, totals = [], [], []
+
+    def weights(k: float) -> np.ndarray:
+        if k == 0.0:
+            return ones
+        if noise_weights == "candidate":
+            return 1.0 + (k / cbar) * (A * qclip)
+        if noise_weights == "larger":
+            return 1.0 + (k / cbar) * np.maximum(A * qclip, chat[:, None])
+        return 1.0 + k * chat / cbar
+
     for k in ks:
-        r = ones if k == 0.0 else 1.0 + k * chat / cbar
+        r = weights(k)
         # kappa = 0 is the homoscedastic pass above
         ll, qh = (logl0, qhat0) if k == 0.0 else _evidence(Ap, Ap2, zp, r[pos], q_max, alpha0, beta0)[:2]
         logls.append(ll)
@@ -772,17 +816,26 @@ def adjoint_log_evidence(
     kw /= kw.sum()
     kbest = int(np.argmax(kw))
     # the zeros' factor with the most probable kappa's noise weights (one pass, not one per kappa)
-    r_best = ones if ks[kbest] == 0.0 else 1.0 + ks[kbest] * chat / cbar
+    r_best = weights(ks[kbest])
     logl = _censored(logl, r_best)
     details.update(
-        qhat=qhats[kbest], kappa_weights=kw, kappa=ks[kbest], chat=chat, cbar=cbar, best=int(np.argmax(logl))
+        qhat=qhats[kbest],
+        kappa_weights=kw,
+        kappa=ks[kbest],
+        chat=chat,
+        cbar=cbar,
+        best=int(np.argmax(logl)),
+        r=r_best,
     )
     return logl, details
 
 
 def sigma_floor(A: np.ndarray, z: np.ndarray, r: np.ndarray, s: int, alpha0: float, beta0: float) -> float:
-    """Posterior-mean noise floor ``E[sigma^2]^(1/2)`` given the source ``s`` (ppm)."""
-    w = 1.0 / r**2
+    """Posterior-mean noise floor ``E[sigma^2]^(1/2)`` given the source ``s`` (ppm).
+
+    ``r``: the noise weights, ``(m,)`` or ``(m, N)`` (each candidate's own: column ``s``).
+    """
+    w = 1.0 / (r[:, s] if r.ndim == 2 else r) ** 2
     a = A[:, s]
     aa = max(float(w @ a**2), 1e-300)
     az = float((w * z) @ a)
@@ -848,6 +901,9 @@ class AdjointEstimator(KnowledgeUser):
             :func:`noise_scale_floor` (:func:`prior_noise_floor`: ``"always"``,
             ``"unscaled"`` while fewer than two readings are positive, ``"never"``: from
             the readings alone, ``sigma0_fraction * mean(z)``).
+        noise_weights: the proportional noise's concentrations, ``"plug-in"``, each
+            candidate's own (``"candidate"``) or the larger (``"larger"``;
+            :func:`adjoint_log_evidence`).
         censored: read zero readings as censored (:func:`censored_correction`); False: as exact zeros.
         candidate_speeds: inlet speeds solved for the wind fit (estimated variant), m/s.
         refine_speed: solve once more at the fitted speed (else use the best candidate).
@@ -866,6 +922,7 @@ class AdjointEstimator(KnowledgeUser):
     alpha0: float = 1.0
     sigma0_fraction: float = 0.25
     noise_floor_prior: Literal["always", "unscaled", "never"] = "never"
+    noise_weights: Literal["plug-in", "candidate", "larger"] = "plug-in"
     censored: bool = True
     candidate_speeds: Sequence[float] = DEFAULT_SPEEDS
     refine_speed: bool = True
@@ -879,6 +936,7 @@ class AdjointEstimator(KnowledgeUser):
         if self.wind not in ("oracle", "estimated"):
             raise InputDataError(f"wind must be 'oracle' or 'estimated', got {self.wind!r}")
         check_noise_floor_mode(self.noise_floor_prior)
+        check_noise_weights(self.noise_weights)
         if self.q_max is not None:
             q = float(self.q_max)
             if not (q > 0 and math.isfinite(q)):
@@ -1016,6 +1074,7 @@ class AdjointEstimator(KnowledgeUser):
             sigma0_fraction=self.sigma0_fraction,
             sigma0_floor=s0_floor,
             censored=self.censored,
+            noise_weights=self.noise_weights,
         )
         post = np.exp(logl - logl.max())
         post /= post.sum()
@@ -1033,11 +1092,7 @@ class AdjointEstimator(KnowledgeUser):
         mean = wts @ fields
         var = np.maximum(wts @ fields**2 - mean**2, 0.0)
         mu, s2 = log_moments_from_ppm(mesh.field(np.maximum(mean, 0.0)), mesh.field(var))
-        chat = det.get("chat")
-        r_best = (
-            np.ones_like(z) if chat is None or det["kappa"] == 0 else 1.0 + det["kappa"] * chat / det["cbar"]
-        )
-        sig = sigma_floor(A, z, r_best, best, self.alpha0, self.alpha0 * det["s0"] ** 2)
+        sig = sigma_floor(A, z, det["r"], best, self.alpha0, self.alpha0 * det["s0"] ** 2)
         model = AdjointResponseModel(fm, qmap, sig, float(det["kappa"]), float(det.get("cbar", 1.0)))
         bi, bj = (int(v) for v in mesh.cells[best])
         info: dict[str, Any] = {
