@@ -11,6 +11,8 @@ each, from 5 to 300 random readings (Table I noise), 2 trials on each of 12 gene
 scenarios (seeds 900-911, a range kept for validation).
 
     python benchmarks/tune_phys_noise_weights.py -o benchmarks/results/phys_noise_weights.json
+    python benchmarks/tune_phys_noise_weights.py --settings candidate candidate-T50 candidate-T25 \
+        -o benchmarks/results/phys_noise_weights_tempering.json
 """
 
 from __future__ import annotations
@@ -22,7 +24,12 @@ from phys_tuning import sweep, write_rows  # this folder's
 
 SEEDS = range(900, 912)
 COUNTS = (5, 20, 50, 150, 300)
-SETTINGS = {name: {"noise_weights": name} for name in ("plug-in", "candidate", "larger")}
+SETTINGS: dict[str, dict] = {name: {"noise_weights": name} for name in ("plug-in", "candidate", "larger")}
+# the candidate weights with the tempering of more readings (``T = max(1, m / effective_readings)``,
+# 100 by default at ``openings``): a sharper likelihood may need more of it
+SETTINGS.update(
+    {f"candidate-T{m}": {"noise_weights": "candidate", "effective_readings": m} for m in (50, 25)}
+)
 
 
 def main() -> None:
@@ -30,8 +37,9 @@ def main() -> None:
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/phys_noise_weights.json"))
     ap.add_argument("--seeds", type=int, default=len(SEEDS), help="only the first N scenarios")
     ap.add_argument("--trials", type=int, default=2)
+    ap.add_argument("--settings", nargs="+", choices=sorted(SETTINGS), default=list(SETTINGS))
     args = ap.parse_args()
-    names = list(SETTINGS)
+    names = list(args.settings)
     seeds = list(SEEDS)[: args.seeds]
     err, ce = sweep("openings", names, SETTINGS.__getitem__, seeds, COUNTS, trials=args.trials)
     write_rows(args.out, err, ce, names, COUNTS, {"seeds": seeds, "trials": args.trials})
