@@ -791,13 +791,18 @@ def adjoint_log_evidence(
         ks = [0.0]
     logls, qhats, totals = [], [], []
 
+    # each candidate's concentrations at the sensors, once for every kappa (the same arithmetic)
+    own = None
+    if noise_weights == "candidate":
+        own = A * qclip
+    elif noise_weights == "larger":
+        own = np.maximum(A * qclip, chat[:, None])
+
     def weights(k: float) -> np.ndarray:
         if k == 0.0:
             return ones
-        if noise_weights == "candidate":
-            return 1.0 + (k / cbar) * (A * qclip)
-        if noise_weights == "larger":
-            return 1.0 + (k / cbar) * np.maximum(A * qclip, chat[:, None])
+        if own is not None:
+            return 1.0 + (k / cbar) * own
         return 1.0 + k * chat / cbar
 
     for k in ks:
