@@ -7,6 +7,12 @@ run ended (converged, stalled, diverged).
     python benchmarks/solver_robustness.py --start 100 --count 40
 
 Writes ``benchmarks/results/solver_robustness.{json,md}``.
+
+``--ser-small 0 0.9 0.95`` instead solves each layout once for every value of
+``FlowSettings.alpha_turb_max_small`` (the turbulence relaxation bound of
+paper-size maps; 0: no SER), back to back, and compares iterations, CPU
+seconds and the wind against the first value's; it writes
+``benchmarks/results/solver_ser_small.{json,md}`` (how the default was chosen).
 """
 
 from __future__ import annotations
@@ -25,7 +31,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--start", type=int, default=100)
     ap.add_argument("--count", type=int, default=40)
+    ap.add_argument("--ser-small", type=float, nargs="+", default=None, metavar="ALPHA")
     args = ap.parse_args()
+    if args.ser_small:
+        compare_ser_small(args.start, args.count, args.ser_small)
+        return
     rows = []
     for seed in range(args.start, args.start + args.count):
         rng = as_generator(seed)
@@ -86,6 +96,84 @@ def main() -> None:
         )
     (out / "solver_robustness.md").write_text("\n".join(md) + "\n")
     print(md[0])
+
+
+def compare_ser_small(start: int, count: int, values: list[float]) -> None:
+    """Each layout solved with every ``alpha_turb_max_small`` in turn (interleaved, so that a
+    busy machine slows them alike); CPU seconds, as wall time on a shared machine is noisy."""
+    import time
+
+    import numpy as np
+
+    from dgse.physics.rans import FlowSettings
+
+    rows = []
+    for seed in range(start, start + count):
+        rng = as_generator(seed)
+        layout = random_layout(rng)
+        v = random_inlet_velocity(rng)
+        if seed == start:
+            flow_and_transport(layout, v)  # numba's kernels loaded: not timed
+        winds = []
+        for a in values:
+            c = time.process_time()
+            flow, _ = flow_and_transport(layout, v, settings=FlowSettings(alpha_turb_max_small=a))
+            i = flow.info
+            rows.append(
+                {
+                    "seed": seed,
+                    "alpha_turb_max_small": a,
+                    "cells": int(layout.free.sum()),
+                    "iterations": i["iterations"],
+                    "converged": i["converged"],
+                    "cpu_s": time.process_time() - c,
+                }
+            )
+            winds.append(flow.wind)
+        for r, w in zip(rows[-len(values) :], winds, strict=True):
+            r["wind_rel_diff"] = float(np.linalg.norm(w - winds[0]) / np.linalg.norm(winds[0]))
+        print(json.dumps(rows[-len(values) :]), flush=True)
+    summary = []
+    for a in values:
+        rr = [r for r in rows if r["alpha_turb_max_small"] == a]
+        both = [
+            (r, b)
+            for r, b in zip(rr, [r for r in rows if r["alpha_turb_max_small"] == values[0]], strict=True)
+            if r["converged"] and b["converged"]
+        ]
+        summary.append(
+            {
+                "alpha_turb_max_small": a,
+                "converged": sum(r["converged"] for r in rr),
+                "median_iterations": float(np.median([r["iterations"] for r in rr])),
+                "median_cpu_s": float(np.median([r["cpu_s"] for r in rr])),
+                "total_cpu_s": float(sum(r["cpu_s"] for r in rr)),
+                "more_iterations_than_first": sum(r["iterations"] > b["iterations"] for r, b in both),
+                "median_wind_rel_diff": float(np.median([r["wind_rel_diff"] for r, _ in both])),
+                "max_wind_rel_diff": float(max(r["wind_rel_diff"] for r, _ in both)),
+            }
+        )
+    out = REPO / "benchmarks" / "results"
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "solver_ser_small.json").write_text(json.dumps({"summary": summary, "runs": rows}, indent=1))
+    md = [
+        f"Seeds {start}-{start + count - 1} (training-distribution layouts, all under 12k free cells), "
+        "each solved with every `FlowSettings.alpha_turb_max_small` back to back "
+        f"(`python benchmarks/solver_robustness.py --start {start} --count {count} --ser-small "
+        f"{' '.join(f'{a:g}' for a in values)}`); wind difference against the first value's flow.",
+        "",
+        "| alpha_turb_max_small | converged | median iterations | median CPU s | total CPU s | "
+        "more iterations than the first | wind rel. diff median / max |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in summary:
+        md.append(
+            f"| {r['alpha_turb_max_small']:g} | {r['converged']} of {count} | {r['median_iterations']:.0f} | "
+            f"{r['median_cpu_s']:.2f} | {r['total_cpu_s']:.1f} | {r['more_iterations_than_first']} | "
+            f"{r['median_wind_rel_diff']:.1e} / {r['max_wind_rel_diff']:.1e} |"
+        )
+    (out / "solver_ser_small.md").write_text("\n".join(md) + "\n")
+    print("\n".join(md))
 
 
 if __name__ == "__main__":

@@ -1,7 +1,8 @@
 """Built-in solver against OpenFOAM, side by side on the same layouts; the built-in one at building scale.
 
 Every solve runs in a fresh Python process (``--worker``), so the wall times
-count process start-up and imports, for both engines.  Layouts: the three
+count process start-up and imports, for both engines; the layouts are drawn
+beforehand and read from a file, as a user's own layout would be.  Layouts: the three
 OpenFOAM reference layouts (accuracy against the reference files) and
 random training-distribution layouts (accuracy of the built-in solver
 against OpenFOAM's solution of the same layout); then a size sweep of
@@ -41,7 +42,7 @@ def worker(args: argparse.Namespace) -> None:
     from dgse.errors import ConvergenceError
     from dgse.physics.engines import Source
 
-    layout, v_in, sources = _scenario(args.scenario)
+    layout, v_in, sources = _load_scenario(args.scenario)
     if args.warm:
         json.dump(warm_start(layout, v_in, args.warm), open(args.out + ".json", "w"))
         return
@@ -175,12 +176,35 @@ def _scenario(spec: str):
     return layout, v, random_sources(layout, rng, n=4)
 
 
+def _load_scenario(path: str):
+    """What :func:`prepare` wrote: the layout, the inlet speed and the four sources."""
+    from dgse.world.layout_io import load_layout
+
+    meta = json.loads(Path(path).with_suffix(".json").read_text())
+    return load_layout(path), meta["inlet_velocity"], [(tuple(p), q) for p, q in meta["sources"]]
+
+
 # ------------------------------------------------------------------------------ driver
+def prepare(scenario: str, tmp: Path) -> Path:
+    """Draw the scenario once and write it where the workers read it: drawing a layout
+    (which imports the generators and scipy.ndimage) is no part of either engine's start-up."""
+    from dgse.world.layout_io import save_layout
+
+    path = tmp / f"scenario_{scenario.replace(':', '_')}.npz"
+    if not path.exists():
+        layout, v, sources = _scenario(scenario)
+        save_layout(layout, path)
+        src = [[[float(x) for x in p], float(q)] for p, q in sources]
+        path.with_suffix(".json").write_text(json.dumps({"inlet_velocity": float(v), "sources": src}))
+    return path
+
+
 def run(
     engine: str, scenario: str, tmp: Path, tolerance: float | None = None, warm: list[float] | None = None
 ) -> dict:
     out = str(tmp / f"{engine}_{scenario.replace(':', '_')}{'_warm' if warm else ''}")
-    cmd = [sys.executable, __file__, "--worker", "--engine", engine, "--scenario", scenario, "--out", out]
+    file = str(prepare(scenario, tmp))
+    cmd = [sys.executable, __file__, "--worker", "--engine", engine, "--scenario", file, "--out", out]
     if tolerance:
         cmd += ["--tolerance", str(tolerance)]
     if warm:

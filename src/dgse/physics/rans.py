@@ -90,8 +90,9 @@ class FlowSettings:
     coarse_cells: int = 30000
     #: residual tolerance of that coarse solution (it only has to be a good start)
     coarse_tolerance: float = 1e-3
-    #: switched evolution relaxation (SER) of the turbulence on maps with more free cells
-    #: than this (0: never): the pseudo-time step ``alpha / (1 - alpha)`` of the k and epsilon
+    #: switched evolution relaxation (SER) of the turbulence, bounded by ``alpha_turb_max`` on
+    #: maps with more free cells than this and by ``alpha_turb_max_small`` on the others (0: no
+    #: SER on any map): the pseudo-time step ``alpha / (1 - alpha)`` of the k and epsilon
     #: equations grows as ``r0 / r`` (``r``: the worst residual of the last five iterations,
     #: ``r0``: of the first five) from that of ``alpha_turb`` up to that of ``alpha_turb_max``;
     #: a rising residual takes it back.  Large rooms converge slowly otherwise: the turbulence
@@ -100,6 +101,11 @@ class FlowSettings:
     #: fluxes)
     ser_cells: int = 12000
     alpha_turb_max: float = 0.99
+    #: the SER bound on maps of at most ``ser_cells`` free cells (``alpha_turb`` or less: no
+    #: SER there).  Paper-size maps converge in fewer iterations with it, but ``alpha_turb_max``
+    #: makes some of them stall; the value was chosen on generated layouts
+    #: (``benchmarks/results/solver_speed.md``)
+    alpha_turb_max_small: float = 0.9
     #: Gauss-Seidel sweeps at most per k and epsilon solve under SER: with the pseudo-time
     #: step near that of ``alpha_turb_max`` those equations lose their diagonal dominance
     #: and a solve to ``rel_tol`` takes ~50 sweeps (most of an iteration's time on large
@@ -820,7 +826,8 @@ def _simplec(
     worst: list[float] = []
     n_limited = 0
     sweeps = {"U": 0, "k": 0, "epsilon": 0}
-    ser = 0 < s.ser_cells < n
+    a_max = s.alpha_turb_max if n > s.ser_cells else s.alpha_turb_max_small
+    ser = s.ser_cells > 0 and a_max > s.alpha_turb
     capped = ser and s.ser_max_sweeps < s.max_sweeps  # turbulence sweeps capped until a stall
     uncapped_at = None
     window_start = 0  # the stall test looks at the residuals since the last switch
@@ -829,7 +836,7 @@ def _simplec(
     for it in range(1, s.max_iterations + 1):
         F = st.F
         if ser:
-            a_t = _relaxation(s.alpha_turb, s.alpha_turb_max, _pseudo_step_factor(worst))
+            a_t = _relaxation(s.alpha_turb, a_max, _pseudo_step_factor(worst))
             s_it = replace(s, alpha_turb=a_t, max_sweeps=s.ser_max_sweeps if capped else s.max_sweeps)
         nueff = nu + st.nut
         yplus, nutw = turb.wall_functions(st.k)

@@ -4,15 +4,17 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from dgse.physics.constants import DEFAULT_PHYSICS
 from dgse.physics.engines import Engine, Solution, Source, get_engine
 from dgse.world.case import Case
-from dgse.world.generate import RngLike, as_generator, random_inlet_velocity, random_layout
-from dgse.world.generate import random_sources as _random_sources
 from dgse.world.layout import Layout
+
+if TYPE_CHECKING:
+    from dgse.world.generate import RngLike
 
 
 def solution_to_cases(
@@ -74,6 +76,10 @@ def random_cases(
     rng_or_seed: RngLike = None, n_sources: int = 4, engine: str | Engine = "builtin", **layout_kw
 ) -> list[Case]:
     """A random training-distribution layout (spec section 3) solved for ``n_sources`` sources."""
+    # imported here: the generators load scipy.ndimage, which solving a given case never needs
+    from dgse.world.generate import as_generator, random_inlet_velocity, random_layout
+    from dgse.world.generate import random_sources as _random_sources
+
     rng = as_generator(rng_or_seed)
     layout = random_layout(rng, **layout_kw)
     v = random_inlet_velocity(rng)
