@@ -11,7 +11,7 @@ floors (``random_layout_with_rooms``); then warm starts (the same map at
 another inlet speed); then the time it takes to report a flow that does not
 converge.
 
-    python benchmarks/solver_speed.py                  # full run, ~30 min on 2 cores
+    python benchmarks/solver_speed.py --floors --repeat 4   # full run, ~20 min on 2 cores
     python benchmarks/solver_speed.py --random 1 --sizes 10 20 --floors   # quick look
 
 Writes ``benchmarks/results/solver_speed.json`` and ``solver_speed.md``.
@@ -240,6 +240,7 @@ def main() -> None:
     ap.add_argument("--warm", type=float, nargs="*", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--shared", default="", help="a note on other work running on the machine meanwhile")
     ap.add_argument("--no-openfoam", action="store_true")
+    ap.add_argument("--repeat", type=int, default=1, help="side-by-side passes (timing only after the first)")
     args = ap.parse_args()
     if args.worker:
         worker(args)
@@ -258,6 +259,7 @@ def main() -> None:
         "openfoam": use_foam,
         "shared": args.shared,
         "layouts": [],
+        "repeats": [],
         "sizes": [],
         "floors": [],
         "warm_start": None,
@@ -290,6 +292,14 @@ def main() -> None:
                         row["openfoam_vs_reference"] = errors(fw, fc, ref_wind, ref_conc, free)
             results["layouts"].append(row)
             print(json.dumps(row, default=float)[:400], flush=True)
+        # more passes, timing only: on a 2-core machine one pass's times vary by tens of percent
+        for rep in range(1, args.repeat if use_foam else 1):
+            for sc in scenarios:
+                b, f = run("builtin", sc, tmp), run("openfoam", sc, tmp)
+                rrow = {"pass": rep + 1, "scenario": sc, "builtin_s": b["wall_s"], "openfoam_s": f["wall_s"]}
+                rrow["speedup"] = f["wall_s"] / b["wall_s"]
+                results["repeats"].append(rrow)
+                print(json.dumps(rrow), flush=True)
         for side in args.sizes:
             for seed in (7, 8) if side < 40 else (7,):  # 400 x 400: one seed (minutes each)
                 b = run("builtin", f"rand:{seed}:{side:g}", tmp)
@@ -325,6 +335,44 @@ def main() -> None:
     print(markdown(results))
 
 
+def _repeats_markdown(r: dict) -> list[str]:
+    """The speed-up of every pass per layout, each pass's median, and the ratio of the median times."""
+    reps = r.get("repeats") or []
+    if not reps:
+        return []
+    passes: dict[int, dict[str, dict]] = {1: {}}
+    for row in r["layouts"]:
+        if "speedup" in row:
+            passes[1][row["scenario"]] = {
+                "builtin_s": row["builtin"]["wall_s"],
+                "openfoam_s": row["openfoam"]["wall_s"],
+                "speedup": row["speedup"],
+            }
+    for row in reps:
+        passes.setdefault(row["pass"], {})[row["scenario"]] = row
+    names = list(passes[1])
+    lines = [
+        "",
+        f"The same side by side in {len(passes)} passes (timing only after the first; speed-up per pass, "
+        "then OpenFOAM's median time over the built-in solver's):",
+        "",
+        "| layout | " + " | ".join(f"pass {k}" for k in passes) + " | median times |",
+        "|---|" + "---|" * (len(passes) + 1),
+    ]
+    ratios = []
+    for name in names:
+        b = statistics.median(p[name]["builtin_s"] for p in passes.values())
+        f = statistics.median(p[name]["openfoam_s"] for p in passes.values())
+        ratios.append(f / b)
+        cells = " | ".join(f"{p[name]['speedup']:.1f}" for p in passes.values())
+        lines.append(f"| {name} | {cells} | {f / b:.1f} ({f:.2f} / {b:.2f} s) |")
+    meds = [statistics.median(p[n]["speedup"] for n in names) for p in passes.values()]
+    lines.append(
+        "| median | " + " | ".join(f"{m:.1f}" for m in meds) + f" | {statistics.median(ratios):.1f} |"
+    )
+    return lines
+
+
 def markdown(r: dict) -> str:
     lines = [
         "Wall seconds per layout with four sources, each in a fresh process (start-up included); "
@@ -347,6 +395,7 @@ def markdown(r: dict) -> str:
     sp = [row["speedup"] for row in r["layouts"] if "speedup" in row]
     if sp:
         lines.append(f"\nMedian speed-up {statistics.median(sp):.1f}x (min {min(sp):.1f}x).")
+    lines += _repeats_markdown(r)
     lines += [
         "",
         "Growth with the map size (square random layouts by seed; multi-room floors "
