@@ -99,7 +99,7 @@ def test_capped_turbulence_sweeps_are_lifted_when_they_stall(plain):
     assert info["ser"] and info["turbulence_sweeps_uncapped_at"] is None
 
 
-def test_paper_size_defaults_relax_the_turbulence_less(plain):
+def test_paper_size_defaults_grow_the_turbulence_step_to_the_small_bound(plain):
     """Under 12k cells the defaults start from rest with SER bounded by ``alpha_turb_max_small``:
     fewer iterations than the plain iteration; without SER there they are that iteration,
     bit for bit."""
@@ -112,6 +112,16 @@ def test_paper_size_defaults_relax_the_turbulence_less(plain):
     st, info = solve_flow(layout, mesh, 1.5, settings=no_ser)
     assert not info["ser"] and info["iterations"] == info0["iterations"]
     assert np.array_equal(st.ux, st0.ux) and np.array_equal(st.k, st0.k)
+
+
+@pytest.mark.parametrize("field", ["alpha_turb_max_small", "alpha_turb_max", "alpha_turb"])
+def test_relaxation_bounds_outside_the_unit_interval_are_rejected(field):
+    from dgse.errors import InputDataError
+
+    with pytest.raises(InputDataError, match=field):
+        FlowSettings(**{field: 1.0})
+    with pytest.raises(InputDataError, match=field):
+        FlowSettings(**{field: -0.1})
 
 
 def test_coarsen_layout_keeps_walls_and_openings():

@@ -104,7 +104,7 @@ class FlowSettings:
     #: the SER bound on maps of at most ``ser_cells`` free cells (``alpha_turb`` or less: no
     #: SER there).  Paper-size maps converge in fewer iterations with it, but ``alpha_turb_max``
     #: makes some of them stall; the value was chosen on generated layouts
-    #: (``benchmarks/results/solver_speed.md``)
+    #: (``benchmarks/results/solver_ser_small.md``)
     alpha_turb_max_small: float = 0.9
     #: Gauss-Seidel sweeps at most per k and epsilon solve under SER: with the pseudo-time
     #: step near that of ``alpha_turb_max`` those equations lose their diagonal dominance
@@ -119,6 +119,12 @@ class FlowSettings:
     #: rounding.  False: the plain division in the sweeps' natural order (the flows of
     #: results recorded before 2026-11-26 also differ in the k-epsilon kernels' last bits)
     short_chain: bool = True
+
+    def __post_init__(self) -> None:
+        for name in ("alpha_u", "alpha_turb", "alpha_turb_max", "alpha_turb_max_small"):
+            a = getattr(self, name)
+            if not (0.0 <= a <= 1.0) or (a == 1.0 and name != "alpha_u"):
+                raise InputDataError(f"FlowSettings.{name} must lie in [0, 1) (alpha_u: [0, 1]), got {a!r}")
 
 
 @dataclass
