@@ -713,13 +713,13 @@ def solve_flow(
             start = "coarse"
     s_fine = replace(s, max_seconds=s.max_seconds - (time.perf_counter() - t0))
     st, info = _simplec(layout, mesh, inlet_velocity, physics, s_fine, progress, initial)
-    attempts = [_summary(info, s)]
+    attempts = [_summary(info, s, start)]
     if (info["stalled"] or info["diverged"]) and s.retry_relaxation is not None:
         a_u, a_t = s.retry_relaxation
         left = s.max_seconds - (time.perf_counter() - t0)
         s2 = replace(s, alpha_u=a_u, alpha_turb=a_t, max_seconds=left, ser_cells=0)
         st, info = _simplec(layout, mesh, inlet_velocity, physics, s2, progress, initial)
-        attempts.append(_summary(info, s2))
+        attempts.append(_summary(info, s2, start))
     if (info["stalled"] or info["diverged"]) and s.coarse_retry and start == "rest" and coarse_info is None:
         # another path to the same steady state: from the coarse grid's solution
         initial_c, coarse_info = _coarse_start(layout, mesh, inlet_velocity, physics, s)
@@ -727,7 +727,7 @@ def solve_flow(
             left = s.max_seconds - (time.perf_counter() - t0)
             s_c = replace(s, max_seconds=left)
             st_c, info_c = _simplec(layout, mesh, inlet_velocity, physics, s_c, progress, initial_c)
-            attempts.append({**_summary(info_c, s_c), "start": "coarse"})
+            attempts.append(_summary(info_c, s_c, "coarse"))
             if not (info_c["stalled"] or info_c["diverged"]):
                 st, info, start = st_c, info_c, "coarse"
     info["attempts"] = attempts
@@ -765,10 +765,11 @@ def _converged(residuals: dict[str, float], s: FlowSettings) -> bool:
     return p_ok and all(v < s.tolerance for k, v in residuals.items() if k != "p")
 
 
-def _summary(info: dict, s: FlowSettings) -> dict:
+def _summary(info: dict, s: FlowSettings, start: str) -> dict:
     keys = ("iterations", "converged", "stalled", "diverged", "residuals", "seconds")
     return {
         **{k: info[k] for k in keys},
+        "start": start,
         "alpha_u": s.alpha_u,
         "alpha_turb": s.alpha_turb,
         "ser": info["ser"],
