@@ -242,6 +242,9 @@ def mix_posteriors(
 #: evidence (its weight would need the gas readings to favour it by as much; between inlet
 #: speeds of one layout they differ by a few nats, since concentrations scale as ``q / v_in``).
 WIND_HOPELESS_NATS = 30.0
+#: the noise-weight modes ``noise_weights="mixture"`` averages (the first one's evidence also
+#: gives the predictive fields)
+MIXED_NOISE_WEIGHTS = ("plug-in", "candidate")
 #: A hypothesis whose evidence bound falls this many nats below the best one's evidence is
 #: not corrected for the zero readings (its weight is below ``exp(-HOPELESS)`` either way).
 HOPELESS_NATS = 10.0
@@ -348,7 +351,9 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             ``"always"``, ``"unscaled"`` while fewer than two readings are positive, ``"never"``).
         noise_weights: the proportional noise's concentrations, ``"plug-in"``, each
             candidate's own (``"candidate"``) or the larger (``"larger"``;
-            :func:`~dgse.localization.adjoint.adjoint_log_evidence`).
+            :func:`~dgse.localization.adjoint.adjoint_log_evidence`); ``"mixture"``: the
+            equal-weight average of the ``"plug-in"`` and ``"candidate"`` posteriors (the
+            planner follows the sharper one, a mass stop needs both; twice the evidence work).
         conc_components: sources per hypothesis in the concentration estimate (drawn from
             its source posterior by :func:`predictive_sources`).
         min_weight: hypotheses below this posterior weight are left out of the predictive.
@@ -405,7 +410,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     alpha0: float = 1.0
     sigma0_fraction: float = 0.25
     noise_floor_prior: Literal["always", "unscaled", "never"] = "never"
-    noise_weights: Literal["plug-in", "candidate", "larger"] = "plug-in"
+    noise_weights: Literal["plug-in", "candidate", "larger", "mixture"] = "plug-in"
     conc_components: int = 32
     min_weight: float = 1e-4
     temperature: float = 1.0
@@ -432,7 +437,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
 
     def __post_init__(self) -> None:
         check_noise_floor_mode(self.noise_floor_prior)
-        check_noise_weights(self.noise_weights)
+        if self.noise_weights != "mixture":
+            check_noise_weights(self.noise_weights)
         speeds = [float(v) for v in self.speeds]
         if not speeds or any(not (v > 0 and math.isfinite(v)) for v in speeds):
             raise InputDataError(f"speeds must be positive numbers of m/s, got {self.speeds}")
@@ -600,6 +606,54 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             self._learned = get_estimator("dgse-s", seed=0, dtype="bf16", channels_last=True)
         return self._learned.estimate(occupancy, resolution, obs)
 
+    def _gas_posterior(
+        self,
+        hyps: list[FlowHypothesis],
+        live: list[int],
+        log_prior: list[float],
+        cells: np.ndarray,
+        z: np.ndarray,
+        s0_floor: float,
+        temp: float,
+        t_h: float,
+        noise_weights: str,
+    ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], list[tuple[Any, dict[str, Any]]]]:
+        """The source posterior and hypothesis weights from the gas readings with one noise-weight
+        mode: ``(post, weights, tempered log evidence per hypothesis, (rows, details) per hypothesis)``.
+        Hypotheses outside ``live`` (ruled out by the wind) get no gas evidence."""
+
+        def evidence(h: FlowHypothesis) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+            A = h.flow.responses(cells)
+            logl, det = adjoint_log_evidence(
+                A,
+                z,
+                q_max=self.q_max,
+                kappas=self.kappas,
+                alpha0=self.alpha0,
+                sigma0_fraction=self.sigma0_fraction,
+                sigma0_floor=s0_floor,
+                censored="deferred" if self.censored else False,
+                noise_weights=noise_weights,
+            )
+            return A, logl, det
+
+        # one flow's rows and evidence per thread (each flow keeps its own caches)
+        got = dict(zip(live, map_threads(evidence, [hyps[k] for k in live]), strict=True))
+        log_ev: list[np.ndarray] = []
+        details: list[tuple[Any, dict[str, Any]]] = []
+        for k, h in enumerate(hyps):
+            if k not in got:
+                log_ev.append(np.full(h.flow.mesh.n, -np.inf))
+                details.append((None, {}))
+                continue
+            A, logl, det = got[k]
+            log_ev.append(logl)
+            details.append((A, det))
+        zeros = _censor(log_ev, log_prior, [d for _, d in details], temp, self.censored_ranking)
+        log_ev = [x / temp for x in zeros]
+        post, hw = mix_posteriors(log_ev, log_prior, t_h)
+        return post, hw, log_ev, details
+
     # -- estimate ---------------------------------------------------------------------------------
     @with_one_blas_thread
     def estimate(self, occupancy: np.ndarray, resolution: float, observations: Observations) -> Belief:
@@ -619,7 +673,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         t_flow = time.perf_counter() - t0
         free_scale = self.knowledge.level == "map"  # proposals are solved at one speed
         cells, z = obs.cells, obs.gas
-        log_ev, details, log_prior, scales = [], [], [], []
+        log_prior: list[float] = []
+        scales: list[float] = []
         temp = self.temperature
         m_eff = self.effective_readings
         if m_eff is None:
@@ -637,37 +692,17 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         s0_floor = prior_noise_floor(
             [h.flow for h in hyps], z, self.q_max, self.sigma0_fraction, self.noise_floor_prior
         )
-
-        def evidence(h: FlowHypothesis) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
-            A = h.flow.responses(cells)
-            logl, det = adjoint_log_evidence(
-                A,
-                z,
-                q_max=self.q_max,
-                kappas=self.kappas,
-                alpha0=self.alpha0,
-                sigma0_fraction=self.sigma0_fraction,
-                sigma0_floor=s0_floor,
-                censored="deferred" if self.censored else False,
-                noise_weights=self.noise_weights,
-            )
-            return A, logl, det
-
         live = [k for k, lp in enumerate(log_prior) if lp >= lp_best - WIND_HOPELESS_NATS]
-        # one flow's rows and evidence per thread (each flow keeps its own caches)
-        got = dict(zip(live, map_threads(evidence, [hyps[k] for k in live]), strict=True))
-        for k, h in enumerate(hyps):
-            if k not in got:
-                log_ev.append(np.full(h.flow.mesh.n, -np.inf))
-                details.append((None, {}))
-                continue
-            A, logl, det = got[k]
-            log_ev.append(logl)
-            details.append((A, det))
-        zeros = _censor(log_ev, log_prior, [d for _, d in details], temp, self.censored_ranking)
-        log_ev = [x / temp for x in zeros]
         t_h = 1.0 if self.hypothesis_readings is None else max(1.0, len(obs) / self.hypothesis_readings)
-        post, hw = mix_posteriors(log_ev, log_prior, t_h)
+        modes = MIXED_NOISE_WEIGHTS if self.noise_weights == "mixture" else (self.noise_weights,)
+        runs = [
+            self._gas_posterior(hyps, live, log_prior, cells, z, s0_floor, temp, t_h, mode) for mode in modes
+        ]
+        # the mixture: an equal-weight average of the modes' posteriors (a mass stop needs both);
+        # the predictive fields and the response model come from the first mode's evidence
+        post = np.mean([r[0] for r in runs], axis=0)
+        hw = np.mean([r[1] for r in runs], axis=0)
+        log_ev, details = runs[0][2], runs[0][3]
         self._refine_speed(hyps, hw, len(obs))
         mesh = hyps[0].flow.mesh
         w_learned = self._learned_weight(len(obs))
