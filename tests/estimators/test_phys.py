@@ -59,6 +59,29 @@ def test_one_hypothesis_equals_the_adjoint_posterior(case):
     assert b.info["hypotheses"][0]["weight"] == pytest.approx(1.0)
 
 
+def test_noise_weight_mixture_averages_the_two_posteriors(case):
+    """``noise_weights="mixture"``: the mean of the plug-in and candidate source posteriors and
+    hypothesis weights; a mass stop then needs both."""
+    k = Knowledge.from_case(case, "openings")
+    obs = draw_observations(case, 25, seed=4)
+    opts = {"knowledge": k, "speeds": (0.6, 1.2), "refine_speeds": 0}
+    b = {
+        mode: get_estimator("dgse-phys", **opts, noise_weights=mode).estimate(
+            case.occupancy, case.resolution, obs
+        )
+        for mode in ("plug-in", "candidate", "mixture")
+    }
+    assert not np.allclose(b["plug-in"].source_probs, b["candidate"].source_probs)
+    mean = (b["plug-in"].source_probs + b["candidate"].source_probs) / 2
+    assert np.allclose(b["mixture"].source_probs, mean)
+    w = [[h["weight"] for h in b[m].info["hypotheses"]] for m in ("plug-in", "candidate", "mixture")]
+    assert np.allclose(w[2], (np.array(w[0]) + np.array(w[1])) / 2)
+    # the fields come from the plug-in's evidence
+    assert np.allclose(b["mixture"].log_conc_mean, b["plug-in"].log_conc_mean, rtol=0.2, atol=0.2)
+    with pytest.raises(InputDataError, match="noise_weights"):
+        get_estimator("dgse-phys", noise_weights="both")
+
+
 def test_openings_weigh_the_inlet_speeds(case):
     est = get_estimator("dgse-phys", knowledge=Knowledge.from_case(case, "openings"), speeds=(0.4, 1.2, 3.6))
     obs = draw_observations(case, 40, seed=2)
