@@ -32,6 +32,10 @@ Stop rules (``--rule``):
   staying within 1 m (``stop_readings=2``);
 * ``...-revisit0.5m-confirm1m``: and a stop needs 2 readings within 1 m of the mode (as ``confirm``).
 
+``dgse-phys`` runs with :data:`dgse.estimators.phys.SEARCH_ESTIMATOR` (the options ``dgse demo``
+uses: ``noise_weights="mixture"`` since 2026-11-26; the files recorded before ran the plug-in
+weights, ``-E 'noise_weights="plug-in"'``); ``-E`` overrides it.
+
 Every finished episode is journaled beside the JSON, so an interrupted run resumes::
 
     python benchmarks/phys_search.py --set validation --rule confirm --knowledge openings
@@ -47,6 +51,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from dgse.estimators.phys import SEARCH_ESTIMATOR
 from dgse.search.campaign import json_safe, run_trials
 
 SETS = {
@@ -258,7 +263,8 @@ def main() -> None:
     else:
         cases = cases_dir(args.out, args.set, args.cases)
     stem = f"{set_name}_{args.method}_{args.knowledge}_{args.rule}" + (f"_{args.tag}" if args.tag else "")
-    est_opts = {}
+    # dgse-phys searches as dgse demo runs them, unless -E says otherwise
+    est_opts = dict(SEARCH_ESTIMATOR) if args.method == "dgse-phys" else {}
     for item in args.estimator_option:
         key, sep, value = item.partition("=")
         if not sep:

@@ -1,9 +1,10 @@
 """Search step cost of dgse-phys (issue 12, part 4): the first estimate and the median step.
 
 Runs one search episode per scenario (the first test scenarios of
-``benchmarks/phys_search.py``, knowledge ``openings``, the planner
-settings ``SEARCH_PLANNER``) and writes the computation seconds of every step: the first
-(which solves the flows) and the median and 90th percentile of the rest.
+``benchmarks/phys_search.py``, knowledge ``openings``, the planner and estimator
+settings of a search, ``SEARCH_PLANNER`` and ``SEARCH_ESTIMATOR``) and writes the
+computation seconds of every step: the first (which solves the flows) and the median and
+90th percentile of the rest.
 Run it on an otherwise idle machine; the number of cores it had is recorded::
 
     python benchmarks/phys_step_time.py --cases 2
@@ -19,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from phys_search import cases_dir
 
-from dgse.estimators.phys import SEARCH_PLANNER
+from dgse.estimators.phys import SEARCH_ESTIMATOR, SEARCH_PLANNER
 from dgse.search.campaign import run_trials
 
 
@@ -37,6 +38,7 @@ def main() -> None:
             "utility",
             trials=1,
             planner_options={"min_observations": 5, **SEARCH_PLANNER},
+            estimator_options=SEARCH_ESTIMATOR,
             knowledge="openings",
             steps=True,
         )
@@ -53,7 +55,12 @@ def main() -> None:
             }
         )
         print(json.dumps(rows[-1]), flush=True)
-    out = {"cores": os.cpu_count(), "load_average_at_end": os.getloadavg(), "episodes": rows}
+    out = {
+        "cores": os.cpu_count(),
+        "load_average_at_end": os.getloadavg(),
+        "estimator_options": SEARCH_ESTIMATOR,
+        "episodes": rows,
+    }
     path = args.out / "step_time.json"
     path.write_text(json.dumps(out, indent=1))
     print(f"wrote {path}")

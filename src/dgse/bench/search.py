@@ -18,7 +18,8 @@ Methods (estimator + planner, registry names):
 * **DGSE-phys** (``dgse-phys`` + ``utility``): the physics-guided estimator at the run's
   knowledge level with the planner settings chosen for it on the validation split
   (:data:`dgse.estimators.phys.SEARCH_PLANNER`: a stop on 90 % of the posterior within 1 m
-  instead of the entropy test, a deadline stop, revisit damping);
+  instead of the entropy test, a deadline stop, revisit damping) and the estimator options
+  chosen with them (:data:`dgse.estimators.phys.SEARCH_ESTIMATOR`);
 * **Dual-mode** (``dualmode`` + ``dualmode``): particle filter and the
   local/global information planner;
 * **GrGSL** (``grgsl`` + ``infotaxis``): GrGSL's posterior, Infotaxis moves
@@ -70,7 +71,7 @@ import numpy as np
 
 from dgse.bench.core import BenchContext
 from dgse.bench.plots import plt
-from dgse.estimators.phys import SEARCH_PLANNER
+from dgse.estimators.phys import SEARCH_ESTIMATOR, SEARCH_PLANNER
 from dgse.search.metrics import format_mean_std
 from dgse.sensing.sensors import MIN_SENSORS
 
@@ -119,7 +120,7 @@ METHODS: tuple[Method, ...] = (
         "DGSE-phys",
         "dgse-phys",
         "utility",
-        {},
+        dict(SEARCH_ESTIMATOR),
         {"min_observations": MIN_SENSORS, **SEARCH_PLANNER},
         "#000080",
     ),

@@ -120,6 +120,10 @@ def demo_cmd(
     if estimator_accepts(method, "dtype") and estimator_accepts(method, "channels_last"):
         # bf16 + channels-last: the same estimates as float32 on the reference cases, ~2.5x faster
         kwargs.update(dtype="bf16", channels_last=True)
+    if eta is None and method == "dgse-phys":
+        from dgse.estimators.phys import SEARCH_ESTIMATOR
+
+        kwargs.update(SEARCH_ESTIMATOR)
     estimator = get_estimator(method, **kwargs)
     require_level(estimator, method, level)
     if eta is None and method == "dgse-phys":
