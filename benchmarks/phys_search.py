@@ -33,7 +33,7 @@ Stop rules (``--rule``):
 * ``...-revisit0.5m-confirm1m``: and a stop needs 2 readings within 1 m of the mode (as ``confirm``).
 
 ``dgse-phys`` runs with :data:`dgse.estimators.phys.SEARCH_ESTIMATOR` (the options ``dgse demo``
-uses: ``noise_weights="mixture"`` since 2026-11-26; the files recorded before ran the plug-in
+uses: ``noise_weights="mixture"`` since 2026-11-27; the files recorded before ran the plug-in
 weights, ``-E 'noise_weights="plug-in"'``); ``-E`` overrides it.
 
 Every finished episode is journaled beside the JSON, so an interrupted run resumes::
