@@ -120,15 +120,14 @@ def demo_cmd(
     if estimator_accepts(method, "dtype") and estimator_accepts(method, "channels_last"):
         # bf16 + channels-last: the same estimates as float32 on the reference cases, ~2.5x faster
         kwargs.update(dtype="bf16", channels_last=True)
-    if eta is None and method == "dgse-phys":
-        from dgse.estimators.phys import SEARCH_ESTIMATOR
+    search_settings = eta is None and method == "dgse-phys"  # the estimator and stop chosen for search
+    if search_settings:
+        from dgse.estimators.phys import SEARCH_ESTIMATOR, SEARCH_PLANNER
 
         kwargs.update(SEARCH_ESTIMATOR)
     estimator = get_estimator(method, **kwargs)
     require_level(estimator, method, level)
-    if eta is None and method == "dgse-phys":
-        from dgse.estimators.phys import SEARCH_PLANNER
-
+    if search_settings:
         planner = get_planner("utility", min_observations=MIN_SENSORS, **SEARCH_PLANNER)
         stop_at: float | str = (
             f"{planner.mass_level:.0%} of the source posterior lies "

@@ -71,6 +71,7 @@ from dgse.localization.adjoint import (
     CENSORED_RANKING,
     CENSORED_RANKINGS,
     DEFAULT_KAPPAS,
+    NOISE_WEIGHTS,
     AdjointResponseModel,
     FlowModel,
     adjoint_log_evidence,
@@ -451,8 +452,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
 
     def __post_init__(self) -> None:
         check_noise_floor_mode(self.noise_floor_prior)
-        if self.noise_weights != "mixture":
-            check_noise_weights(self.noise_weights)
+        check_noise_weights(self.noise_weights, (*NOISE_WEIGHTS, "mixture"))
         speeds = [float(v) for v in self.speeds]
         if not speeds or any(not (v > 0 and math.isfinite(v)) for v in speeds):
             raise InputDataError(f"speeds must be positive numbers of m/s, got {self.speeds}")

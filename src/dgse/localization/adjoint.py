@@ -373,10 +373,11 @@ def check_noise_floor_mode(mode: object) -> None:
         raise InputDataError(f"noise_floor_prior must be one of {NOISE_FLOOR_MODES}, got {mode!r}")
 
 
-def check_noise_weights(mode: object) -> None:
-    """Raise a clear :class:`InputDataError` unless ``mode`` is one of :data:`NOISE_WEIGHTS`."""
-    if mode not in NOISE_WEIGHTS:
-        raise InputDataError(f"noise_weights must be one of {NOISE_WEIGHTS}, got {mode!r}")
+def check_noise_weights(mode: object, modes: tuple[str, ...] = NOISE_WEIGHTS) -> None:
+    """Raise a clear :class:`InputDataError` unless ``mode`` is one of ``modes`` (by default
+    :data:`NOISE_WEIGHTS`; an estimator may offer more, e.g. ``dgse-phys``'s mixture)."""
+    if mode not in modes:
+        raise InputDataError(f"noise_weights must be one of {modes}, got {mode!r}")
 
 
 def prior_noise_floor(
