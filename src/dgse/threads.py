@@ -21,18 +21,19 @@ from __future__ import annotations
 
 import functools
 import os
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from typing import Any, TypeVar
 
-__all__ = ["map_threads", "one_blas_thread", "with_one_blas_thread"]
+__all__ = ["map_threads", "one_blas_thread", "side_by_side", "with_one_blas_thread"]
 
 _T = TypeVar("_T")
 _R = TypeVar("_R")
 #: Threads of :func:`map_threads` (the machine's cores, at most 2).
 WORKERS = max(1, min(2, os.cpu_count() or 1))
 _pool: ThreadPoolExecutor | None = None
+_outer: ThreadPoolExecutor | None = None
 
 _F = TypeVar("_F", bound=Callable[..., Any])
 _controller: Any = None
@@ -75,3 +76,20 @@ def map_threads(func: Callable[[_T], _R], items: Iterable[_T]) -> list[_R]:
     if _pool is None:
         _pool = ThreadPoolExecutor(WORKERS, thread_name_prefix="dgse-map")
     return list(_pool.map(func, work))
+
+
+def side_by_side(funcs: Sequence[Callable[[], _R]]) -> list[_R]:
+    """``[f() for f in funcs]``, each call in a thread of its own (:data:`WORKERS` at once).
+
+    Unlike :func:`map_threads`'s, these calls may use :func:`map_threads`: their own
+    threads are not the shared pool's, so their pieces queue on it together, and while
+    one call waits for its slowest piece the other's pieces keep the cores busy.  With
+    one call or one core, the calls run in the caller's thread.
+    """
+    global _outer
+    work = list(funcs)
+    if WORKERS < 2 or len(work) < 2:
+        return [f() for f in work]
+    if _outer is None:
+        _outer = ThreadPoolExecutor(WORKERS, thread_name_prefix="dgse-side")
+    return list(_outer.map(lambda f: f(), work))

@@ -18,7 +18,6 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-import yaml
 from rich.markup import escape
 
 from dgse.cli.common import check_output_dir, check_output_file, console
@@ -48,6 +47,8 @@ def parse_devices(text: str) -> int | str | list[int]:
 
 def parse_set(items: list[str]) -> dict[str, Any]:
     """``--set KEY=VALUE`` items as a dict; values are parsed as YAML scalars (``3``, ``true``, ``null``)."""
+    import yaml  # here, not at the top: every command imports this module
+
     out: dict[str, Any] = {}
     for item in items:
         key, eq, raw = item.partition("=")

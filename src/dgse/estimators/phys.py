@@ -55,6 +55,7 @@ in the predictive).
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Sequence
@@ -88,7 +89,7 @@ from dgse.physics.openings import potential_flow_proposals
 from dgse.physics.projection import project_wind, transport_from_wind
 from dgse.physics.rans import FlowSettings
 from dgse.sensing.sensors import Observations
-from dgse.threads import map_threads, with_one_blas_thread
+from dgse.threads import map_threads, side_by_side, with_one_blas_thread
 from dgse.world.layout import Layout
 
 __all__ = [
@@ -623,7 +624,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     def _gas_posterior(
         self,
         hyps: list[FlowHypothesis],
-        live: list[int],
+        rows: dict[int, np.ndarray],
         log_prior: list[float],
         cells: np.ndarray,
         z: np.ndarray,
@@ -634,10 +635,12 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], list[tuple[Any, dict[str, Any]]]]:
         """The source posterior and hypothesis weights from the gas readings with one noise-weight
         mode: ``(post, weights, tempered log evidence per hypothesis, (rows, details) per hypothesis)``.
-        Hypotheses outside ``live`` (ruled out by the wind) get no gas evidence."""
+        ``rows``: the readings' response rows of the live hypotheses (by index); the others
+        (ruled out by the wind) get no gas evidence.  Reads no state that another mode's
+        call, run beside it, writes."""
 
-        def evidence(h: FlowHypothesis) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
-            A = h.flow.responses(cells)
+        def evidence(k: int) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+            A = rows[k]
             logl, det = adjoint_log_evidence(
                 A,
                 z,
@@ -651,8 +654,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             )
             return A, logl, det
 
-        # one flow's rows and evidence per thread (each flow keeps its own caches)
-        got = dict(zip(live, map_threads(evidence, [hyps[k] for k in live]), strict=True))
+        got = dict(zip(rows, map_threads(evidence, list(rows)), strict=True))
         log_ev: list[np.ndarray] = []
         details: list[tuple[Any, dict[str, Any]]] = []
         for k, h in enumerate(hyps):
@@ -709,9 +711,17 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         live = [k for k, lp in enumerate(log_prior) if lp >= lp_best - WIND_HOPELESS_NATS]
         t_h = 1.0 if self.hypothesis_readings is None else max(1.0, len(obs) / self.hypothesis_readings)
         modes = MIXED_NOISE_WEIGHTS if self.noise_weights == "mixture" else (self.noise_weights,)
-        runs = [
-            self._gas_posterior(hyps, live, log_prior, cells, z, s0_floor, temp, t_h, mode) for mode in modes
-        ]
+        # the live flows' response rows, one flow per thread (each flow keeps its own cache),
+        # then the modes side by side (they share the rows and write nothing the other reads)
+        rows = dict(zip(live, map_threads(lambda k: hyps[k].flow.responses(cells), live), strict=True))
+        runs = side_by_side(
+            [
+                functools.partial(
+                    self._gas_posterior, hyps, rows, log_prior, cells, z, s0_floor, temp, t_h, mode
+                )
+                for mode in modes
+            ]
+        )
         # the mixture: an equal-weight average of the modes' posteriors (a mass stop needs both);
         # the predictive fields and the response model come from the first mode's evidence
         post = np.mean([r[0] for r in runs], axis=0)
