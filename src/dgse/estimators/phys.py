@@ -742,15 +742,20 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         mean = np.zeros(mesh.n)
         second = np.zeros(mesh.n)
         qmax = np.inf if self.q_max is None else self.q_max
-        for w, h, logl, (_, det) in zip(hw, hyps, log_ev, details, strict=True):
-            if w < self.min_weight:
-                continue
+
+        def predictive(k: int) -> tuple[np.ndarray, np.ndarray]:
+            """Hypothesis ``k``'s predictive mean and second moment (its flow's own cache)."""
+            logl, det = log_ev[k], details[k][1]
             ph = np.exp(logl - logl.max())
             top, wts = predictive_sources(ph / ph.sum(), int(self.conc_components))
             qmap = np.clip(det["qhat"], 0.0, qmax)
-            fields = h.flow.forward(mesh.cells[top], qmap[top])
-            mean += w * (wts @ fields)
-            second += w * (wts @ fields**2)
+            fields = hyps[k].flow.forward(mesh.cells[top], qmap[top])
+            return wts @ fields, wts @ fields**2
+
+        weighty = [k for k, w in enumerate(hw) if w >= self.min_weight]
+        for k, (m1, m2) in zip(weighty, map_threads(predictive, weighty), strict=True):
+            mean += hw[k] * m1
+            second += hw[k] * m2
         total = float(hw[hw >= self.min_weight].sum())
         mean /= total
         second /= total
