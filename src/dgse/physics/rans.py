@@ -658,7 +658,8 @@ def solve_turbulence(
     while it < s.max_iterations:
         it += 1
         yplus, nutw = turb.wall_functions(st.k)
-        turb.step(st, s, yplus, nutw, residuals, sweeps)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # tested just below
+            turb.step(st, s, yplus, nutw, residuals, sweeps)
         if not (np.isfinite(st.k).all() and np.isfinite(st.eps).all()):
             break
         if all(v < s.tolerance for v in residuals.values()):
@@ -922,7 +923,10 @@ def _simplec(
         st.uy = hbyay - rAtU * gp[:, 1]
 
         # ---- k-epsilon ---------------------------------------------------------------------
-        n_limited = turb.step(st, s_it, yplus, nutw, residuals, sweeps)
+        # a diverging run overflows here; the finiteness test below reports it, without
+        # NumPy's warnings on the user's terminal
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            n_limited = turb.step(st, s_it, yplus, nutw, residuals, sweeps)
 
         history.append(dict(residuals))
         if progress is not None:
