@@ -9,8 +9,10 @@ Runs one dgse-phys search episode per test scenario (knowledge ``openings``,
 the posterior mass, as the correction hands them over), and replays them::
 
     python benchmarks/censored_accuracy.py --cases 2
+    python benchmarks/censored_accuracy.py --cases 2 --search-estimator   # with SEARCH_ESTIMATOR
 
-Writes ``benchmarks/results/censored_accuracy.json``: per scenario and way, the seconds
+Writes ``benchmarks/results/censored_accuracy.json`` (``censored_accuracy_search.json`` with
+``--search-estimator``, the noise-weight mixture the searches run): per scenario and way, the seconds
 of the replay, the share of candidates scanned and the quantiles of the absolute error
 (nats) against the scan; the sample's scan and brute-force values.  Calls before the
 first positive reading are left out of the error (their noise prior is degenerate: its
@@ -29,6 +31,7 @@ import numpy as np
 from phys_search import cases_dir, record_calls
 from scipy import special
 
+from dgse.estimators.phys import SEARCH_ESTIMATOR
 from dgse.localization import adjoint, censored_kernel
 
 WAYS = {"gauss-hermite": math.inf, "default": adjoint.CENSORED_SCAN_MARGIN, "scan": -math.inf}
@@ -67,12 +70,19 @@ def main() -> None:
     ap.add_argument("--every", type=int, default=3, help="keep every N-th call")
     ap.add_argument("--brute", type=int, default=12, help="candidates checked by brute force per scenario")
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results"))
+    ap.add_argument(
+        "--search-estimator",
+        action="store_true",
+        help="episodes with the searches' estimator options (SEARCH_ESTIMATOR), not dgse-phys's defaults",
+    )
     args = ap.parse_args()
+    options = dict(SEARCH_ESTIMATOR) if args.search_estimator else {}
     d = cases_dir(args.out / "phys_search", "test", args.cases)
     report = []
     rng = np.random.default_rng(0)
     for path in sorted(d.glob("*.npz")):
-        kept = [list(a) for a, _ in record_calls(censored_kernel, "censored_log_factor", path, args.every)]
+        calls = record_calls(censored_kernel, "censored_log_factor", path, args.every, options)
+        kept = [list(a) for a, _ in calls]
         # no positive reading yet: beta_n at the prior's floor
         proper = [c for c in kept if c[3].min() > 1e-12]
         vals, secs, shares = {}, {}, {}
@@ -116,8 +126,9 @@ def main() -> None:
         }
         report.append(row)
         print(json.dumps({k: v for k, v in row.items() if k != "sample"}), flush=True)
-    out = args.out / "censored_accuracy.json"
-    out.write_text(json.dumps({"scan_margin": adjoint.CENSORED_SCAN_MARGIN, "episodes": report}, indent=1))
+    out = args.out / ("censored_accuracy_search.json" if args.search_estimator else "censored_accuracy.json")
+    body = {"scan_margin": adjoint.CENSORED_SCAN_MARGIN, "estimator_options": options, "episodes": report}
+    out.write_text(json.dumps(body, indent=1))
     print("wrote", out)
 
 

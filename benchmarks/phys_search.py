@@ -126,9 +126,12 @@ def cases_dir(out: Path, name: str, limit: int | None = None) -> Path:
     return d
 
 
-def record_calls(owner: Any, name: str, path: Path, every: int) -> list[tuple[tuple, dict]]:
+def record_calls(
+    owner: Any, name: str, path: Path, every: int, estimator_options: dict[str, Any] | None = None
+) -> list[tuple[tuple, dict]]:
     """The arguments (arrays copied) of every ``every``-th call of ``owner.name`` during one
-    dgse-phys search episode on ``path`` (knowledge ``openings``, ``SEARCH_PLANNER``)."""
+    dgse-phys search episode on ``path`` (knowledge ``openings``, ``SEARCH_PLANNER``; the
+    estimator's defaults, or ``estimator_options``)."""
     from dgse.estimators.phys import SEARCH_PLANNER
 
     original = getattr(owner, name)
@@ -149,6 +152,7 @@ def record_calls(owner: Any, name: str, path: Path, every: int) -> list[tuple[tu
         run_trials(
             path, "dgse-phys", "utility", trials=1, knowledge="openings",
             planner_options={"min_observations": 5, **SEARCH_PLANNER},
+            estimator_options=estimator_options,
         )  # fmt: skip
     finally:
         setattr(owner, name, original)
