@@ -46,6 +46,7 @@ import torch
 from dgse.bench.core import cpu_model
 from dgse.data.rasterize import rasterize
 from dgse.estimators.dgse import DGSEEstimator
+from dgse.models.inference import native_bf16
 from dgse.models.networks import DGSEModel, count_parameters, create_model
 from dgse.sensing.sensors import Observations
 
@@ -158,7 +159,9 @@ def write_markdown(result: dict[str, Any], path: Path) -> None:
         f"{result['repeats']} runs after a warm-up; {N_SENSORS} sensors; model: {result['model']['source']} "
         f"({result['model']['parameters'] / 1e6:.2f} M parameters).",
         "",
-        f"Machine: {m['cpu']}, {m['cores']} cores, PyTorch {m['torch']}; load average "
+        f"Machine: {m['cpu']}, {m['cores']} cores, PyTorch {m['torch']} (CPU capability "
+        f"{m.get('cpu_capability', 'not recorded')}, native bf16: {m.get('native_bf16', 'not recorded')}); "
+        "load average "
         f"{m['load_before']} before, {m['load_after']} after (**shared machine**: other jobs ran on the "
         "same cores, so absolute numbers are pessimistic and noisy; compare rows, not machines).",
         "",
@@ -236,6 +239,8 @@ def main() -> None:
             "cpu": cpu_model(),
             "cores": os.cpu_count(),
             "torch": torch.__version__,
+            "cpu_capability": torch.backends.cpu.get_cpu_capability(),
+            "native_bf16": native_bf16("cpu"),
             "platform": platform.platform(),
             "load_before": _load(),
         },

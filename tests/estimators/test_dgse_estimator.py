@@ -10,6 +10,7 @@ from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators.dgse import DGSEEstimator, default_model_path
 from dgse.estimators.registry import Estimator, StreamingEstimator, get_estimator
 from dgse.models.checkpoint import CheckpointError, save_model
+from dgse.models.inference import native_bf16
 from dgse.sensing.sensors import Observations
 from tests.models.helpers import tiny_model
 
@@ -61,6 +62,15 @@ def test_bfloat16_channels_last_option():
     assert b.info["dtype"] == "bfloat16" and b.source_probs.sum() == pytest.approx(1.0)
     with pytest.raises(InputDataError, match="dtype"):
         DGSEEstimator(tiny_model("dgse-s"), dtype="int8")
+
+
+def test_auto_dtype_is_bf16_only_where_the_cpu_has_it(monkeypatch: pytest.MonkeyPatch):
+    for native in (True, False):
+        monkeypatch.setattr(torch.cpu, "_is_avx512_bf16_supported", lambda v=native: v, raising=False)
+        monkeypatch.setattr(torch.cpu, "_is_amx_tile_supported", lambda: False, raising=False)
+        assert native_bf16("cpu") is native
+        est = DGSEEstimator(tiny_model("dgse-s"), dtype="auto")
+        assert est.dtype == (torch.bfloat16 if native else torch.float32)
 
 
 def test_resolution_and_observation_checks():

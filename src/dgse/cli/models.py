@@ -57,6 +57,7 @@ __all__ = [
 ]
 
 
+_DTYPE_HELP = "DGSE precision: float32, bf16, or auto (bf16 where the CPU computes it natively)."
 _MODEL_HELP = "DGSE weights: 'default' (shipped with dgse) or a .safetensors checkpoint."
 _PARAM_HELP = "Estimator argument KEY=VALUE (VALUE as JSON, else a string); repeatable."
 _THREADS_HELP = "PyTorch CPU threads (1 is often fastest on busy, shared cores)."
@@ -153,7 +154,7 @@ def estimate_cmd(
     k: Annotated[int | None, typer.Option("-K", help="DGSE-S wind samples (default 5).")] = None,
     t: Annotated[int | None, typer.Option("-T", help="DGSE-S concentration samples (default 5).")] = None,
     device: Annotated[str | None, typer.Option("--device", help="DGSE device (cpu, cuda, ...).")] = None,
-    dtype: Annotated[str | None, typer.Option("--dtype", help="DGSE precision: float32 or bf16.")] = None,
+    dtype: Annotated[str | None, typer.Option("--dtype", help=_DTYPE_HELP)] = None,
     params: Annotated[list[str] | None, typer.Option("--param", "-p", help=_PARAM_HELP)] = None,
     threads: Annotated[int | None, typer.Option("--threads", help=_THREADS_HELP)] = None,
     plot: Annotated[Path | None, typer.Option("--plot", help="Also save a figure of the belief.")] = None,
@@ -364,7 +365,7 @@ def evaluate_cmd(
     k: Annotated[int | None, typer.Option("-K", help="DGSE-S wind samples (default 5).")] = None,
     t: Annotated[int | None, typer.Option("-T", help="DGSE-S concentration samples (default 5).")] = None,
     device: Annotated[str | None, typer.Option("--device", help="DGSE device (cpu, cuda, ...).")] = None,
-    dtype: Annotated[str | None, typer.Option("--dtype", help="DGSE precision: float32 or bf16.")] = None,
+    dtype: Annotated[str | None, typer.Option("--dtype", help=_DTYPE_HELP)] = None,
     params: Annotated[list[str] | None, typer.Option("--param", "-p", help=_PARAM_HELP)] = None,
     threads: Annotated[int | None, typer.Option("--threads", help=_THREADS_HELP)] = None,
     limit: Annotated[int | None, typer.Option("--limit", help="Only the first N cases.")] = None,

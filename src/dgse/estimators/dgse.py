@@ -40,7 +40,7 @@ from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators.belief import Belief, normalize_source_probs
 from dgse.estimators.knowledge import KnowledgeUser
 from dgse.models.checkpoint import load_checkpoint
-from dgse.models.inference import Prediction, make_generator, predict, resolve_device
+from dgse.models.inference import Prediction, make_generator, native_bf16, predict, resolve_device
 from dgse.models.networks import DGSEModel
 from dgse.options import options_from
 from dgse.sensing.sensors import Observations
@@ -57,13 +57,19 @@ _DTYPES: dict[str, torch.dtype] = {
 }
 
 
-def _as_dtype(dtype: torch.dtype | str) -> torch.dtype:
+#: ``dtype="auto"``: bfloat16 where the device computes it natively, else float32
+AUTO_DTYPE = "auto"
+
+
+def _as_dtype(dtype: torch.dtype | str, device: torch.device) -> torch.dtype:
     if isinstance(dtype, torch.dtype):
         if dtype in (torch.float32, torch.bfloat16, torch.float16):
             return dtype
+    elif dtype == AUTO_DTYPE:
+        return torch.bfloat16 if native_bf16(device) else torch.float32
     elif dtype in _DTYPES:
         return _DTYPES[dtype]
-    raise InputDataError(f"dtype must be float32, bfloat16 or float16, got {dtype!r}")
+    raise InputDataError(f"dtype must be float32, bfloat16, float16 or auto, got {dtype!r}")
 
 
 class DGSEEstimator(KnowledgeUser):
@@ -78,7 +84,9 @@ class DGSEEstimator(KnowledgeUser):
             global RNG.
         dtype: ``float32`` (default) or ``bfloat16`` / ``float16``: run the
             networks under ``torch.autocast`` with that type (sampling,
-            softmax and moment matching stay float32).
+            softmax and moment matching stay float32); ``"auto"``: bfloat16
+            where the device computes it natively
+            (:func:`~dgse.models.inference.native_bf16`), else float32.
         channels_last: use the channels-last memory format (faster convolutions
             on some CPUs with bf16).
         model_resolution: the cell size (m) the network was trained on; maps
@@ -110,7 +118,7 @@ class DGSEEstimator(KnowledgeUser):
         if not (model_resolution > 0 and math.isfinite(model_resolution)):
             raise InputDataError(f"model_resolution must be positive, got {model_resolution}")
         self.device = resolve_device(device)
-        self.dtype = _as_dtype(dtype)
+        self.dtype = _as_dtype(dtype, self.device)
         self.channels_last = bool(channels_last)
         self.model = model.to(self.device).eval()
         if self.channels_last:

@@ -618,7 +618,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         if self._learned is None:
             from dgse.estimators.registry import get_estimator
 
-            self._learned = get_estimator("dgse-s", seed=0, dtype="bf16", channels_last=True)
+            self._learned = get_estimator("dgse-s", seed=0, dtype="auto", channels_last=True)
         return self._learned.estimate(occupancy, resolution, obs)
 
     def _gas_posterior(

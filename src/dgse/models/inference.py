@@ -39,6 +39,7 @@ __all__ = [
     "log_mean_exp",
     "make_generator",
     "moment_match",
+    "native_bf16",
     "predict",
     "resolve_device",
     "run_sequential",
@@ -80,6 +81,22 @@ class SequentialParams:
     wind_logvar: torch.Tensor
     logc_mean: torch.Tensor
     logc_logvar: torch.Tensor
+
+
+def native_bf16(device: torch.device | str) -> bool:
+    """Whether ``device`` computes in bfloat16 natively, so that bf16 autocast speeds the
+    networks up: a CUDA GPU that supports it, or a CPU with AVX-512-BF16 or AMX.
+
+    Elsewhere bf16 is emulated: on an AVX2-only CPU one DGSE-S estimate took about 4x
+    as long in bf16 as in float32 (2.3-2.6 s against 0.56-0.65 s, two threads).
+    """
+    dev = torch.device(device) if isinstance(device, str) else device
+    if dev.type == "cuda":
+        return bool(torch.cuda.is_available() and torch.cuda.is_bf16_supported())
+    if dev.type != "cpu":
+        return False
+    names = ("_is_avx512_bf16_supported", "_is_amx_tile_supported")  # private, so looked up
+    return any(bool(probe()) for probe in (getattr(torch.cpu, n, None) for n in names) if probe is not None)
 
 
 def resolve_device(device: torch.device | str) -> torch.device:
