@@ -131,7 +131,7 @@ def test_map_level_proposes_openings_from_the_wind_readings(case):
 def test_learned_belief_is_mixed_in_where_the_readings_are_few(case):
     obs = draw_observations(case, 10, seed=7)
     k = Knowledge.from_case(case, "map")
-    learned = get_estimator("dgse-s", seed=0, dtype="bf16", channels_last=True)
+    learned = get_estimator("dgse-s", seed=0, dtype="auto", channels_last=True)
     net = learned.estimate(case.occupancy, case.resolution, obs).source_probs
     only_net = get_estimator("dgse-phys", knowledge=k, learned_weight=1.0, learned_readings=1e9)
     b = only_net.estimate(case.occupancy, case.resolution, obs)
