@@ -266,3 +266,13 @@ def test_init_starts_a_fresh_run_from_given_weights(store, tmp_path):
         train(_config(store, tmp_path / "e", init=str(tmp_path / "missing.safetensors")))
     with pytest.raises(InputDataError, match=r"best\.safetensors is a model file"):
         train(_config(store, tmp_path / "f", init=str(first.last_path)))  # a training state
+
+
+def test_bf16_on_a_cpu_without_it_warns(store, tmp_path, monkeypatch):
+    import importlib
+
+    train_module = importlib.import_module("dgse.training.train")  # the package exports a function `train`
+    monkeypatch.setattr(train_module, "native_bf16", lambda device: False)
+    cfg = _config(store, tmp_path / "bf16", precision="bf16-mixed", fast_dev_run=True)
+    with pytest.warns(UserWarning, match="does not compute bf16 natively"):
+        train(cfg)

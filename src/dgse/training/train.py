@@ -100,6 +100,7 @@ from dgse.models.checkpoint import (
     read_checkpoint_info,
     save_model,
 )
+from dgse.models.inference import native_bf16
 from dgse.models.networks import DGSEModel, ModelConfig
 from dgse.training.config import TrainConfig
 from dgse.training.datamodule import DGSEDataModule, EpochSetup
@@ -946,6 +947,13 @@ def train(
             raise InputDataError(f"cannot set up training: {e}") from None
         if config.precision == "16-mixed" and trainer.strategy.root_device.type == "cpu":
             raise InputDataError("precision 16-mixed needs a GPU; use bf16-mixed on the CPU")
+        if config.precision == "bf16-mixed" and not native_bf16(trainer.strategy.root_device):
+            warnings.warn(
+                f"precision bf16-mixed on {trainer.strategy.root_device}, which does not compute bf16 "
+                "natively (no AVX-512 BF16 or AMX): it is emulated and slower than precision 32",
+                UserWarning,
+                stacklevel=2,
+            )
         if trainer.is_global_zero:
             out.mkdir(parents=True, exist_ok=True)
             logger.log_hyperparams(config.to_dict())
