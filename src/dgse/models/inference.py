@@ -87,8 +87,8 @@ def native_bf16(device: torch.device | str) -> bool:
     """Whether ``device`` computes in bfloat16 natively, so that bf16 autocast speeds the
     networks up: a CUDA GPU that supports it, or a CPU with AVX-512-BF16 or AMX.
 
-    Elsewhere bf16 is emulated: on an AVX2-only CPU one DGSE-S estimate took about 4x
-    as long in bf16 as in float32 (2.3-2.6 s against 0.56-0.65 s, two threads).
+    Elsewhere bf16 is emulated: on an AVX2-only CPU one DGSE-S estimate took 2.57 s in
+    bf16 against 0.35 s in float32 (one thread, ``benchmarks/results/latency_avx2``).
     """
     dev = torch.device(device) if isinstance(device, str) else device
     if dev.type == "cuda":

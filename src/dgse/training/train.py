@@ -950,7 +950,8 @@ def train(
         if config.precision == "bf16-mixed" and not native_bf16(trainer.strategy.root_device):
             warnings.warn(
                 f"precision bf16-mixed on {trainer.strategy.root_device}, which does not compute bf16 "
-                "natively (no AVX-512 BF16 or AMX): it is emulated and slower than precision 32",
+                "natively (a CPU without AVX-512 BF16 or AMX, or an older GPU): it is emulated and "
+                "slower than precision 32",
                 UserWarning,
                 stacklevel=2,
             )
