@@ -1,13 +1,14 @@
 """Search step cost of dgse-phys (issue 12, part 4): the first estimate and the median step.
 
 Runs one search episode per scenario (the first test scenarios of
-``benchmarks/phys_search.py``, knowledge ``openings``, the planner and estimator
+``benchmarks/phys_search.py``, knowledge ``openings`` or ``--knowledge map``, the planner and estimator
 settings of a search, ``SEARCH_PLANNER`` and ``SEARCH_ESTIMATOR``) and writes the
 computation seconds of every step: the first (which solves the flows) and the median and
 90th percentile of the rest.
 Run it on an otherwise idle machine; the number of cores it had is recorded::
 
     python benchmarks/phys_step_time.py --cases 2
+    python benchmarks/phys_step_time.py --cases 2 --knowledge map   # step_time_map.json
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", type=int, default=2)
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/phys_search"))
+    ap.add_argument("--knowledge", choices=("openings", "map"), default="openings")
     args = ap.parse_args()
     d = cases_dir(args.out, "test", args.cases)
     rows = []
@@ -39,7 +41,7 @@ def main() -> None:
             trials=1,
             planner_options={"min_observations": 5, **SEARCH_PLANNER},
             estimator_options=SEARCH_ESTIMATOR,
-            knowledge="openings",
+            knowledge=args.knowledge,
             steps=True,
         )
         trial = res["per_case"][0]["trials"][0]
@@ -59,9 +61,11 @@ def main() -> None:
         "cores": os.cpu_count(),
         "load_average_at_end": os.getloadavg(),
         "estimator_options": SEARCH_ESTIMATOR,
+        "knowledge": args.knowledge,
         "episodes": rows,
     }
-    path = args.out / "step_time.json"
+    name = "step_time.json" if args.knowledge == "openings" else f"step_time_{args.knowledge}.json"
+    path = args.out / name
     path.write_text(json.dumps(out, indent=1))
     print(f"wrote {path}")
 
