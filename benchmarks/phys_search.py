@@ -51,7 +51,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from dgse.estimators.phys import SEARCH_ESTIMATOR
+from dgse.estimators.phys import SEARCH_ESTIMATOR, SEARCH_PLANNER
 from dgse.search.campaign import json_safe, run_trials
 
 SETS = {
@@ -132,8 +132,6 @@ def record_calls(
     """The arguments (arrays copied) of every ``every``-th call of ``owner.name`` during one
     dgse-phys search episode on ``path`` (knowledge ``openings``, ``SEARCH_PLANNER``; the
     estimator's defaults, or ``estimator_options``)."""
-    from dgse.estimators.phys import SEARCH_PLANNER
-
     original = getattr(owner, name)
     kept: list[tuple[tuple, dict]] = []
     n = [0]
