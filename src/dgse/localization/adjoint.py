@@ -147,7 +147,7 @@ from dgse import threads
 from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators.belief import Belief
 from dgse.estimators.knowledge import Knowledge, KnowledgeUser, Level
-from dgse.localization import censored_kernel, check_inputs, log_moments_from_ppm, map_key
+from dgse.localization import censored_kernel, check_inputs, evidence_kernel, log_moments_from_ppm, map_key
 from dgse.localization.student_t import log_interval
 from dgse.options import options_from
 from dgse.physics.builtin import flow_and_transport
@@ -419,17 +419,25 @@ def _evidence(
     A: np.ndarray,
     A2: np.ndarray,
     z: np.ndarray,
-    r: np.ndarray,
+    r: np.ndarray | None,
     q_max: float | None,
     alpha0: float,
     beta0: float,
+    sums: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """``(log p(z | s) per column of A up to an (s, r)-independent constant, qhat, alpha_n)``.
 
-    ``r``: the noise weights, ``(m,)`` or ``(m, N)`` (:func:`_weighted_sums`).
+    ``r``: the noise weights, ``(m,)`` or ``(m, N)`` (:func:`_weighted_sums`); or ``sums``,
+    ``(aa, az, zz, sum_i log r_i)`` already made from them
+    (:func:`~dgse.localization.evidence_kernel.candidate_sums`), and ``r`` unused.
     """
     m = z.size
-    aa, az, zz = _weighted_sums(A, A2, z, r)
+    if sums is None:
+        assert r is not None
+        aa, az, zz = _weighted_sums(A, A2, z, r)
+        log_r = np.log(r).sum(axis=0)
+    else:
+        aa, az, zz, log_r = sums
     qhat = az / aa
     S = np.maximum(zz - az * qhat, 0.0)
     alpha_n = alpha0 + 0.5 * (m - 1)
@@ -437,7 +445,7 @@ def _evidence(
     nu = 2.0 * alpha_n
     with np.errstate(over="ignore"):  # a candidate no reading sees (aa at its floor): scale inf
         scale = np.sqrt(beta_n / (alpha_n * aa))
-    logl = -np.log(r).sum(axis=0) - 0.5 * np.log(aa) - alpha_n * np.log(beta_n)
+    logl = -log_r - 0.5 * np.log(aa) - alpha_n * np.log(beta_n)
     # the truncation term (<= 0) only where it can matter: candidates within TRUNC_NATS of
     # the best truncated one (:func:`~dgse.localization.student_t.log_interval`); the
     # rest, TRUNC_NATS below, keep the untruncated value, an upper bound
@@ -806,10 +814,18 @@ def adjoint_log_evidence(
             return 1.0 + (k / cbar) * own
         return 1.0 + k * chat / cbar
 
+    # a candidate's own weights: the sums in one compiled pass per kappa, no (m, N) temporaries
+    own_p = None if own is None else np.ascontiguousarray(own[pos] if cen.any() else own)
+    Ap_c = np.ascontiguousarray(Ap)
     for k in ks:
-        r = weights(k)
         # kappa = 0 is the homoscedastic pass above
-        ll, qh = (logl0, qhat0) if k == 0.0 else _evidence(Ap, Ap2, zp, r[pos], q_max, alpha0, beta0)[:2]
+        if k == 0.0:
+            ll, qh = logl0, qhat0
+        elif own_p is not None:
+            sums = evidence_kernel.candidate_sums(Ap_c, own_p, zp, k / cbar)
+            ll, qh = _evidence(Ap, Ap2, zp, None, q_max, alpha0, beta0, sums=sums)[:2]
+        else:
+            ll, qh = _evidence(Ap, Ap2, zp, weights(k)[pos], q_max, alpha0, beta0)[:2]
         logls.append(ll)
         qhats.append(qh)
         top = ll.max()
