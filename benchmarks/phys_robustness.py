@@ -71,6 +71,8 @@ def variant_case(case: Case, variant: str, cache: Path, tag: str) -> Case:
     if not path.exists():
         from dgse.physics.filament import FilamentSettings, make_filament_case
 
+        # FilamentSettings' default caps the prefill at RECOMMENDED_MAX_FILAMENTS since
+        # 2026-11-27; the recorded summary's filament cases were made without a cap
         make_filament_case(case, FilamentSettings(), seed=0).save(path)
     return Case.load(path)
 

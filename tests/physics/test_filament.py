@@ -24,6 +24,7 @@ from dgse.cli.plume import register
 from dgse.errors import InputDataError
 from dgse.physics.constants import DEFAULT_PHYSICS
 from dgse.physics.filament import (
+    RECOMMENDED_MAX_FILAMENTS,
     FilamentSettings,
     face_velocities,
     make_filament_case,
@@ -213,7 +214,7 @@ def test_max_filaments_caps_the_prefill_and_keeps_the_mass():
     )  # fmt: skip
     steady = np.where(free, 2000.0, 0.0)
     args = (occ, np.zeros((2, *occ.shape)), (0.35, 0.35))
-    full = run_filaments(*args, settings, 4, None, steady=steady)
+    full = run_filaments(*args, settings.with_(max_filaments=None), 4, None, steady=steady)
     capped = run_filaments(*args, settings.with_(max_filaments=400), 4, None, steady=steady)
     assert full.info["n_prefilled"] > 2000
     assert capped.info["n_prefilled"] == 400
@@ -228,6 +229,8 @@ def test_max_filaments_caps_the_prefill_and_keeps_the_mass():
     np.testing.assert_array_equal(same.frames, full.frames)
     with pytest.raises(InputDataError, match="max_filaments"):
         settings.with_(max_filaments=0)
+    # capped unless asked otherwise: an uncapped quiet room can hold millions of filaments
+    assert FilamentSettings().max_filaments == RECOMMENDED_MAX_FILAMENTS
 
 
 def test_heavy_prefilled_filaments_leave_with_their_mass():
