@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from dgse.localization import student_t
 from dgse.localization.student_t import log_interval, log_interval_exact
 
 
@@ -42,3 +43,22 @@ def test_far_tails_and_whole_line() -> None:
     far = log_interval(np.array([1e15, -1e16]), np.array([np.inf, -1e15]), nu)
     assert np.isfinite(far).all() and (far < -300).all()
     assert math.isnan(log_interval(np.array([math.nan]), np.array([1.0]), nu)[0])
+
+
+def test_narrow_intervals_take_the_density_times_the_width(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Where the readings hardly see a candidate its interval is ~1e-150 wide: density x width."""
+    nu = 6.0
+    lo = np.array([-0.0, 0.0, -8.0, 3.0, -1e-160])
+    hi = lo + np.array([1.4e-150, 5e-151, 7e-10, 1e-9, 1e-160])
+    width = hi - lo  # as represented
+    want = np.log(stats.t.pdf(0.5 * (lo + hi), nu)) + np.log(width)
+    np.testing.assert_allclose(log_interval(lo, hi, nu), want, rtol=1e-12)
+    np.testing.assert_allclose(log_interval(lo, hi, nu), log_interval_exact(lo, hi, nu), rtol=1e-14)
+    # in the compiled loop: no call of the exact function (SciPy's CDF per value) for them
+    exact = log_interval_exact(lo, hi, nu)
+
+    def refuse(*_args: object) -> None:
+        raise AssertionError("narrow intervals went the exact way")
+
+    monkeypatch.setattr(student_t, "log_interval_exact", refuse)
+    np.testing.assert_array_equal(log_interval(lo, hi, nu), exact)
