@@ -37,6 +37,7 @@ EXACT_GAP = 1e-3
 NARROW = 1e-7
 
 
+@functools.lru_cache(maxsize=64)
 def _log_norm(nu: float) -> float:
     """The log normalizer of the Student-t density with ``nu`` degrees of freedom."""
     return float(special.gammaln(0.5 * (nu + 1.0)) - special.gammaln(0.5 * nu) - 0.5 * math.log(nu * math.pi))
