@@ -816,12 +816,12 @@ def adjoint_log_evidence(
 
     # a candidate's own weights: the sums in one compiled pass per kappa, no (m, N) temporaries
     own_p = None if own is None else np.ascontiguousarray(own[pos] if cen.any() else own)
-    Ap_c = np.ascontiguousarray(Ap)
+    Ap_c = None if own_p is None else np.ascontiguousarray(Ap)
     for k in ks:
         # kappa = 0 is the homoscedastic pass above
         if k == 0.0:
             ll, qh = logl0, qhat0
-        elif own_p is not None:
+        elif own_p is not None and Ap_c is not None:
             sums = evidence_kernel.candidate_sums(Ap_c, own_p, zp, k / cbar)
             ll, qh = _evidence(Ap, Ap2, zp, None, q_max, alpha0, beta0, sums=sums)[:2]
         else:
