@@ -4,7 +4,7 @@ Runs one search episode per scenario (the first test scenarios of
 ``benchmarks/phys_search.py``, knowledge ``openings`` or ``--knowledge map``, the planner and estimator
 settings of a search, ``SEARCH_PLANNER`` and ``SEARCH_ESTIMATOR``) and writes the
 computation seconds of every step: the first (which solves the flows) and the median and
-90th percentile of the rest.
+90th percentile of the rest, per episode and (the median) pooled over the episodes.
 Run it on an otherwise idle machine; the number of cores it had is recorded::
 
     python benchmarks/phys_step_time.py --cases 2
@@ -54,15 +54,18 @@ def main() -> None:
                 "median_s": float(np.median(s[1:])),
                 "p90_s": float(np.percentile(s[1:], 90)),
                 "error_m": trial["error_m"],
+                "step_s": [round(float(x), 4) for x in s],
             }
         )
-        print(json.dumps(rows[-1]), flush=True)
+        print(json.dumps({k: v for k, v in rows[-1].items() if k != "step_s"}), flush=True)
     out = {
         "cores": os.cpu_count(),
         "load_average_at_end": os.getloadavg(),
         "estimator_options": SEARCH_ESTIMATOR,
         "knowledge": args.knowledge,
         "episodes": rows,
+        # every step after each episode's first, pooled over the episodes
+        "median_all_s": float(np.median(np.concatenate([r["step_s"][1:] for r in rows]))),
     }
     name = "step_time.json" if args.knowledge == "openings" else f"step_time_{args.knowledge}.json"
     path = args.out / name
