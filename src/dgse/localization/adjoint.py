@@ -419,25 +419,29 @@ def _evidence(
     A: np.ndarray,
     A2: np.ndarray,
     z: np.ndarray,
-    r: np.ndarray | None,
+    r: np.ndarray,
     q_max: float | None,
     alpha0: float,
     beta0: float,
-    sums: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """``(log p(z | s) per column of A up to an (s, r)-independent constant, qhat, alpha_n)``.
 
-    ``r``: the noise weights, ``(m,)`` or ``(m, N)`` (:func:`_weighted_sums`); or ``sums``,
-    ``(aa, az, zz, sum_i log r_i)`` already made from them
-    (:func:`~dgse.localization.evidence_kernel.candidate_sums`), and ``r`` unused.
+    ``r``: the noise weights, ``(m,)`` or ``(m, N)`` (:func:`_weighted_sums`).
     """
-    m = z.size
-    if sums is None:
-        assert r is not None
-        aa, az, zz = _weighted_sums(A, A2, z, r)
-        log_r = np.log(r).sum(axis=0)
-    else:
-        aa, az, zz, log_r = sums
+    sums = (*_weighted_sums(A, A2, z, r), np.log(r).sum(axis=0))
+    return _evidence_from_sums(sums, z.size, q_max, alpha0, beta0)
+
+
+def _evidence_from_sums(
+    sums: tuple[np.ndarray, np.ndarray, np.ndarray | float, np.ndarray | float],
+    m: int,
+    q_max: float | None,
+    alpha0: float,
+    beta0: float,
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """:func:`_evidence` of ``m`` readings from their weighted sums ``(aa, az, zz, sum_i log r_i)``
+    (:func:`_weighted_sums`, or :func:`~dgse.localization.evidence_kernel.candidate_sums`)."""
+    aa, az, zz, log_r = sums
     qhat = az / aa
     S = np.maximum(zz - az * qhat, 0.0)
     alpha_n = alpha0 + 0.5 * (m - 1)
@@ -815,15 +819,16 @@ def adjoint_log_evidence(
         return 1.0 + k * chat / cbar
 
     # a candidate's own weights: the sums in one compiled pass per kappa, no (m, N) temporaries
-    own_p = None if own is None else np.ascontiguousarray(own[pos] if cen.any() else own)
-    Ap_c = None if own_p is None else np.ascontiguousarray(Ap)
+    own_rows = None
+    if own is not None:
+        own_rows = (np.ascontiguousarray(Ap), np.ascontiguousarray(own[pos] if cen.any() else own))
     for k in ks:
         # kappa = 0 is the homoscedastic pass above
         if k == 0.0:
             ll, qh = logl0, qhat0
-        elif own_p is not None and Ap_c is not None:
-            sums = evidence_kernel.candidate_sums(Ap_c, own_p, zp, k / cbar)
-            ll, qh = _evidence(Ap, Ap2, zp, None, q_max, alpha0, beta0, sums=sums)[:2]
+        elif own_rows is not None:
+            sums = evidence_kernel.candidate_sums(*own_rows, zp, k / cbar)
+            ll, qh = _evidence_from_sums(sums, zp.size, q_max, alpha0, beta0)[:2]
         else:
             ll, qh = _evidence(Ap, Ap2, zp, weights(k)[pos], q_max, alpha0, beta0)[:2]
         logls.append(ll)

@@ -184,7 +184,8 @@ def log_interval(lo: np.ndarray, hi: np.ndarray, nu: float) -> np.ndarray:
     hi = np.asarray(hi, dtype=np.float64)
     lo, hi = np.broadcast_arrays(lo, hi)
     shape = lo.shape
-    g, dg = _table(float(nu))
+    nu = float(nu)
+    g, dg = _table(nu)
     out, ok = _log_interval_table(
         np.ascontiguousarray(lo).ravel(),
         np.ascontiguousarray(hi).ravel(),
@@ -192,8 +193,8 @@ def log_interval(lo: np.ndarray, hi: np.ndarray, nu: float) -> np.ndarray:
         dg,
         TABLE_STEP,
         EXACT_GAP,
-        float(nu),
-        _log_norm(float(nu)),
+        nu,
+        _log_norm(nu),
     )
     out, ok = out.reshape(shape), ok.reshape(shape)
     if not ok.all():
