@@ -30,7 +30,11 @@ Stop rules (``--rule``):
   one plus the cells measured within 0.5 m of it (``revisit_radius_m``);
 * ``...-revisit0.5m-twice``: and the mass test must pass at two readings in a row, the mode
   staying within 1 m (``stop_readings=2``);
-* ``...-revisit0.5m-confirm1m``: and a stop needs 2 readings within 1 m of the mode (as ``confirm``).
+* ``...-revisit0.5m-confirm1m``: and a stop needs 2 readings within 1 m of the mode (as ``confirm``);
+* ``...-revisit0.5m-gas1m``: and a stop needs 1 reading within 1 m of the mode above twice the
+  estimator's noise floor (``confirm_readings=1``, ``confirm_sigmas=2``): gas smelt there.
+  Every trial records the stops the confirmation held (``held_stops``) and the error of the
+  first (``first_held_error_m``): what the rule without it would have reported, in the same run.
 
 ``dgse-phys`` runs with :data:`dgse.estimators.phys.SEARCH_ESTIMATOR` (the options ``dgse demo``
 uses: ``noise_weights="mixture"`` since 2026-11-27; the files recorded before ran the plug-in
@@ -102,6 +106,12 @@ RULES["mass1m90-disk1m-deadline60s-revisit0.5m-confirm1m"] = {
     **RULES["mass1m90-disk1m-deadline60s-revisit0.5m"],
     "confirm_radius_m": 1.0,
     "confirm_readings": 2,
+}
+RULES["mass1m90-disk1m-deadline60s-revisit0.5m-gas1m"] = {
+    **RULES["mass1m90-disk1m-deadline60s-revisit0.5m"],
+    "confirm_radius_m": 1.0,
+    "confirm_readings": 1,
+    "confirm_sigmas": 2.0,
 }
 
 

@@ -19,6 +19,7 @@ from dgse.search.planners import (
     mass_within,
     planner_names,
     register_planner,
+    stop_held,
 )
 from dgse.sensing.sensors import Observations
 
@@ -170,6 +171,40 @@ def test_a_stop_needs_readings_near_the_mode():
     for bad in ({"confirm_radius_m": 0.0}, {"confirm_radius_m": math.nan}, {"confirm_readings": 0}):
         with pytest.raises(InputDataError, match="confirm"):
             UtilityPlanner(**bad)
+
+
+def test_a_stop_can_need_gas_above_the_noise_floor_near_the_mode():
+    """confirm_sigmas: readings near the mode count only above that many noise floors."""
+    occ = np.zeros((10, 10), np.uint8)
+    peaked = np.zeros((10, 10))
+    peaked[5, 5] = 1.0
+    belief = _belief(occ, peaked, res=0.5)
+    belief.info["noise_floor_ppm"] = 10.0
+    g = FreeSpaceGraph(occ, 0.5)
+    planner = UtilityPlanner(confirm_radius_m=1.0, confirm_readings=1, confirm_sigmas=2.0)
+    h = _history(g, [(0, 0), (5, 5), (5, 6)])
+    h.step = 3
+    h.observations.gas[:] = [500.0, 0.0, 15.0]  # high far away; near the mode: a zero and 1.5 floors
+    assert UtilityPlanner(confirm_radius_m=1.0, confirm_readings=1).should_stop(belief, h)
+    assert not planner.should_stop(belief, h)
+    assert planner.stop_held(belief, h) and stop_held(planner, belief, h)
+    goal = planner.next_goal(belief, (5, 6), g.distances_from((5, 6)), h)
+    assert goal is not None and goal not in ((5, 5), (5, 6))
+    assert np.hypot(goal[0] - 5, goal[1] - 5) * 0.5 <= 1.0
+    h.observations.gas[2] = 25.0  # 2.5 floors
+    assert planner.should_stop(belief, h) and not planner.stop_held(belief, h)
+    # a belief that states no noise floor: any reading above 0 ppm counts
+    del belief.info["noise_floor_ppm"]
+    h.observations.gas[2] = 0.0
+    assert not planner.should_stop(belief, h)
+    h.observations.gas[1] = 0.5
+    assert planner.should_stop(belief, h)
+    # a flat belief holds nothing; other planners hold nothing
+    flat = _belief(occ, np.ones((10, 10)), res=0.5)
+    assert not planner.stop_held(flat, h) and not stop_held(object(), belief, h)
+    for bad in (-1.0, math.inf, math.nan):
+        with pytest.raises(InputDataError, match="confirm_sigmas"):
+            UtilityPlanner(confirm_sigmas=bad)
 
 
 def test_mass_near_the_mode_stop_rule():

@@ -59,7 +59,7 @@ from dgse.estimators.belief import Belief
 from dgse.estimators.knowledge import DEFAULT_LEVEL, Knowledge
 from dgse.estimators.registry import Estimator, StreamingEstimator
 from dgse.search.paths import Cell, graph_for
-from dgse.search.planners import Planner, SearchHistory, stopped_by_deadline
+from dgse.search.planners import Planner, SearchHistory, stop_held, stopped_by_deadline
 from dgse.search.robot import DEFAULT_DWELL, DEFAULT_SPEED, Robot, random_start_cell
 from dgse.sensing.noise import NoiseModel, NoiseParams
 from dgse.world.case import Case
@@ -97,6 +97,8 @@ class StepRecord:
         error_m: distance from ``estimate_xy`` to the true source, m.
         preprocessing_s, inference_s, planning_s: computation time of this step, s.
         goal: the chosen next cell, or None (the search ended at this step).
+        held: the planner's stop test passed here but the stop waited for readings that
+            confirm the posterior's mode (``UtilityPlanner.confirm_radius_m``).
         source_probs: recorded source posterior ``float32 (h, w)`` (or None).
         wind_mean: recorded wind mean ``float32 (2, h, w)`` (or None).
         log_conc_mean: recorded ``log(1 + c)`` mean ``float32 (h, w)`` (or None).
@@ -115,6 +117,7 @@ class StepRecord:
     inference_s: float = 0.0
     planning_s: float = 0.0
     goal: Cell | None = None
+    held: bool = False
     source_probs: np.ndarray | None = field(default=None, repr=False)
     wind_mean: np.ndarray | None = field(default=None, repr=False)
     log_conc_mean: np.ndarray | None = field(default=None, repr=False)
@@ -141,6 +144,7 @@ class StepRecord:
             "planning_s": self.planning_s,
             "compute_s": self.compute_s,
             "goal": None if self.goal is None else list(self.goal),
+            "held": self.held,
         }
 
 
@@ -236,6 +240,9 @@ class EpisodeResult:
             "shortest_path_m": self.shortest_path_m if math.isfinite(self.shortest_path_m) else None,
             "time_limit_s": self.time_limit_s,
             "n_steps": self.n_steps,
+            "held_stops": sum(s.held for s in self.steps),
+            # the error had the search stopped at its first held stop (without the confirmation)
+            "first_held_error_m": next((s.error_m for s in self.steps if s.held), None),
             "settings": self.settings,
         }
         if steps:
@@ -400,6 +407,7 @@ def run_episode(
             distances = graph.distances_from(robot.cell)
             raw = planner.next_goal(belief, robot.cell, distances, history)
             goal = None if raw is None else graph.check_cell(raw, f"goal of planner {planner.name!r}")
+        held = not stop and stop_held(planner, belief, history)
         plan = time.perf_counter() - t3
 
         est = belief.source_estimate()
@@ -417,6 +425,7 @@ def run_episode(
             inference_s=inf,
             planning_s=plan,
             goal=goal,
+            held=held,
         )
         if record:
             rec.source_probs = _block_reduce(belief.source_probs, factor, "sum")

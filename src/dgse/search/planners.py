@@ -89,6 +89,7 @@ __all__ = [
     "mass_within",
     "planner_names",
     "register_planner",
+    "stop_held",
     "stopped_by_deadline",
 ]
 
@@ -213,6 +214,11 @@ class UtilityPlanner:
             from afar (clipped noise in clean air can make one); measured at, the estimator
             keeps it only if the readings there agree.
         confirm_readings: readings near the mode the stop needs (with ``confirm_radius_m``).
+        confirm_sigmas: 0 (any reading counts) or a number: only readings above this many
+            times the belief's noise floor (``belief.info["noise_floor_ppm"]``; a belief that
+            states none: above 0 ppm) count towards ``confirm_readings``.  Clipped noise in
+            clean air (zeros) can make a sharp posterior on a spot the plume of no candidate
+            reaches; a source that nobody has smelt near is a guess.
         mass_radius_m: None (the entropy test) or a radius, m: the stop test becomes "the
             posterior holds at least ``mass_level`` within this distance of its mode"; with
             a calibrated posterior, that share of the stops lies within the radius of the
@@ -254,6 +260,7 @@ class UtilityPlanner:
     min_observations: int = 0
     confirm_radius_m: float | None = None
     confirm_readings: int = 2
+    confirm_sigmas: float = 0.0
     mass_radius_m: float | None = None
     mass_level: float = 0.9
     source_radius_m: float | None = None
@@ -286,6 +293,10 @@ class UtilityPlanner:
         if self.confirm_readings < 1:
             raise InputDataError(f"confirm_readings must be >= 1, got {self.confirm_readings}")
         self.confirm_readings = int(self.confirm_readings)
+        sig = float(self.confirm_sigmas)
+        if not (math.isfinite(sig) and sig >= 0):
+            raise InputDataError(f"confirm_sigmas must be a finite number >= 0, got {self.confirm_sigmas!r}")
+        self.confirm_sigmas = sig
         self.mass_radius_m = _radius_or_none("mass_radius_m", self.mass_radius_m)
         if not (0.0 < float(self.mass_level) <= 1.0):
             raise InputDataError(f"mass_level must lie in (0, 1], got {self.mass_level}")
@@ -369,9 +380,21 @@ class UtilityPlanner:
         cells = history.observations.cells
         if len(cells):
             d = np.hypot(cells[:, 0] - mode[0], cells[:, 1] - mode[1]) * belief.resolution
-            if int((d <= self.confirm_radius_m + 1e-9).sum()) >= self.confirm_readings:
+            counts = d <= self.confirm_radius_m + 1e-9
+            if self.confirm_sigmas > 0:
+                counts &= np.asarray(history.observations.gas) > self.confirm_sigmas * _noise_floor(belief)
+            if int(counts.sum()) >= self.confirm_readings:
                 return None
         return mode
+
+    def stop_held(self, belief: Belief, history: SearchHistory | None) -> bool:
+        """True when the stop test passes but the mode waits for its confirmation
+        (``confirm_radius_m``): what the search would have stopped on without it."""
+        if history is None or self.confirm_radius_m is None or history.step < self.min_observations:
+            return False
+        if self.deadline_reached(history) or not self._entropy_passes(belief):
+            return False
+        return self._unconfirmed_mode(belief, history) is not None
 
     def utility(
         self, belief: Belief, distances: np.ndarray, history: SearchHistory | None = None
@@ -461,6 +484,20 @@ class UtilityPlanner:
             return None
         k = int(np.argmin(np.where(ok, near, np.inf)))
         return (k // W, k % W)
+
+
+def _noise_floor(belief: Belief) -> float:
+    """The belief's stated noise floor, ppm (``info["noise_floor_ppm"]``), else 0."""
+    v = belief.info.get("noise_floor_ppm") if isinstance(belief.info, dict) else None
+    if isinstance(v, int | float) and math.isfinite(v) and v > 0:
+        return float(v)
+    return 0.0
+
+
+def stop_held(planner: Planner, belief: Belief, history: SearchHistory) -> bool:
+    """Whether ``planner`` would stop now but for the confirmation of its mode
+    (:meth:`UtilityPlanner.stop_held`; False for other planners)."""
+    return isinstance(planner, UtilityPlanner) and planner.stop_held(belief, history)
 
 
 def stopped_by_deadline(planner: Planner, history: SearchHistory) -> bool:
