@@ -82,6 +82,24 @@ def test_deadline_stop_ends_before_the_limit():
     assert 90.0 <= r.search_time_s < 100.0
 
 
+def test_a_stop_in_clean_air_is_held_and_recorded():
+    """confirm_sigmas: a sharp mode where only zeros were read is no stop; the trial says
+    which stops were held and what the first would have reported."""
+    case = corridor_case(gas=False)
+    est = PeakEstimator(sigma=0.05, threshold=-1.0)  # peaked at the first zero
+    kw = {"start": (5, 2), "rng": 2, "time_limit": 40.0}
+    plain = run_episode(case, est, UtilityPlanner(deadline_margin_s=4.0), **kw)
+    assert plain.reason == "converged" and plain.n_steps == 1 and not plain.steps[0].held
+    confirm = {"confirm_radius_m": 0.5, "confirm_readings": 1, "confirm_sigmas": 2.0}
+    r = run_episode(case, est, UtilityPlanner(deadline_margin_s=4.0, **confirm), **kw)
+    assert r.reason == "deadline" and r.n_steps > 3
+    assert all(s.held for s in r.steps[:-1]) and not r.steps[-1].held  # the deadline stop is no held one
+    d = r.to_dict(steps=True)
+    assert d["held_stops"] == r.n_steps - 1 and d["steps"][0]["held"]
+    assert d["first_held_error_m"] == pytest.approx(plain.error_m)
+    assert plain.to_dict()["held_stops"] == 0 and plain.to_dict()["first_held_error_m"] is None
+
+
 def test_seeding_compute_time_and_downsampled_records():
     case = corridor_case(gas=False)
     a = run_episode(case, UniformEstimator(), UtilityPlanner(), rng=7, time_limit=30.0, record=False)
