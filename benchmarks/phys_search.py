@@ -174,7 +174,7 @@ def stop_quality(result: dict[str, Any]) -> dict[str, Any]:
     late = [t for t in ended if t.get("reason") == "deadline"]
     stops = [t for t in ended if t.get("reason") != "deadline"]
     near = [t for t in stops if t["error_m"] <= 2.0]
-    return {
+    out: dict[str, Any] = {
         "episodes": len(rows),
         "entropy_stops": len(stops),
         "stops_within_2m": len(near),
@@ -182,6 +182,29 @@ def stop_quality(result: dict[str, Any]) -> dict[str, Any]:
         "deadline_stops": len(late),
         "deadline_stops_within_2m": sum(t["error_m"] <= 2.0 for t in late),
     }
+    held = [t for t in rows if t.get("held_stops")]
+    if held:
+        # the same run read as the rule without the confirmation: an episode with a held stop
+        # would have ended there (as a mass stop) with that step's error; the others the same
+        def without(t: dict[str, Any]) -> tuple[float, bool]:
+            if t.get("held_stops"):
+                return float(t["first_held_error_m"]), True
+            return float(t["error_m"]), bool(t.get("terminated")) and t.get("reason") != "deadline"
+
+        w = [without(t) for t in rows]
+        w_stops = [e for e, stop in w if stop]
+        out["held"] = {
+            "episodes_with_held_stops": len(held),
+            "held_stop_errors_m": [round(float(t["first_held_error_m"]), 3) for t in held],
+            "final_errors_m": [round(float(t["error_m"]), 3) for t in held],
+            "without_confirmation": {
+                "found": sum(e <= 2.0 for e, _ in w),
+                "error_m_mean": sum(e for e, _ in w) / len(w),
+                "mass_stops": len(w_stops),
+                "mass_stops_within_2m": sum(e <= 2.0 for e in w_stops),
+            },
+        }
+    return out
 
 
 def write_result(path: Path, result: dict[str, Any], label: str, extra: str = "") -> None:
