@@ -19,7 +19,8 @@ Methods (estimator + planner, registry names):
 * **DGSE-phys** (``dgse-phys`` + ``utility``): the physics-guided estimator at the run's
   knowledge level with the planner settings chosen for it on the validation split
   (:data:`dgse.estimators.phys.SEARCH_PLANNER`: a stop on 90 % of the posterior within 1 m
-  instead of the entropy test, a deadline stop, revisit damping) and the estimator options
+  instead of the entropy test, held until gas above the noise floor was read within 1 m of
+  the mode, a deadline stop, revisit damping) and the estimator options
   chosen with them (:data:`dgse.estimators.phys.SEARCH_ESTIMATOR`);
 * **Dual-mode** (``dualmode`` + ``dualmode``): particle filter and the
   local/global information planner;

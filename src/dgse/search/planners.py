@@ -388,8 +388,9 @@ class UtilityPlanner:
         return mode
 
     def stop_held(self, belief: Belief, history: SearchHistory | None) -> bool:
-        """True when the stop test passes but the mode waits for its confirmation
-        (``confirm_radius_m``): what the search would have stopped on without it."""
+        """True when the stop test passes at this reading but the mode waits for its
+        confirmation (``confirm_radius_m``): where the search would have stopped without it
+        (with ``stop_readings`` 1)."""
         if history is None or self.confirm_radius_m is None or history.step < self.min_observations:
             return False
         if self.deadline_reached(history) or not self._entropy_passes(belief):
