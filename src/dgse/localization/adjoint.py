@@ -474,7 +474,7 @@ def _evidence_from_sums(
 
 #: Gauss-Hermite nodes over the log noise precision in the censored correction.
 CENSORED_TAU_NODES = 4
-#: Newton steps to the mode of that integrand (at most: they stop once they are below 1e-7).
+#: Newton steps to the mode of that integrand.
 CENSORED_NEWTON_STEPS = 5
 #: Gauss-Legendre nodes per piece over the release rate (pieces refine towards the low end).
 CENSORED_Q_NODES = 4

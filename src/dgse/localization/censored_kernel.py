@@ -66,11 +66,6 @@ _SCAN_NEWTON = 12
 _SCAN_UNIFORM = 6
 _SCAN_MAX_STEPS = 60
 _SCAN_OUTSIDE_ALPHA = 5.0
-#: Truncation intervals of the rate (in standard deviations) narrower than this take a Newton
-#: step on Acklam's quantiles (:func:`_rate_nodes`).
-_NEWTON_WIDTH = 1e-4
-#: The Newton steps to the mode over ``log tau`` stop once a step is below this.
-_MODE_STEP = 1e-7
 
 # Acklam's coefficients of the normal quantile (central region and tails)
 _A = np.array(
@@ -268,13 +263,7 @@ def _rate_nodes(t: float, qhat: float, aa: float, qmax: float, u: np.ndarray, la
     lo = -qhat * rs
     hi = (qmax - qhat) * rs
     lmass, a, d, upper = _truncation_mass(lo, hi)
-    if hi - lo < 1e-9 * (1.0 + abs(lo)):
-        # the interval is too narrow for the quantiles to tell its points apart: evenly
-        # by the CDF (the density is flat across it)
-        for j in range(u.size):
-            x = min(max(lo + u[j] * min(hi - lo, 1e300), lo), hi)
-            lam[j] = min(max(qhat + sd * x, 0.0), qmax) * rt
-        return lmass
+    narrow_width = hi - lo < 1e-9 * (1.0 + abs(lo))
     pa = math.exp(a)
     for j in range(u.size):
         # the node's quantile: Phi(x) = e^a f (of -x in the right tail, ``upper``)
@@ -287,16 +276,14 @@ def _rate_nodes(t: float, qhat: float, aa: float, qmax: float, u: np.ndarray, la
         xl, pl, yl, sign = _share_quantile(a, pa, f, fc)
         # Acklam's 1e-9 moves q = qhat + sd x by 1e-9 |x| sd, against a spread of the
         # nodes of about sd min(hi - lo, 1 / |lo|): Newton's step only where that
-        # ratio could exceed 1e-5 (a candidate the positive readings hardly see: a
-        # narrow interval far out) or far in the tail.  (A bound of 1e-7, with the
-        # step on every interval narrower than 1: 13 % more time in this kernel over a
-        # search episode's calls, for values that moved by 6e-9 nats at most.)
-        if hi - lo < _NEWTON_WIDTH or abs(xl) * max(1.0, abs(lo)) > 100.0 or yl < -700.0:
+        # ratio could exceed 1e-7 (a candidate the positive readings hardly see: a
+        # narrow interval far out) or far in the tail
+        if hi - lo < 1.0 or abs(xl) * max(1.0, abs(lo)) > 100.0 or yl < -700.0:
             xl = _newton(xl, math.log(pl) if math.isnan(yl) else yl)
         x = sign * xl
         if upper:
             x = -x
-        if not math.isfinite(x):
+        if narrow_width or not math.isfinite(x):
             x = lo + u[j] * min(hi - lo, 1e300)
         x = min(max(x, lo), hi)
         q = min(max(qhat + sd * x, 0.0), qmax)
@@ -451,8 +438,7 @@ def censored_log_factor(
         u, log_wu: ``(k,)`` the rate's nodes in its conditional CDF and their log weights;
         xh, wh: Gauss-Hermite nodes and weights over ``log tau``;
         cheb_matrix: ``(p, p)`` values at Chebyshev points to coefficients;
-        newton_steps: at most this many Newton steps to the mode over ``log tau`` (fewer once
-            a step is below ``_MODE_STEP``);
+        newton_steps: Newton steps to the mode over ``log tau``;
         floor: the value of a candidate whose integrand vanishes everywhere.
         scan_margin: how far (nats) the probe's estimate of the integral may exceed the
             Gauss-Hermite one before the candidate's integral is scanned instead (a rate
@@ -500,8 +486,6 @@ def censored_log_factor(
                 break
             step = min(max(d1 / min(d2, -1e-6), -3.0), 3.0)
             t = min(max(t - step, t0 - 60.0), t0 + 20.0)
-            if abs(step) < _MODE_STEP:
-                break  # converged: the curvature of this step stands for the mode's
         if not math.isfinite(t):
             t = t0
         width = 1.0
