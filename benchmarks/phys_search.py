@@ -35,6 +35,7 @@ Stop rules (``--rule``):
   estimator's noise floor (``confirm_readings=1``, ``confirm_sigmas=2``): gas smelt there.
   Every trial records the stops the confirmation held (``held_stops``) and the error of the
   first (``first_held_error_m``): what the rule without it would have reported, in the same run.
+  This rule is :data:`dgse.estimators.phys.SEARCH_PLANNER` (since 2026-11-27 d).
 
 ``dgse-phys`` runs with :data:`dgse.estimators.phys.SEARCH_ESTIMATOR` (the options ``dgse demo``
 uses: ``noise_weights="mixture"`` since 2026-11-27; the files recorded before ran the plug-in
