@@ -187,12 +187,12 @@ def test_a_stop_can_need_gas_above_the_noise_floor_near_the_mode():
     h.observations.gas[:] = [500.0, 0.0, 15.0]  # high far away; near the mode: a zero and 1.5 floors
     assert UtilityPlanner(confirm_radius_m=1.0, confirm_readings=1).should_stop(belief, h)
     assert not planner.should_stop(belief, h)
-    assert planner.stop_held(belief, h) and stop_held(planner, belief, h)
+    assert planner.stop_held(h) and stop_held(planner, h)
     goal = planner.next_goal(belief, (5, 6), g.distances_from((5, 6)), h)
     assert goal is not None and goal not in ((5, 5), (5, 6))
     assert np.hypot(goal[0] - 5, goal[1] - 5) * 0.5 <= 1.0
     h.observations.gas[2] = 25.0  # 2.5 floors
-    assert planner.should_stop(belief, h) and not planner.stop_held(belief, h)
+    assert planner.should_stop(belief, h) and not planner.stop_held(h)
     # a belief that states no noise floor: any reading above 0 ppm counts
     del belief.info["noise_floor_ppm"]
     h.observations.gas[2] = 0.0
@@ -201,7 +201,8 @@ def test_a_stop_can_need_gas_above_the_noise_floor_near_the_mode():
     assert planner.should_stop(belief, h)
     # a flat belief holds nothing; other planners hold nothing
     flat = _belief(occ, np.ones((10, 10)), res=0.5)
-    assert not planner.stop_held(flat, h) and not stop_held(object(), belief, h)
+    assert not planner.should_stop(flat, h) and not planner.stop_held(h)
+    assert not stop_held(object(), h)
     for bad in (-1.0, math.inf, math.nan):
         with pytest.raises(InputDataError, match="confirm_sigmas"):
             UtilityPlanner(confirm_sigmas=bad)

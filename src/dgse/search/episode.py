@@ -407,7 +407,7 @@ def run_episode(
             distances = graph.distances_from(robot.cell)
             raw = planner.next_goal(belief, robot.cell, distances, history)
             goal = None if raw is None else graph.check_cell(raw, f"goal of planner {planner.name!r}")
-        held = not stop and stop_held(planner, belief, history)
+        held = stop_held(planner, history)
         plan = time.perf_counter() - t3
 
         est = belief.source_estimate()

@@ -269,6 +269,7 @@ class UtilityPlanner:
     stop_readings: int = 1
     name: str = field(default="utility", init=False)
     _streak: list[tuple[int, int, int]] = field(default_factory=list, init=False, repr=False)
+    _held_step: int | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         for k in ("w_d", "w_w", "w_c", "w_s"):
@@ -319,19 +320,24 @@ class UtilityPlanner:
     def reset(self) -> None:
         """Forget the stop test's run of passes (``stop_readings``)."""
         self._streak = []
+        self._held_step = None
 
     def should_stop(self, belief: Belief, history: SearchHistory | None = None) -> bool:
         """``H(pi_s) <= eta log N`` (``N``: free cells or ``entropy_cells``); a one-cell map stops at once.
 
         Never before ``min_observations`` readings (``history`` None: no minimum).
         """
+        self._held_step = None
         if history is not None and history.step < self.min_observations:
             return False
         if self.deadline_reached(history):
             return True
         if not self._passes_in_a_row(belief, history):
             return False
-        return history is None or self._unconfirmed_mode(belief, history) is None
+        if history is None or self._unconfirmed_mode(belief, history) is None:
+            return True
+        self._held_step = int(history.step)  # passed, held for the mode's confirmation
+        return False
 
     def _passes_in_a_row(self, belief: Belief, history: SearchHistory | None) -> bool:
         """The stop test has passed at the last ``stop_readings`` readings, the posterior's mode
@@ -387,15 +393,11 @@ class UtilityPlanner:
                 return None
         return mode
 
-    def stop_held(self, belief: Belief, history: SearchHistory | None) -> bool:
-        """True when the stop test passes at this reading but the mode waits for its
-        confirmation (``confirm_radius_m``): where the search would have stopped without it
-        (with ``stop_readings`` 1)."""
-        if history is None or self.confirm_radius_m is None or history.step < self.min_observations:
-            return False
-        if self.deadline_reached(history) or not self._entropy_passes(belief):
-            return False
-        return self._unconfirmed_mode(belief, history) is not None
+    def stop_held(self, history: SearchHistory | None) -> bool:
+        """True when :meth:`should_stop`, asked at this step, passed its stop test but held the
+        stop for the mode's confirmation (``confirm_radius_m``): where the search would have
+        stopped without it."""
+        return history is not None and self._held_step == int(history.step)
 
     def utility(
         self, belief: Belief, distances: np.ndarray, history: SearchHistory | None = None
@@ -489,16 +491,16 @@ class UtilityPlanner:
 
 def _noise_floor(belief: Belief) -> float:
     """The belief's stated noise floor, ppm (``info["noise_floor_ppm"]``), else 0."""
-    v = belief.info.get("noise_floor_ppm") if isinstance(belief.info, dict) else None
+    v = belief.info.get("noise_floor_ppm")
     if isinstance(v, int | float) and math.isfinite(v) and v > 0:
         return float(v)
     return 0.0
 
 
-def stop_held(planner: Planner, belief: Belief, history: SearchHistory) -> bool:
-    """Whether ``planner`` would stop now but for the confirmation of its mode
-    (:meth:`UtilityPlanner.stop_held`; False for other planners)."""
-    return isinstance(planner, UtilityPlanner) and planner.stop_held(belief, history)
+def stop_held(planner: Planner, history: SearchHistory) -> bool:
+    """Whether ``planner``'s last stop test, at this step, held a stop for the confirmation of
+    its mode (:meth:`UtilityPlanner.stop_held`; False for other planners)."""
+    return isinstance(planner, UtilityPlanner) and planner.stop_held(history)
 
 
 def stopped_by_deadline(planner: Planner, history: SearchHistory) -> bool:
