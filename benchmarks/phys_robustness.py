@@ -19,6 +19,14 @@ error per variant, method and count;
 every estimate is journaled, so an interrupted run resumes::
 
     python benchmarks/phys_robustness.py --trials 2
+
+The calibration at 50 readings on all 20 test scenarios, two processes (one
+journal each, one summary over both)::
+
+    python benchmarks/phys_robustness.py --seeds 2000-2019 --counts 50 --trials 5 \
+        --variants steady filament --methods dgse-phys@openings --tag phys \
+        --cache benchmarks/results/phys_robustness/_cases -o benchmarks/results/phys_calibration50
+    # the same with --methods dgse-s@map --tag dgse-s
 """
 
 from __future__ import annotations
@@ -35,7 +43,12 @@ from scipy import ndimage
 
 from dgse.estimators.knowledge import Knowledge
 from dgse.estimators.registry import get_estimator
-from dgse.evaluation.calibration import calibration_error, coverage_curve, credible_level
+from dgse.evaluation.calibration import (
+    calibration_error,
+    chance_calibration_error,
+    coverage_curve,
+    credible_level,
+)
 from dgse.evaluation.evaluate import draw_observations, summarize
 from dgse.evaluation.metrics import source_cross_entropy, source_localization_error
 from dgse.world.case import Case
@@ -77,15 +90,37 @@ def variant_case(case: Case, variant: str, cache: Path, tag: str) -> Case:
     return Case.load(path)
 
 
+def parse_seeds(text: str) -> list[int]:
+    """``"2000-2019"`` or ``"2000,2003"`` -> the scenario seeds."""
+    seeds: list[int] = []
+    try:
+        for part in text.split(","):
+            lo, _, hi = part.partition("-")
+            seeds += list(range(int(lo), int(hi or lo) + 1))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"seeds must look like 2000-2019 or 2000,2003, got {text!r}"
+        ) from None
+    if not seeds:
+        raise argparse.ArgumentTypeError(f"no seeds in {text!r}")
+    return seeds
+
+
 def write_summary(out: Path, trials: int) -> None:
-    """``summary.md`` / ``summary.json`` from the journal (whatever it holds so far)."""
-    journal = out / "journal.jsonl"
-    rows = [json.loads(line) for line in journal.read_text().splitlines()]
+    """``summary.md`` / ``summary.json`` from the journals (whatever they hold so far)."""
+    rows = [
+        json.loads(line) for j in sorted(out.glob("journal*.jsonl")) for line in j.read_text().splitlines()
+    ]
+    if not rows:
+        raise SystemExit(f"no journal in {out}")
+    cases = sorted({r["case"] for r in rows})
+    counts = sorted({r["n"] for r in rows})
     summary: dict[str, Any] = {}
+    sizes: set[int] = set()
     lines = [
         "# dgse-phys where the physics is wrong",
         "",
-        "`python benchmarks/phys_robustness.py` (test scenarios 2000-2007, "
+        f"`python benchmarks/phys_robustness.py` ({len(cases)} test scenarios, {cases[0]}-{cases[-1]}, "
         f"{trials} trials): SL error mean / median (m), source CE mean (nats), and the "
         "calibration error of the source posterior's highest-density credible sets "
         "(mean |coverage - level|, `dgse.evaluation.calibration`); in brackets the number of estimates.",
@@ -95,31 +130,40 @@ def write_summary(out: Path, trials: int) -> None:
         vr = [r for r in rows if r["variant"] == variant]
         if not vr:
             continue
-        lines += [f"## {variant}", "", "| method@knowledge | " + " | ".join(map(str, COUNTS)) + " |"]
-        lines.append("|---" * (len(COUNTS) + 1) + "|")
+        lines += [f"## {variant}", "", "| method@knowledge | " + " | ".join(map(str, counts)) + " |"]
+        lines.append("|---" * (len(counts) + 1) + "|")
         for method, level in METHODS:
             cells = []
-            for n in COUNTS:
+            for n in counts:
                 rr = [r for r in vr if r["method"] == method and r["knowledge"] == level and r["n"] == n]
                 if not rr:
                     cells.append("-")
                     continue
                 sl, ce = summarize(r["sl_m"] for r in rr), summarize(r["ce"] for r in rr)
                 ece = calibration_error(coverage_curve([r["credible_level"] for r in rr]))
+                sizes.add(len(rr))
                 summary.setdefault(variant, {}).setdefault(f"{method}@{level}", {})[str(n)] = {
                     "sl_m": sl,
                     "ce": ce,
                     "credible_set_calibration_error": ece,
+                    # 0.5 when calibrated; above: the truth sits in the tails (overconfident)
+                    "mean_credible_level_of_truth": float(np.mean([r["credible_level"] for r in rr])),
                 }
                 cell = f"{sl['mean']:.2f} / {sl['median']:.2f} / {ce['mean']:.1f} / {ece:.2f}"
                 cells.append(f"{cell} ({len(rr)})")
             if any(c != "-" for c in cells):
                 lines.append(f"| {method}@{level} | " + " | ".join(cells) + " |")
         lines.append("")
+    chance = {str(k): round(chance_calibration_error(k), 3) for k in sorted(sizes)}
+    summary["chance_calibration_error"] = chance
+    lines.append(
+        "A perfectly calibrated posterior would show a calibration error of about "
+        + ", ".join(f"{v:.2f} on {k}" for k, v in chance.items())
+        + " estimates (sampling noise alone, `chance_calibration_error`)."
+    )
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     (out / "summary.md").write_text("\n".join(lines))
     print("\n".join(lines))
-
 
 
 def main() -> None:
@@ -128,18 +172,30 @@ def main() -> None:
     ap.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
     names = [f"{m}@{k}" for m, k in METHODS]
     ap.add_argument("--methods", nargs="+", default=names, choices=names, help="method@knowledge")
+    ap.add_argument(
+        "--seeds", type=parse_seeds, default=list(SEEDS), help="test scenario seeds, e.g. 2000-2019"
+    )
+    ap.add_argument("--counts", type=int, nargs="+", default=list(COUNTS), help="numbers of readings")
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/phys_robustness"))
+    ap.add_argument(
+        "--cache", type=Path, default=None, help="where scenario files are kept (default: OUT/_cases)"
+    )
+    ap.add_argument(
+        "--tag", default="", help="this process's journal is journal-TAG.jsonl (the summary reads all)"
+    )
     ap.add_argument("--summary-only", action="store_true", help="summarize the journal, estimate nothing")
     args = ap.parse_args()
+    if any(n < 1 for n in args.counts):
+        ap.error("--counts must be positive")
     if args.summary_only:
         write_summary(args.out, args.trials)
         return
     from dgse.physics.scenario import random_cases
 
     args.out.mkdir(parents=True, exist_ok=True)
-    cache = args.out / "_cases"
-    cache.mkdir(exist_ok=True)
-    journal = args.out / "journal.jsonl"
+    cache = args.cache or args.out / "_cases"
+    cache.mkdir(parents=True, exist_ok=True)
+    journal = args.out / (f"journal-{args.tag}.jsonl" if args.tag else "journal.jsonl")
     done = set()
     if journal.exists():
         for line in journal.read_text().splitlines():
@@ -147,7 +203,7 @@ def main() -> None:
             done.add((r["variant"], r["method"], r["knowledge"], r["case"], r["n"], r["trial"]))
     estimators: dict[tuple[str, str], Any] = {}
     with journal.open("a") as jf:
-        for seed in SEEDS:
+        for seed in args.seeds:
             path = cache / f"test{seed}.npz"
             if not path.exists():
                 random_cases(seed, n_sources=1)[0].save(path)
@@ -155,7 +211,7 @@ def main() -> None:
             for variant in args.variants:
                 truth = variant_case(base, variant, cache, f"test{seed}")
                 told = replace(base, wind=perturbed_wind(base, variant))
-                for n in COUNTS:
+                for n in args.counts:
                     for trial in range(args.trials):
                         obs = draw_observations(truth, n, seed=0, case_id=f"test{seed}", trial=trial)
                         for method, level in METHODS:
@@ -187,6 +243,7 @@ def main() -> None:
                             jf.flush()
                             print(json.dumps(rec), flush=True)
     write_summary(args.out, args.trials)
+
 
 if __name__ == "__main__":
     main()

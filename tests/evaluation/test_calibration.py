@@ -6,6 +6,7 @@ from dgse.evaluation.calibration import (
     DEFAULT_LEVELS,
     SIGMA_LEVELS,
     calibration_error,
+    chance_calibration_error,
     coverage_curve,
     credible_level,
     interval_hits,
@@ -52,6 +53,17 @@ def test_posterior_sampled_from_itself_is_calibrated():
     # a posterior that always points at the wrong cells is badly calibrated
     bad = [credible_level(np.r_[0.9, np.full(29, 0.1 / 29)], 5) for _ in range(10)]
     assert calibration_error(coverage_curve(bad, DEFAULT_LEVELS)) > 0.3
+
+
+def test_chance_calibration_error_is_the_sampling_noise_of_a_calibrated_posterior():
+    # one case: |1{u <= p} - p| has mean 2 p (1 - p) at each level
+    lv = np.asarray(DEFAULT_LEVELS)
+    assert chance_calibration_error(1, draws=40000) == pytest.approx(float((2 * lv * (1 - lv)).mean()), rel=0.02)
+    # it shrinks like 1 / sqrt(n): 25 times the cases, a fifth of the noise
+    small, large = chance_calibration_error(6), chance_calibration_error(150)
+    assert 4.0 < small / large < 6.0
+    with pytest.raises(InputDataError):
+        chance_calibration_error(0)
 
 
 def test_bad_input():

@@ -14,6 +14,8 @@ Pure functions on arrays (no estimator, no I/O):
   fraction of cases with level ``<= p`` is ``p`` for every ``p``
   (:func:`coverage_curve`); :func:`calibration_error` is the mean absolute gap
   over a grid of levels (an expected calibration error of the credible sets).
+  On a few cases that error is mostly sampling noise:
+  :func:`chance_calibration_error` is what a calibrated posterior would show.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ __all__ = [
     "DEFAULT_LEVELS",
     "SIGMA_LEVELS",
     "calibration_error",
+    "chance_calibration_error",
     "coverage_curve",
     "credible_level",
     "interval_hits",
@@ -109,3 +112,20 @@ def calibration_error(observed: Sequence[float], levels: Sequence[float] = DEFAU
     if o.shape != lv.shape:
         raise InputDataError(f"{o.size} observed coverages for {lv.size} levels")
     return float(np.abs(o - lv).mean())
+
+
+def chance_calibration_error(
+    n_cases: int, levels: Sequence[float] = DEFAULT_LEVELS, draws: int = 4000, seed: int = 0
+) -> float:
+    """The calibration error a perfectly calibrated posterior shows on ``n_cases`` cases, on average.
+
+    Its credible levels are uniform on ``[0, 1]``, so the error measured on a
+    finite sample is sampling noise alone: a measured error near this value
+    says nothing about miscalibration.  Monte Carlo over ``draws`` samples.
+    """
+    if n_cases < 1 or draws < 1:
+        raise InputDataError(f"n_cases and draws must be positive, got {n_cases} and {draws}")
+    lv = _levels(levels)
+    u = np.random.default_rng(seed).random((draws, n_cases))
+    cov = (u[:, None, :] <= lv[None, :, None]).mean(axis=2)
+    return float(np.abs(cov - lv[None, :]).mean())
