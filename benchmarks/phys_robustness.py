@@ -107,12 +107,13 @@ def parse_seeds(text: str) -> list[int]:
 
 
 def write_summary(out: Path, trials: int) -> None:
-    """``summary.md`` / ``summary.json`` from the journals (whatever they hold so far)."""
+    """``summary.md`` / ``summary.json`` from the journals (what they hold so far of the first ``trials``)."""
     rows = [
         json.loads(line) for j in sorted(out.glob("journal*.jsonl")) for line in j.read_text().splitlines()
     ]
+    rows = [r for r in rows if r["trial"] < trials]  # the trials the summary covers
     if not rows:
-        raise SystemExit(f"no journal in {out}")
+        raise SystemExit(f"no estimates of trials below {trials} in the journals of {out}")
     cases = sorted({r["case"] for r in rows})
     counts = sorted({r["n"] for r in rows})
     summary: dict[str, Any] = {}
