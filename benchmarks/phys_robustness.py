@@ -122,9 +122,10 @@ def write_summary(out: Path, trials: int) -> None:
         "# dgse-phys where the physics is wrong",
         "",
         f"`python benchmarks/phys_robustness.py` ({len(cases)} test scenarios, {cases[0]}-{cases[-1]}, "
-        f"{trials} trials): SL error mean / median (m), source CE mean (nats), and the "
+        f"up to {trials} trials each; the counts in brackets say how many estimates): "
+        "SL error mean / median (m), source CE mean (nats), and the "
         "calibration error of the source posterior's highest-density credible sets "
-        "(mean |coverage - level|, `dgse.evaluation.calibration`); in brackets the number of estimates.",
+        "(mean |coverage - level|, `dgse.evaluation.calibration`).",
         "",
     ]
     for variant in VARIANTS:
