@@ -41,6 +41,8 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
+from dgse.cli.common import parse_params
+from dgse.errors import InputDataError
 from dgse.estimators.knowledge import Knowledge
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.calibration import (
@@ -185,10 +187,22 @@ def main() -> None:
     ap.add_argument(
         "--tag", default="", help="this process's journal is journal-TAG.jsonl (the summary reads all)"
     )
+    ap.add_argument(
+        "-E",
+        "--estimator-option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a dgse-phys option, e.g. -E hypothesis_readings=10 (repeatable; give the run its own -o)",
+    )
     ap.add_argument("--summary-only", action="store_true", help="summarize the journal, estimate nothing")
     args = ap.parse_args()
     if any(n < 1 for n in args.counts):
         ap.error("--counts must be positive")
+    try:
+        phys_options = parse_params(args.estimator_option, "-E")
+    except InputDataError as exc:
+        ap.error(str(exc))
     if args.summary_only:
         write_summary(args.out, args.trials)
         return
@@ -226,7 +240,11 @@ def main() -> None:
                                 continue
                             est = estimators.get((method, level))
                             if est is None:
-                                kw = {"dtype": "bf16", "channels_last": True} if method == "dgse-s" else {}
+                                kw = (
+                                    {"dtype": "bf16", "channels_last": True}
+                                    if method == "dgse-s"
+                                    else dict(phys_options)
+                                )
                                 est = estimators[(method, level)] = get_estimator(method, **kw)
                             est.set_knowledge(Knowledge.from_case(told, level))
                             b = est.estimate(base.occupancy, base.resolution, obs)
@@ -241,6 +259,8 @@ def main() -> None:
                                 "ce": source_cross_entropy(b, base.source_cell),
                                 "credible_level": credible_level(b.source_probs, base.source_cell),
                             }
+                            if method == "dgse-phys" and phys_options:
+                                rec["options"] = phys_options
                             jf.write(json.dumps(rec) + "\n")
                             jf.flush()
                             print(json.dumps(rec), flush=True)
