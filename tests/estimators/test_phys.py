@@ -143,6 +143,14 @@ def test_learned_belief_is_mixed_in_where_the_readings_are_few(case):
     assert half._learned_weight(25) == 0.0
     half.set_knowledge(Knowledge.from_case(case, "openings"))
     assert half._learned_weight(5) == 0.0
+    # a floor keeps the network in past learned_readings, and only there
+    floored = get_estimator(
+        "dgse-phys", knowledge=k, learned_weight=0.5, learned_readings=20.0, learned_floor=0.1
+    )
+    assert floored._learned_weight(25) == pytest.approx(0.1)
+    assert floored._learned_weight(10) == pytest.approx(0.25)
+    with pytest.raises(InputDataError, match="learned_floor"):
+        get_estimator("dgse-phys", learned_weight=0.5, learned_floor=0.6)
 
 
 def test_predictive_sources_stand_for_the_whole_posterior():

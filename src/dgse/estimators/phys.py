@@ -386,8 +386,12 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         min_weight: hypotheses below this posterior weight are left out of the predictive.
         learned_weight, learned_readings, learned_levels: at the knowledge levels
             ``learned_levels`` the source posterior is mixed with DGSE-S's (the shipped
-            network), weight ``learned_weight * max(0, 1 - m / learned_readings)`` for
-            ``m`` readings: the network where the readings are few, the physics after.
+            network), weight ``max(learned_floor, learned_weight * max(0, 1 - m /
+            learned_readings))`` for ``m`` readings: the network where the readings are few,
+            the physics after.
+        learned_floor: the network's weight never falls below this (0: the physics alone
+            from ``learned_readings`` on); a floor caps how sure of a wrong spot the mixture
+            can be, at the cost of slower mass stops.
         hypothesis_readings: beyond this many readings the flow hypotheses' weights are
             tempered, ``T = m / hypothesis_readings`` (None: not tempered).
         refine_speeds, refine_readings, refine_ratio: at knowledge ``openings``, up to
@@ -447,6 +451,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     map_proposals: int = 5
     learned_weight: float = LEARNED_WEIGHT
     learned_readings: float = LEARNED_READINGS
+    learned_floor: float = 0.0
     learned_levels: Sequence[str] = ("map",)
     hypothesis_readings: float | None = None
     refine_speeds: int = 4
@@ -487,6 +492,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             )
         if not (0.0 <= self.learned_weight <= 1.0):
             raise InputDataError(f"learned_weight must be in [0, 1], got {self.learned_weight}")
+        if not (0.0 <= self.learned_floor <= self.learned_weight):
+            raise InputDataError(f"learned_floor must be in [0, learned_weight], got {self.learned_floor}")
         if not (self.learned_readings > 0 and math.isfinite(self.learned_readings)):
             raise InputDataError(f"learned_readings must be positive, got {self.learned_readings}")
         rs = self.refine_speeds
@@ -622,7 +629,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         k = self.knowledge
         if self.learned_weight <= 0 or k is None or k.level not in self.learned_levels:
             return 0.0
-        return float(self.learned_weight * max(0.0, 1.0 - m / self.learned_readings))
+        fading = self.learned_weight * max(0.0, 1.0 - m / self.learned_readings)
+        return float(max(self.learned_floor, fading))
 
     def _learned_belief(self, occupancy: np.ndarray, resolution: float, obs: Observations) -> Belief:
         """DGSE-S's belief from the same readings (the shipped network, built on first use)."""
