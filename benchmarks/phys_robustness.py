@@ -117,13 +117,14 @@ def write_summary(out: Path, trials: int) -> None:
     if not rows:
         raise SystemExit(f"no estimates of trials below {trials} in the journals of {out}")
     cases = sorted({r["case"] for r in rows})
+    seeds = sorted(int(c.removeprefix("test")) for c in cases)  # journals name a scenario test<seed>
     counts = sorted({r["n"] for r in rows})
     summary: dict[str, Any] = {}
     sizes: set[int] = set()
     lines = [
         "# dgse-phys where the physics is wrong",
         "",
-        f"`python benchmarks/phys_robustness.py` ({len(cases)} test scenarios, {cases[0]}-{cases[-1]}, "
+        f"`python benchmarks/phys_robustness.py` ({len(cases)} scenarios, seeds {seeds[0]}-{seeds[-1]}, "
         f"up to {trials} trials each; the counts in brackets say how many estimates): "
         "SL error mean / median (m), source CE mean (nats), and the "
         "calibration error of the source posterior's highest-density credible sets "
