@@ -57,7 +57,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/phys_gsl"))
     ap.add_argument("--trials", type=int, default=2)
-    ap.add_argument("--sets", nargs="+", default=["reference", "test"])
+    ap.add_argument("--sets", nargs="+", default=["reference", "test"], choices=["reference", "test"])
     ap.add_argument(
         "--methods",
         nargs="+",
@@ -85,8 +85,9 @@ def main() -> None:
             ap.error(f"unknown rows {bad}; choose from {sorted(known)}")
         rows = [known[x] for x in args.methods]
     table: dict = {}
-    sources = {} if args.summary_only else {"reference": args.reference, "test": _test_cases(args.out)}
-    for name in [] if args.summary_only else args.sets:
+    sets = [] if args.summary_only else args.sets
+    sources = {name: args.reference if name == "reference" else _test_cases(args.out) for name in sets}
+    for name in sets:
         for method, level in rows:
             out = args.out / f"{name}_{method}_{level}.json"
             res = evaluate(

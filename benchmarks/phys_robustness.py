@@ -145,14 +145,15 @@ def write_summary(out: Path, trials: int) -> None:
                     cells.append("-")
                     continue
                 sl, ce = summarize(r["sl_m"] for r in rr), summarize(r["ce"] for r in rr)
-                ece = calibration_error(coverage_curve([r["credible_level"] for r in rr]))
+                levels = [r["credible_level"] for r in rr]
+                ece = calibration_error(coverage_curve(levels))
                 sizes.add(len(rr))
                 summary.setdefault(variant, {}).setdefault(f"{method}@{level}", {})[str(n)] = {
                     "sl_m": sl,
                     "ce": ce,
                     "credible_set_calibration_error": ece,
                     # 0.5 when calibrated; above: the truth sits in the tails (overconfident)
-                    "mean_credible_level_of_truth": float(np.mean([r["credible_level"] for r in rr])),
+                    "mean_credible_level_of_truth": float(np.mean(levels)),
                 }
                 cell = f"{sl['mean']:.2f} / {sl['median']:.2f} / {ce['mean']:.1f} / {ece:.2f}"
                 cells.append(f"{cell} ({len(rr)})")
@@ -178,7 +179,10 @@ def main() -> None:
     names = [f"{m}@{k}" for m, k in METHODS]
     ap.add_argument("--methods", nargs="+", default=names, choices=names, help="method@knowledge")
     ap.add_argument(
-        "--seeds", type=parse_seeds, default=list(SEEDS), help="test scenario seeds, e.g. 2000-2019"
+        "--seeds",
+        type=parse_seeds,
+        default=list(SEEDS),
+        help="scenario seeds, e.g. 2000-2019 (test) or 900-923 (validation)",
     )
     ap.add_argument("--counts", type=int, nargs="+", default=list(COUNTS), help="numbers of readings")
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/phys_robustness"))

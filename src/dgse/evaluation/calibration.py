@@ -24,6 +24,7 @@ from collections.abc import Sequence
 
 import numpy as np
 from scipy.special import ndtri
+from scipy.stats import binom
 
 from dgse.errors import InputDataError
 
@@ -114,18 +115,17 @@ def calibration_error(observed: Sequence[float], levels: Sequence[float] = DEFAU
     return float(np.abs(o - lv).mean())
 
 
-def chance_calibration_error(
-    n_cases: int, levels: Sequence[float] = DEFAULT_LEVELS, draws: int = 4000, seed: int = 0
-) -> float:
+def chance_calibration_error(n_cases: int, levels: Sequence[float] = DEFAULT_LEVELS) -> float:
     """The calibration error a perfectly calibrated posterior shows on ``n_cases`` cases, on average.
 
-    Its credible levels are uniform on ``[0, 1]``, so the error measured on a
-    finite sample is sampling noise alone: a measured error near this value
-    says nothing about miscalibration.  Monte Carlo over ``draws`` samples.
+    Its credible levels are uniform on ``[0, 1]``, so the number of cases covered at
+    level ``p`` is binomial ``(n_cases, p)`` and the error measured on a finite sample
+    is sampling noise alone: a measured error near this value says nothing about
+    miscalibration.  Exact (a sum over the binomial's outcomes).
     """
-    if n_cases < 1 or draws < 1:
-        raise InputDataError(f"n_cases and draws must be positive, got {n_cases} and {draws}")
+    if n_cases < 1:
+        raise InputDataError(f"n_cases must be positive, got {n_cases}")
     lv = _levels(levels)
-    u = np.random.default_rng(seed).random((draws, n_cases))
-    cov = (u[:, None, :] <= lv[None, :, None]).mean(axis=2)
-    return float(np.abs(cov - lv[None, :]).mean())
+    k = np.arange(n_cases + 1)
+    pmf = binom.pmf(k[None, :], n_cases, lv[:, None])
+    return float((pmf * np.abs(k[None, :] / n_cases - lv[:, None])).sum(axis=1).mean())
