@@ -39,7 +39,8 @@ Stop rules (``--rule``):
 
 ``dgse-phys`` runs with :data:`dgse.estimators.phys.SEARCH_ESTIMATOR` (the options ``dgse demo``
 uses: ``noise_weights="mixture"`` since 2026-11-27; the files recorded before ran the plug-in
-weights, ``-E 'noise_weights="plug-in"'``); ``-E`` overrides it.
+weights, ``-E 'noise_weights="plug-in"'``); ``-E`` overrides it, and ``-P`` a planner option
+of the rule (``-P min_observations=60``: no entropy or mass stop before 60 readings).
 
 Every finished episode is journaled beside the JSON, so an interrupted run resumes::
 
@@ -269,6 +270,14 @@ def main() -> None:
         help="an estimator option, e.g. -E refine_speeds=0 (repeatable)",
     )
     ap.add_argument(
+        "-P",
+        "--planner-option",
+        action="append",
+        default=[],
+        metavar="KEY=JSON",
+        help="a planner option over the rule's, e.g. -P min_observations=60 (repeatable)",
+    )
+    ap.add_argument(
         "--steps",
         action="store_true",
         help="keep every step's record (cell, readings, estimate) in the journal (not in the JSON)",
@@ -306,13 +315,19 @@ def main() -> None:
         if not sep:
             ap.error(f"-E takes KEY=JSON, got {item!r}")
         est_opts[key] = json.loads(value)
+    planner_opts = dict(RULES[args.rule])
+    for item in args.planner_option:
+        key, sep, value = item.partition("=")
+        if not sep:
+            ap.error(f"-P takes KEY=JSON, got {item!r}")
+        planner_opts[key] = json.loads(value)
     result = run_trials(
         cases,
         args.method,
         "utility",
         trials=args.trials,
         seed=args.seed,
-        planner_options=RULES[args.rule],
+        planner_options=planner_opts,
         estimator_options=est_opts,
         knowledge=args.knowledge,
         steps=args.steps,
