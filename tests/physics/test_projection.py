@@ -96,6 +96,28 @@ def test_the_k_epsilon_closure_gives_back_the_plume(case):
     assert ml.info["closure"] == "mixing-length" and np.all(ml.nut[free] > 0)
 
 
+def test_frozen_turbulence_decays_in_quiet_rooms():
+    """Generated scenario 2005 (its source in a quiet room): the frozen k-epsilon stopped at a flow
+    solve's residual criterion keeps the inlet's turbulence there and misplaces the plume; at the
+    default tolerance it is the case's own plume."""
+    from dgse.physics.scenario import random_cases
+
+    case = random_cases(2005, n_sources=1)[0]
+    src = case.layout.grid.cell_of(*case.source)
+
+    def log_rmse(**kw):
+        flow = project_wind(case.occupancy, case.resolution, case.wind, case.layout, **kw)
+        ts = transport_from_wind(flow)
+        c = ts.solve_cells([src], [case.release_rate])[0] * ts.physics.ppm_per_gm3
+        d = np.log1p(np.maximum(c, 0)) - np.log1p(case.concentration)
+        return float(np.sqrt(np.mean(d[case.free] ** 2)))
+
+    assert log_rmse(turbulence_tolerance=1e-4) > 0.6  # what the projection did before
+    assert log_rmse() < 0.3
+    with pytest.raises(InputDataError, match="turbulence_tolerance"):
+        project_wind(case.occupancy, case.resolution, case.wind, turbulence_tolerance=2.0)
+
+
 def test_bad_wind_is_a_clear_error(case):
     with pytest.raises(InputDataError, match="shape"):
         project_wind(case.occupancy, case.resolution, np.zeros((2, 3, 3)))
