@@ -376,29 +376,3 @@ def test_a_stop_needs_the_test_to_pass_at_readings_in_a_row():
     for bad in (0, 1.5, True):
         with pytest.raises(InputDataError, match="stop_readings"):
             UtilityPlanner(stop_readings=bad)
-
-
-def test_a_stop_waits_for_readings_after_new_hypotheses():
-    """settle_readings: no stop until that many readings followed the estimator's last proposal."""
-    occ = np.zeros((20, 20), np.uint8)
-    graph = FreeSpaceGraph(occ, 0.1)
-    p = np.full((20, 20), 1e-9)
-    p[10, 10] = 1.0
-
-    def belief(proposed_from):
-        b = _belief(occ, p, res=0.1)
-        b.info["hypotheses_from"] = proposed_from
-        return b
-
-    def after(n):
-        return _history(graph, [(i % 20, i // 20) for i in range(n)])
-
-    planner = UtilityPlanner(mass_radius_m=0.5, settle_readings=3)
-    assert not planner.should_stop(belief(64), after(64))  # proposed from these very readings
-    assert not planner.should_stop(belief(64), after(66))
-    assert planner.should_stop(belief(64), after(67))
-    assert planner.should_stop(belief(None), after(64))  # a belief that states no proposal
-    assert UtilityPlanner(mass_radius_m=0.5).should_stop(belief(64), after(64))
-    for bad in (-1, 1.5, True):
-        with pytest.raises(InputDataError, match="settle_readings"):
-            UtilityPlanner(settle_readings=bad)

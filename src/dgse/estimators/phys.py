@@ -799,8 +799,6 @@ class PhysicsGuidedEstimator(KnowledgeUser):
                 for h, w in zip(hyps, hw, strict=True)
             ],
             "best_hypothesis": hyps[best_h].label,
-            # at map the hypotheses come from the readings (UtilityPlanner's settle_readings)
-            "hypotheses_from": self._proposed_at if self.knowledge.level == "map" else None,
             "learned_weight": w_learned,
             "temperature": temp,
             "noise_floor_ppm": sig,

@@ -247,12 +247,6 @@ class UtilityPlanner:
             row, the posterior's mode staying within ``mass_radius_m`` (1 m without it) of
             where it first passed: a posterior that one or two readings have sharpened on a
             wrong spot is given the next reading to contradict it.  1: the paper's rule.
-        settle_readings: 0 (the paper's rule) or a number: no stop (entropy or mass) until
-            this many readings were taken after the estimator last proposed its hypotheses
-            (``belief.info["hypotheses_from"]``: the readings they were proposed from;
-            beliefs that state none are not held).  Hypotheses chosen to fit the readings
-            are then weighed by the same readings, so a posterior is overconfident just
-            after they change; readings taken after are fresh evidence.
     """
 
     w_d: float = 0.1
@@ -273,7 +267,6 @@ class UtilityPlanner:
     deadline_margin_s: float | None = None
     revisit_radius_m: float | None = None
     stop_readings: int = 1
-    settle_readings: int = 0
     name: str = field(default="utility", init=False)
     _streak: list[tuple[int, int, int]] = field(default_factory=list, init=False, repr=False)
     _held_step: int | None = field(default=None, init=False, repr=False)
@@ -316,11 +309,6 @@ class UtilityPlanner:
         if self.stop_readings < 1:
             raise InputDataError(f"stop_readings must be >= 1, got {self.stop_readings}")
         self.stop_readings = int(self.stop_readings)
-        if isinstance(self.settle_readings, bool) or int(self.settle_readings) != self.settle_readings:
-            raise InputDataError(f"settle_readings must be an integer, got {self.settle_readings!r}")
-        if self.settle_readings < 0:
-            raise InputDataError(f"settle_readings must be >= 0, got {self.settle_readings}")
-        self.settle_readings = int(self.settle_readings)
         if self.deadline_margin_s is not None:
             m = float(self.deadline_margin_s)
             if not (math.isfinite(m) and m >= 0):
@@ -344,21 +332,12 @@ class UtilityPlanner:
             return False
         if self.deadline_reached(history):
             return True
-        if self._settling(belief, history):
-            return False
         if not self._passes_in_a_row(belief, history):
             return False
         if history is None or self._unconfirmed_mode(belief, history) is None:
             return True
         self._held_step = int(history.step)  # passed, held for the mode's confirmation
         return False
-
-    def _settling(self, belief: Belief, history: SearchHistory | None) -> bool:
-        """True while fewer than ``settle_readings`` readings followed the belief's hypotheses."""
-        since = belief.info.get("hypotheses_from")
-        if not self.settle_readings or history is None or since is None:
-            return False
-        return len(history.observations) - int(since) < self.settle_readings
 
     def _passes_in_a_row(self, belief: Belief, history: SearchHistory | None) -> bool:
         """The stop test has passed at the last ``stop_readings`` readings, the posterior's mode
