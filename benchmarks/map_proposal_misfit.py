@@ -1,0 +1,108 @@
+"""Were the true openings among dgse-phys's proposals at ``map``, and did the wind say so? (issue 12)
+
+For every episode of ``map`` searches journaled with ``--steps`` (``benchmarks/phys_search.py``), the
+opening pairs ``dgse-phys`` proposes from the episode's first 64 wind readings (or all, if fewer) are
+compared with the case's true inlet and outlet (a proposal hits an opening when it lies on the same
+side and its window overlaps it), and the best proposal's wind misfit is computed: the RMS of the
+readings minus the proposal's flow at their cells (one free, non-negative scale fitted), over the
+RMS of the readings.  Writes one row per episode and the split by success.
+
+    python benchmarks/map_proposal_misfit.py \\
+        benchmarks/results/phys_search/validation3*_map_*-gas1m_base-s0.journal.jsonl \\
+        -o benchmarks/results/phys_search/map_proposal_misfit_validation3.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+
+from dgse.estimators.knowledge import Knowledge
+from dgse.estimators.registry import get_estimator
+from dgse.search.metrics import SUCCESS_RADIUS_M
+from dgse.sensing.sensors import Observations
+from dgse.world.case import Case
+
+READINGS = 64
+LABEL = re.compile(r"in (\w+) ([\d.]+)-([\d.]+) m, out (\w+) ([\d.]+)-([\d.]+) m")
+
+
+def _hits(side: str, a: float, b: float, opening: dict) -> bool:
+    return side == opening["side"] and a < opening["end_m"] and b > opening["start_m"]
+
+
+def episode_row(name: str, case: Case, row: dict) -> dict:
+    steps = row["steps"]
+    n = min(READINGS, len(steps))
+    cells = np.array([s["cell"] for s in steps[:n]], dtype=np.int64)
+    wind = np.array([s["wind"] for s in steps[:n]], dtype=np.float64)
+    gas = np.array([s["gas"] for s in steps[:n]], dtype=np.float64)
+    est = get_estimator("dgse-phys", knowledge=Knowledge.from_case(case, "map"))
+    hyps = est.hypotheses(Observations(cells, gas, wind))
+    misfits, inlet, pair = [], False, False
+    for h in hyps:
+        hw = h.flow.wind[:, cells[:, 0], cells[:, 1]].T
+        scale = max(float((hw * wind).sum() / max((hw * hw).sum(), 1e-12)), 0.0)
+        misfits.append(float(np.sqrt(np.mean(((wind - scale * hw) ** 2).sum(1)) / np.mean((wind**2).sum(1)))))
+        m = LABEL.match(h.label)
+        if m is None:
+            continue
+        i_ok = _hits(m[1], float(m[2]), float(m[3]), case.meta["inlet"])
+        o_ok = _hits(m[4], float(m[5]), float(m[6]), case.meta["outlet"])
+        inlet, pair = inlet or i_ok, pair or (i_ok and o_ok)
+    return {
+        "case": name,
+        "success": row["error_m"] <= SUCCESS_RADIUS_M and row["reason"] != "time_limit",
+        "error_m": row["error_m"],
+        "reason": row["reason"],
+        "n_steps": row["n_steps"],
+        "readings_used": n,
+        "best_misfit": min(misfits),
+        "true_inlet_proposed": inlet,
+        "true_pair_proposed": pair,
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("journals", type=Path, nargs="+", help="search journals written with --steps")
+    ap.add_argument("-o", "--out", type=Path, required=True)
+    args = ap.parse_args()
+    rows = []
+    for journal in args.journals:
+        lines = journal.read_text().splitlines()
+        for line in lines[1:]:
+            entry = json.loads(line)
+            if "steps" not in entry["row"]:
+                raise SystemExit(f"{journal}: no steps recorded; run the search with --steps")
+            found = sorted(journal.parent.glob(f"_cases_*/{entry['case']}.npz"))
+            if not found:
+                raise SystemExit(f"no case file {entry['case']}.npz beside {journal}")
+            rows.append(episode_row(entry["case"], Case.load(found[0]), entry["row"]))
+            r = rows[-1]
+            print(
+                f"{r['case']}: {'found' if r['success'] else 'FAILED'} {r['error_m']:.2f} m ({r['reason']}), "
+                f"misfit {r['best_misfit']:.2f}, inlet proposed {r['true_inlet_proposed']}, "
+                f"pair {r['true_pair_proposed']}",
+                flush=True,
+            )
+    summary = {}
+    found_rows = [r for r in rows if r["success"]]
+    failed_rows = [r for r in rows if not r["success"]]
+    for label, group in (("found", found_rows), ("failed", failed_rows)):
+        summary[label] = {
+            "episodes": len(group),
+            "true_inlet_proposed": sum(r["true_inlet_proposed"] for r in group),
+            "true_pair_proposed": sum(r["true_pair_proposed"] for r in group),
+            "best_misfit_median": float(np.median([r["best_misfit"] for r in group])) if group else None,
+        }
+    args.out.write_text(json.dumps({"readings": READINGS, "summary": summary, "episodes": rows}, indent=1))
+    print(json.dumps(summary))
+
+
+if __name__ == "__main__":
+    main()
