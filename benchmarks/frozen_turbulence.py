@@ -7,7 +7,7 @@ the plume on the coupled ``nu_t`` and the plume on the frozen one.  Diagnoses wh
 wind`` missed test scenario 2005 (a nearly laminar flow); the tolerance itself was chosen with
 ``benchmarks/tune_projection.py`` on validation seeds.
 
-    python benchmarks/frozen_turbulence.py --seeds 900-911 2005 \\
+    python benchmarks/frozen_turbulence.py --seeds 900-911,2005 \\
         -o benchmarks/results/frozen_turbulence.json
 """
 
@@ -18,6 +18,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+from phys_robustness import parse_seeds  # this folder's
 
 from dgse.physics.constants import DEFAULT_PHYSICS
 from dgse.physics.fv import build_mesh
@@ -26,14 +27,6 @@ from dgse.physics.scenario import random_cases
 from dgse.physics.transport import TransportSolver
 
 TOLERANCES = (1e-4, 1e-6)
-
-
-def _seeds(items: list[str]) -> list[int]:
-    out: list[int] = []
-    for item in items:
-        a, _, b = item.partition("-")
-        out += list(range(int(a), int(b) + 1)) if b else [int(a)]
-    return out
 
 
 def scenario_row(seed: int) -> dict:
@@ -65,11 +58,11 @@ def scenario_row(seed: int) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", nargs="+", default=["900-911", "2005"], help="seeds or ranges A-B")
+    ap.add_argument("--seeds", type=parse_seeds, default=[*range(900, 912), 2005], help="e.g. 900-911,2005")
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/frozen_turbulence.json"))
     args = ap.parse_args()
     rows = []
-    for seed in _seeds(args.seeds):
+    for seed in args.seeds:
         rows.append(scenario_row(seed))
         r = rows[-1]
         print(

@@ -16,23 +16,27 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 from pathlib import Path
 
 import numpy as np
 
 from dgse.estimators.knowledge import Knowledge
 from dgse.estimators.registry import get_estimator
-from dgse.search.metrics import SUCCESS_RADIUS_M
+from dgse.physics.openings import potential_flow_proposals
 from dgse.sensing.sensors import Observations
 from dgse.world.case import Case
+from dgse.world.layout import Opening
 
 READINGS = 64
-LABEL = re.compile(r"in (\w+) ([\d.]+)-([\d.]+) m, out (\w+) ([\d.]+)-([\d.]+) m")
 
 
-def _hits(side: str, a: float, b: float, opening: dict) -> bool:
-    return side == opening["side"] and a < opening["end_m"] and b > opening["start_m"]
+def _hits(opening: Opening, truth: dict) -> bool:
+    """The proposed opening lies on the true one's side and overlaps it."""
+    return (
+        opening.side == truth["side"]
+        and opening.start_m < truth["end_m"]
+        and opening.end_m > truth["start_m"]
+    )
 
 
 def episode_row(name: str, case: Case, row: dict) -> dict:
@@ -43,27 +47,27 @@ def episode_row(name: str, case: Case, row: dict) -> dict:
     gas = np.array([s["gas"] for s in steps[:n]], dtype=np.float64)
     est = get_estimator("dgse-phys", knowledge=Knowledge.from_case(case, "map"))
     hyps = est.hypotheses(Observations(cells, gas, wind))
-    misfits, inlet, pair = [], False, False
+    # the same call the estimator makes, for the openings themselves (its hypotheses keep labels)
+    props = potential_flow_proposals(case.occupancy, case.resolution, cells, wind, top=est.map_proposals)
+    if [p.label() for p in props] != [h.label for h in hyps]:
+        raise SystemExit(f"{name}: the proposals differ from dgse-phys's hypotheses")
+    misfits = []
     for h in hyps:
         hw = h.flow.wind[:, cells[:, 0], cells[:, 1]].T
         scale = max(float((hw * wind).sum() / max((hw * hw).sum(), 1e-12)), 0.0)
         misfits.append(float(np.sqrt(np.mean(((wind - scale * hw) ** 2).sum(1)) / np.mean((wind**2).sum(1)))))
-        m = LABEL.match(h.label)
-        if m is None:
-            continue
-        i_ok = _hits(m[1], float(m[2]), float(m[3]), case.meta["inlet"])
-        o_ok = _hits(m[4], float(m[5]), float(m[6]), case.meta["outlet"])
-        inlet, pair = inlet or i_ok, pair or (i_ok and o_ok)
+    inlet = [_hits(p.inlets[0], case.meta["inlet"]) for p in props]
+    outlet = [_hits(p.outlets[0], case.meta["outlet"]) for p in props]
     return {
         "case": name,
-        "success": row["error_m"] <= SUCCESS_RADIUS_M and row["reason"] != "time_limit",
+        "success": bool(row["metrics"]["success"]),
         "error_m": row["error_m"],
         "reason": row["reason"],
         "n_steps": row["n_steps"],
         "readings_used": n,
         "best_misfit": min(misfits),
-        "true_inlet_proposed": inlet,
-        "true_pair_proposed": pair,
+        "true_inlet_proposed": any(inlet),
+        "true_pair_proposed": any(i and o for i, o in zip(inlet, outlet, strict=True)),
     }
 
 
