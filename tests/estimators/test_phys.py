@@ -12,12 +12,14 @@ from dgse.estimators.phys import (
     PhysicsGuidedEstimator,
     mix_posteriors,
     predictive_sources,
+    relative_wind_misfit,
     wind_log_likelihood,
 )
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.evaluate import draw_observations
 from dgse.localization.adjoint import adjoint_log_evidence, flow_model
 from dgse.physics.scenario import solve_cases
+from dgse.sensing.sensors import Observations
 from tests.conftest import two_rooms
 
 
@@ -126,6 +128,23 @@ def test_map_level_proposes_openings_from_the_wind_readings(case):
     assert np.array_equal(est._proposed_from[0], other.cells)
     with pytest.raises(InputDataError, match="give readings"):
         est.hypotheses(None)
+
+
+def test_wind_misfit_says_how_much_of_the_wind_the_flows_miss(case):
+    u = np.array([[1.0, 0.0], [0.5, 0.5]])
+    assert relative_wind_misfit(u, u) == 0.0
+    assert relative_wind_misfit(np.zeros_like(u), u) == pytest.approx(1.0)
+    assert relative_wind_misfit(0.5 * u, u) == pytest.approx(0.5)
+    assert relative_wind_misfit(u, np.zeros_like(u)) == np.inf
+    # the true openings explain the noiseless wind; a flow turned around does not
+    drawn = draw_observations(case, 30, seed=3)
+    true_wind = case.wind[:, drawn.cells[:, 0], drawn.cells[:, 1]].T
+    obs = Observations(drawn.cells, drawn.gas, true_wind)
+    right = get_estimator("dgse-phys", knowledge=Knowledge.from_case(case, "openings"), speeds=(1.2,))
+    b = right.estimate(case.occupancy, case.resolution, obs)
+    assert b.info["wind_misfit"] < 0.05
+    turned = Observations(obs.cells, obs.gas, -obs.wind)
+    assert right.estimate(case.occupancy, case.resolution, turned).info["wind_misfit"] > 1.0
 
 
 def test_learned_belief_is_mixed_in_where_the_readings_are_few(case):

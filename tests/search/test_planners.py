@@ -208,6 +208,33 @@ def test_a_stop_can_need_gas_above_the_noise_floor_near_the_mode():
             UtilityPlanner(confirm_sigmas=bad)
 
 
+def test_a_stop_waits_for_a_flow_that_explains_the_wind():
+    """max_wind_misfit: a sharp posterior on a flow that misses the wind readings holds the stop."""
+    occ = np.zeros((10, 10), np.uint8)
+    peaked = np.zeros((10, 10))
+    peaked[5, 5] = 1.0
+    belief = _belief(occ, peaked, res=0.5)
+    g = FreeSpaceGraph(occ, 0.5)
+    h = _history(g, [(0, 0), (5, 5)])
+    h.step = 2
+    planner = UtilityPlanner(max_wind_misfit=0.7)
+    assert planner.should_stop(belief, h)  # states no misfit: not held
+    belief.info["wind_misfit"] = 0.8
+    assert not planner.should_stop(belief, h)
+    assert planner.stop_held(h) and stop_held(planner, h)
+    assert UtilityPlanner().should_stop(belief, h)  # the option off: the paper's stop
+    belief.info["wind_misfit"] = 0.6
+    assert planner.should_stop(belief, h) and not planner.stop_held(h)
+    belief.info["wind_misfit"] = math.nan  # unknown fit: not a reason to trust the flow
+    assert not planner.should_stop(belief, h)
+    # the deadline still ends a held search
+    h.time_limit_s, h.time_s = 100.0, 95.0
+    assert UtilityPlanner(max_wind_misfit=0.7, deadline_margin_s=10.0).should_stop(belief, h)
+    for bad in (0.0, -1.0, math.inf, math.nan):
+        with pytest.raises(InputDataError, match="max_wind_misfit"):
+            UtilityPlanner(max_wind_misfit=bad)
+
+
 def test_mass_near_the_mode_stop_rule():
     """mass_radius_m: stop once the posterior holds mass_level within the radius of its mode."""
     occ = np.zeros((20, 20), np.uint8)

@@ -328,6 +328,22 @@ def wind_log_likelihood(
     return _logsumexp(np.array(vals)) - math.log(len(vals))
 
 
+def relative_wind_misfit(predicted: np.ndarray, readings: np.ndarray) -> float:
+    """How much of the wind readings a flow leaves unexplained: ``sqrt(sum |w - u|^2 / sum |w|^2)``.
+
+    ``predicted``, ``readings``: ``(m, 2)`` winds at the reading cells, m/s.  0: the flow
+    reproduces every reading; 1: no better than a still room; inf: the readings are all zero
+    and the flow is not.
+    """
+    u = np.asarray(predicted, dtype=np.float64)
+    w = np.asarray(readings, dtype=np.float64)
+    num = float(((w - u) ** 2).sum())
+    den = float((w**2).sum())
+    if den > 0:
+        return math.sqrt(num / den)
+    return 0.0 if num == 0 else math.inf
+
+
 def field_error_variance(
     wind_mean: np.ndarray, log_conc_mean: np.ndarray, params: Sequence[float]
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -710,6 +726,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         cells, z = obs.cells, obs.gas
         log_prior: list[float] = []
         scales: list[float] = []
+        misfits: list[float] = []
         temp = self.temperature
         m_eff = self.effective_readings
         if m_eff is None:
@@ -720,6 +737,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             uu = float((u * u).sum())
             scale = max(float((u * obs.wind).sum()) / uu, 0.0) if free_scale and uu > 0 else 1.0
             scales.append(scale)
+            misfits.append(relative_wind_misfit(scale * u, obs.wind))
             lw = wind_log_likelihood(scale * u, obs.wind, self.wind_noise_levels, self.wind_noise_floor)
             log_prior.append(math.log(h.prior) + lw)
         # flows the wind readings rule out (WIND_HOPELESS_NATS below the best) get no gas evidence
@@ -799,6 +817,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
                 for h, w in zip(hyps, hw, strict=True)
             ],
             "best_hypothesis": hyps[best_h].label,
+            "wind_misfit": min(misfits),
             "learned_weight": w_learned,
             "temperature": temp,
             "noise_floor_ppm": sig,

@@ -247,6 +247,13 @@ class UtilityPlanner:
             row, the posterior's mode staying within ``mass_radius_m`` (1 m without it) of
             where it first passed: a posterior that one or two readings have sharpened on a
             wrong spot is given the next reading to contradict it.  1: the paper's rule.
+        max_wind_misfit: None (no such test) or a number: the stop is held while the belief
+            states a ``wind_misfit`` above it (``belief.info["wind_misfit"]``: how much of the
+            wind readings the best flow hypothesis leaves unexplained, see
+            :func:`~dgse.estimators.phys.relative_wind_misfit`; a belief that states none is
+            not held).  A posterior drawn on a flow that does not explain the wind can be
+            sharp and wrong; the search goes on (the deadline still ends it) until the
+            estimator finds a flow that does.
     """
 
     w_d: float = 0.1
@@ -267,6 +274,7 @@ class UtilityPlanner:
     deadline_margin_s: float | None = None
     revisit_radius_m: float | None = None
     stop_readings: int = 1
+    max_wind_misfit: float | None = None
     name: str = field(default="utility", init=False)
     _streak: list[tuple[int, int, int]] = field(default_factory=list, init=False, repr=False)
     _held_step: int | None = field(default=None, init=False, repr=False)
@@ -309,6 +317,13 @@ class UtilityPlanner:
         if self.stop_readings < 1:
             raise InputDataError(f"stop_readings must be >= 1, got {self.stop_readings}")
         self.stop_readings = int(self.stop_readings)
+        if self.max_wind_misfit is not None:
+            mm = float(self.max_wind_misfit)
+            if not (math.isfinite(mm) and mm > 0):
+                raise InputDataError(
+                    f"max_wind_misfit must be a number > 0 or None, got {self.max_wind_misfit!r}"
+                )
+            self.max_wind_misfit = mm
         if self.deadline_margin_s is not None:
             m = float(self.deadline_margin_s)
             if not (math.isfinite(m) and m >= 0):
@@ -334,10 +349,19 @@ class UtilityPlanner:
             return True
         if not self._passes_in_a_row(belief, history):
             return False
-        if history is None or self._unconfirmed_mode(belief, history) is None:
+        if history is None or (
+            self._unconfirmed_mode(belief, history) is None and not self._wind_unexplained(belief)
+        ):
             return True
-        self._held_step = int(history.step)  # passed, held for the mode's confirmation
+        self._held_step = int(history.step)  # passed, held for confirmation or a better flow
         return False
+
+    def _wind_unexplained(self, belief: Belief) -> bool:
+        """The belief's ``wind_misfit`` exceeds ``max_wind_misfit`` (False when either is unset)."""
+        v = belief.info.get("wind_misfit")
+        if self.max_wind_misfit is None or not isinstance(v, int | float):
+            return False
+        return not (float(v) <= self.max_wind_misfit)
 
     def _passes_in_a_row(self, belief: Belief, history: SearchHistory | None) -> bool:
         """The stop test has passed at the last ``stop_readings`` readings, the posterior's mode
@@ -395,8 +419,8 @@ class UtilityPlanner:
 
     def stop_held(self, history: SearchHistory | None) -> bool:
         """True when :meth:`should_stop`, asked at this step, passed its stop test but held the
-        stop for the mode's confirmation (``confirm_radius_m``): where the search would have
-        stopped without it."""
+        stop for the mode's confirmation (``confirm_radius_m``) or a flow that explains the wind
+        (``max_wind_misfit``): where the search would have stopped without them."""
         return history is not None and self._held_step == int(history.step)
 
     def utility(
