@@ -35,7 +35,9 @@ Stop rules (``--rule``):
   estimator's noise floor (``confirm_readings=1``, ``confirm_sigmas=2``): gas smelt there.
   Every trial records the stops the confirmation held (``held_stops``) and the error of the
   first (``first_held_error_m``): what the rule without it would have reported, in the same run.
-  This rule is :data:`dgse.estimators.phys.SEARCH_PLANNER` (since 2026-11-27 d).
+  This rule is :data:`dgse.estimators.phys.SEARCH_PLANNER` (since 2026-11-27 d); at knowledge
+  ``map`` a search adds ``max_wind_misfit=0.7`` (``SEARCH_PLANNER_AT_LEVEL``, since 2026-11-27 g):
+  run it with ``-P max_wind_misfit=0.7`` (files tagged ``fit0.7``).
 
 ``dgse-phys`` runs with :data:`dgse.estimators.phys.SEARCH_ESTIMATOR` (the options ``dgse demo``
 uses: ``noise_weights="mixture"`` since 2026-11-27; the files recorded before ran the plug-in

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 from phys_search import cases_dir
 
-from dgse.estimators.phys import SEARCH_ESTIMATOR, SEARCH_PLANNER
+from dgse.estimators.phys import SEARCH_ESTIMATOR, search_planner
 from dgse.search.campaign import run_trials
 
 
@@ -39,7 +39,7 @@ def main() -> None:
             "dgse-phys",
             "utility",
             trials=1,
-            planner_options={"min_observations": 5, **SEARCH_PLANNER},
+            planner_options={"min_observations": 5, **search_planner(args.knowledge)},
             estimator_options=SEARCH_ESTIMATOR,
             knowledge=args.knowledge,
             steps=True,

@@ -13,6 +13,7 @@ from dgse.estimators.phys import (
     mix_posteriors,
     predictive_sources,
     relative_wind_misfit,
+    search_planner,
     wind_log_likelihood,
 )
 from dgse.estimators.registry import get_estimator
@@ -293,3 +294,12 @@ def test_field_variances_add_a_model_error_the_planner_leaves_out(case):
     assert np.array_equal(planner.utility(on, dist), planner.utility(off, dist))
     with pytest.raises(InputDataError, match="field_error"):
         get_estimator("dgse-phys", field_error=(0.1, -1, 0, 0))
+
+
+def test_search_planner_holds_map_stops_on_unexplained_wind():
+    """At ``map`` a search stop waits for a flow that explains the wind; other levels do not."""
+    from dgse.search.planners import get_planner
+
+    assert get_planner("utility", **search_planner("map")).max_wind_misfit == pytest.approx(0.7)
+    for level in ("openings", "wind"):
+        assert get_planner("utility", **search_planner(level)).max_wind_misfit is None

@@ -73,7 +73,7 @@ import numpy as np
 
 from dgse.bench.core import BenchContext
 from dgse.bench.plots import plt
-from dgse.estimators.phys import SEARCH_ESTIMATOR, SEARCH_PLANNER
+from dgse.estimators.phys import SEARCH_ESTIMATOR, SEARCH_PLANNER, SEARCH_PLANNER_AT_LEVEL
 from dgse.search.metrics import format_mean_std
 from dgse.sensing.sensors import MIN_SENSORS
 
@@ -104,6 +104,12 @@ class Method:
     estimator_options: Mapping[str, Any] = field(default_factory=dict)
     planner_options: Mapping[str, Any] = field(default_factory=dict)
     color: str = "black"
+    #: what the planner adds at a knowledge level (``SEARCH_PLANNER_AT_LEVEL`` for dgse-phys)
+    level_planner_options: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+
+    def planner_options_at(self, level: str) -> dict[str, Any]:
+        """The planner's options in a run at knowledge ``level``."""
+        return {**self.planner_options, **self.level_planner_options.get(level, {})}
 
 
 #: The compared methods, in table order.
@@ -125,6 +131,7 @@ METHODS: tuple[Method, ...] = (
         dict(SEARCH_ESTIMATOR),
         {"min_observations": MIN_SENSORS, **SEARCH_PLANNER},
         "#000080",
+        SEARCH_PLANNER_AT_LEVEL,
     ),
     Method("dualmode", "Dual-mode", "dualmode", "dualmode", color="#8c564b"),
     Method("grgsl", "GrGSL", "grgsl", "infotaxis", color="#2ca02c"),
@@ -507,7 +514,7 @@ def run(ctx: BenchContext) -> None:
             cases,
             trials=int(o.get("trials", plan.trials)),
             time_limit=float(o.get("time_limit", plan.time_limit)),
-            planner_options=kw.pop("planner_options", m.planner_options),
+            planner_options=kw.pop("planner_options", m.planner_options_at(ctx.knowledge)),
             extra_options=plan.extra_options.get(m.key, {}),
             use_frames=kind == "filament",
             keep_paths=2 if kind == "test" else 0,
@@ -779,7 +786,7 @@ def _rerun_first(ctx: BenchContext, first: tuple[Path, Any], plan: Plan) -> tupl
     result = run_episode(
         case,
         est,
-        get_planner(m.planner, **m.planner_options),
+        get_planner(m.planner, **m.planner_options_at(ctx.knowledge)),
         rng=trial_seed(ctx.seed, path.stem, 0),
         time_limit=plan.time_limit,
         record=True,

@@ -123,13 +123,13 @@ def demo_cmd(
         kwargs.update(dtype="auto", channels_last=True)
     search_settings = eta is None and method == "dgse-phys"  # the estimator and stop chosen for search
     if search_settings:
-        from dgse.estimators.phys import SEARCH_ESTIMATOR, SEARCH_PLANNER
+        from dgse.estimators.phys import SEARCH_ESTIMATOR, search_planner
 
         kwargs.update(SEARCH_ESTIMATOR)
     estimator = get_estimator(method, **kwargs)
     require_level(estimator, method, level)
     if search_settings:
-        planner = get_planner("utility", min_observations=MIN_SENSORS, **SEARCH_PLANNER)
+        planner = get_planner("utility", min_observations=MIN_SENSORS, **search_planner(level))
         stop_at: float | str = (
             f"{planner.mass_level:.0%} of the source posterior lies "
             f"within {planner.mass_radius_m:g} m of its mode"

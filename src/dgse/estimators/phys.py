@@ -97,12 +97,15 @@ __all__ = [
     "FIELD_ERROR",
     "SEARCH_ESTIMATOR",
     "SEARCH_PLANNER",
+    "SEARCH_PLANNER_AT_LEVEL",
     "FlowHypothesis",
     "PhysicsGuidedEstimator",
     "field_error_variance",
     "make_dgse_phys",
     "mix_posteriors",
     "predictive_sources",
+    "relative_wind_misfit",
+    "search_planner",
 ]
 
 #: Candidate inlet speeds at knowledge ``openings``, m/s (log-spaced over the training range).
@@ -155,6 +158,27 @@ SEARCH_PLANNER: dict[str, float] = {
     "confirm_readings": 1,
     "confirm_sigmas": 2.0,
 }
+#: What a search at a knowledge level adds to ``SEARCH_PLANNER`` (:func:`search_planner`):
+#:
+#: * ``map``: the stop waits for a flow that explains the wind (``max_wind_misfit=0.7``: the
+#:   best opening proposal leaves at most 70 % of the wind readings' RMS unexplained;
+#:   ``benchmarks/phys_search.py --rule ...-gas1m -P max_wind_misfit=0.7``).  On validation
+#:   924-963 (trial seed 0) the two wrong mass stops had misfits 0.82 and 0.77 there, the 11
+#:   right ones 0.17-0.56 but one (951: 1.00; ``python benchmarks/map_proposal_misfit.py``).
+#:   Held, 925 stopped 1.52 m off (was 2.67 m) once renewed proposals fitted, 951 ended at the
+#:   deadline 0.44 m off (was a stop 1.57 m off), 960 stopped 5.72 m off later (was 5.66 m):
+#:   31 of 39 found, against 30.  At ``openings`` the true openings' flows left up to 0.72 of
+#:   the wind unexplained on the same readings (951, from 32 readings), so that level does
+#:   not use it.
+SEARCH_PLANNER_AT_LEVEL: dict[str, dict[str, float]] = {"map": {"max_wind_misfit": 0.7}}
+
+
+def search_planner(level: str) -> dict[str, float]:
+    """The utility planner's settings for a dgse-phys search at knowledge ``level``:
+    ``SEARCH_PLANNER`` and ``SEARCH_PLANNER_AT_LEVEL[level]``."""
+    return {**SEARCH_PLANNER, **SEARCH_PLANNER_AT_LEVEL.get(level, {})}
+
+
 #: dgse-phys's options in an active search (``dgse demo``, ``dgse bench search`` and
 #: ``benchmarks/phys_search.py``): the source posterior is the equal-weight mixture of the
 #: plug-in and candidate noise weights (``noise_weights="mixture"``).  The candidate weights
