@@ -224,9 +224,26 @@ def write_result(path: Path, result: dict[str, Any], label: str, extra: str = ""
     print(f"wrote {path}")
 
 
-def merge(paths: list[Path]) -> dict[str, Any]:
+#: Planner options that only hold stops (a stop test that passed returns False instead): a run
+#: with one of them differs from a run without it only in episodes where the stop test passed,
+#: so the other run's deadline episodes are the new run's too (``--fill``).
+STOP_HOLDING_OPTIONS = ("max_wind_misfit",)
+
+
+def _without(settings: dict[str, Any], option: str | None) -> dict[str, Any]:
+    planner = {k: v for k, v in settings.get("planner_options", {}).items() if k != option}
+    return {**settings, "planner_options": planner}
+
+
+def merge(paths: list[Path], fill: Path | None = None, fill_option: str | None = None) -> dict[str, Any]:
     """One result of several runs' JSON files (their cases in the given order, their settings
-    checked equal but for ``set``; the aggregate and the stops recomputed)."""
+    checked equal but for ``set``; the aggregate and the stops recomputed).
+
+    ``fill``: a run without the stop-holding planner option ``fill_option``
+    (:data:`STOP_HOLDING_OPTIONS`) whose other settings equal the runs'; its episodes of the
+    cases the runs lack are added, each checked to have ended at the deadline (never stopped,
+    so the option could not have changed it).  The runs then need only the episodes that
+    stopped without the option."""
     from dgse.search.metrics import aggregate
 
     results = [json.loads(p.read_text()) for p in paths]
@@ -235,12 +252,31 @@ def merge(paths: list[Path]) -> dict[str, Any]:
         if {**r["settings"], "set": settings["set"]} != settings:
             raise SystemExit(f"{p}: its settings differ from {paths[0]}'s")
     per_case = [c for r in results for c in r["per_case"]]
+    filled: list[str] = []
+    if fill is not None:
+        if fill_option not in STOP_HOLDING_OPTIONS:
+            raise SystemExit(f"--fill needs --fill-option, one of {STOP_HOLDING_OPTIONS}")
+        base = json.loads(fill.read_text())
+        base_settings = {**base["settings"], "set": settings["set"]}
+        if _without(base_settings, fill_option) != _without(settings, fill_option):
+            raise SystemExit(f"{fill}: its settings differ from the runs' in more than {fill_option}")
+        have = {Path(c["file"]).name for c in per_case}  # case names repeat; files do not
+        for c in base["per_case"]:
+            name = Path(c["file"]).name
+            if name in have:
+                continue
+            if any(t["reason"] != "deadline" for t in c["trials"]):
+                raise SystemExit(f"{fill}: {name} stopped before its deadline: run it with the option")
+            per_case.append(c)
+            filled.append(name)
     out = {
         "settings": settings,
         "aggregate": aggregate([t["metrics"] for c in per_case for t in c["trials"]]),
         "per_case": per_case,
         "merged_from": [str(p) for p in paths],
     }
+    if fill is not None:
+        out["filled_from"] = {"file": str(fill), "option": fill_option, "cases": filled}
     out["stops"] = stop_quality(out)
     return out
 
@@ -293,11 +329,20 @@ def main() -> None:
         metavar=("OUT", "RESULT"),
         help="write OUT.json from the RESULT JSON files of runs made apart; run nothing",
     )
+    ap.add_argument(
+        "--fill",
+        type=Path,
+        default=None,
+        metavar="BASE",
+        help="with --merge: the deadline episodes of BASE, a run without --fill-option, for the cases "
+        "the runs lack (see merge)",
+    )
+    ap.add_argument("--fill-option", default=None, choices=STOP_HOLDING_OPTIONS)
     args = ap.parse_args()
     if args.merge:
         if len(args.merge) < 2:
             ap.error("--merge takes OUT and at least one RESULT")
-        result = merge(args.merge[1:])
+        result = merge(args.merge[1:], args.fill, args.fill_option)
         write_result(args.merge[0], result, args.merge[0].stem, f", stops {result['stops']}")
         return
     args.out.mkdir(parents=True, exist_ok=True)
