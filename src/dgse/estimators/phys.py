@@ -170,7 +170,9 @@ SEARCH_PLANNER: dict[str, float] = {
 #:   31 of 39 found, against 30.  At ``openings`` the true openings' flows left up to 0.72 of
 #:   the wind unexplained on the same readings (951, from 32 readings), so that level does
 #:   not use it.
-SEARCH_PLANNER_AT_LEVEL: dict[str, dict[str, float]] = {"map": {"max_wind_misfit": 0.7}}
+SEARCH_PLANNER_AT_LEVEL: dict[str, dict[str, float]] = {
+    "map": {"max_wind_misfit": 0.7, "deadline_estimate_radius_m": 1.0}
+}
 
 
 def search_planner(level: str) -> dict[str, float]:

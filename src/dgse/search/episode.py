@@ -59,7 +59,7 @@ from dgse.estimators.belief import Belief
 from dgse.estimators.knowledge import DEFAULT_LEVEL, Knowledge
 from dgse.estimators.registry import Estimator, StreamingEstimator
 from dgse.search.paths import Cell, graph_for
-from dgse.search.planners import Planner, SearchHistory, stop_held, stopped_by_deadline
+from dgse.search.planners import Planner, SearchHistory, declared_source, stop_held, stopped_by_deadline
 from dgse.search.robot import DEFAULT_DWELL, DEFAULT_SPEED, Robot, random_start_cell
 from dgse.sensing.noise import NoiseModel, NoiseParams
 from dgse.world.case import Case
@@ -163,7 +163,8 @@ class EpisodeResult:
         source_xy: the true source ``(x, y)``, m.
         source_cell: the true source cell.
         start_cell: the robot's start cell.
-        estimate_xy: the final estimate ``(x, y)``, m.
+        estimate_xy: the final estimate ``(x, y)``, m: the belief's posterior mean, or what
+            the planner declares at a deadline stop (:func:`~dgse.search.planners.declared_source`).
         error_m: localization error of the final estimate, m.
         reason: one of :data:`REASONS`.
         search_time_s: the clock when the search ended (``time_limit_s`` after a timeout), s.
@@ -453,7 +454,10 @@ def run_episode(
         search_time = time_limit
     else:
         search_time = robot.clock
-    estimate = belief.source_estimate() if belief is not None else _free_centroid(case)
+    if belief is None:
+        estimate = _free_centroid(case)
+    else:
+        estimate = declared_source(planner, belief, reason == "deadline")
     return EpisodeResult(
         case_name=case.name,
         method=_estimator_name(estimator, belief),

@@ -84,6 +84,7 @@ __all__ = [
     "PlannerFactory",
     "SearchHistory",
     "UtilityPlanner",
+    "declared_source",
     "get_planner",
     "mass_near_mode",
     "mass_within",
@@ -254,6 +255,11 @@ class UtilityPlanner:
             not held).  A posterior drawn on a flow that does not explain the wind can be
             sharp and wrong; the search goes on (the deadline still ends it) until the
             estimator finds a flow that does.
+        deadline_estimate_radius_m: None (the belief's posterior mean, the paper's ``s_hat``)
+            or a radius, m: at a deadline stop the search declares the centre of the free cell
+            whose disk of this radius holds the most posterior mass
+            (:func:`declared_source`).  A search that never passed its stop test often ends
+            with a posterior split between two places, whose mean lies between them.
     """
 
     w_d: float = 0.1
@@ -275,6 +281,7 @@ class UtilityPlanner:
     revisit_radius_m: float | None = None
     stop_readings: int = 1
     max_wind_misfit: float | None = None
+    deadline_estimate_radius_m: float | None = None
     name: str = field(default="utility", init=False)
     _streak: list[tuple[int, int, int]] = field(default_factory=list, init=False, repr=False)
     _held_step: int | None = field(default=None, init=False, repr=False)
@@ -312,6 +319,9 @@ class UtilityPlanner:
         self.mass_level = float(self.mass_level)
         self.source_radius_m = _radius_or_none("source_radius_m", self.source_radius_m)
         self.revisit_radius_m = _radius_or_none("revisit_radius_m", self.revisit_radius_m)
+        self.deadline_estimate_radius_m = _radius_or_none(
+            "deadline_estimate_radius_m", self.deadline_estimate_radius_m
+        )
         if isinstance(self.stop_readings, bool) or int(self.stop_readings) != self.stop_readings:
             raise InputDataError(f"stop_readings must be an integer, got {self.stop_readings!r}")
         if self.stop_readings < 1:
@@ -530,6 +540,22 @@ def stop_held(planner: Planner, history: SearchHistory) -> bool:
 def stopped_by_deadline(planner: Planner, history: SearchHistory) -> bool:
     """Whether ``planner``'s stop now is a deadline stop (``UtilityPlanner.deadline_margin_s``)."""
     return isinstance(planner, UtilityPlanner) and planner.deadline_reached(history)
+
+
+def declared_source(planner: Planner, belief: Belief, deadline: bool) -> tuple[float, float]:
+    """The source ``(x, y)``, m, a search declares when it ends with ``belief``.
+
+    The belief's posterior mean (:meth:`~dgse.estimators.belief.Belief.source_estimate`),
+    except at a deadline stop (``deadline``) of a :class:`UtilityPlanner` with
+    ``deadline_estimate_radius_m``: there the centre of the free cell whose disk of that
+    radius holds the most posterior mass.
+    """
+    radius = getattr(planner, "deadline_estimate_radius_m", None)
+    if radius is None or not deadline:
+        return belief.source_estimate()
+    mass = np.where(belief.free, mass_within(belief.source_probs, belief.resolution, radius), -np.inf)
+    i, j = np.unravel_index(int(np.argmax(mass)), mass.shape)
+    return (float((j + 0.5) * belief.resolution), float((i + 0.5) * belief.resolution))
 
 
 # -- registry -------------------------------------------------------------------------
