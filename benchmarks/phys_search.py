@@ -224,10 +224,11 @@ def write_result(path: Path, result: dict[str, Any], label: str, extra: str = ""
     print(f"wrote {path}")
 
 
-#: Planner options that only hold stops (a stop test that passed returns False instead): a run
-#: with one of them differs from a run without it only in episodes where the stop test passed,
-#: so the other run's deadline episodes are the new run's too (``--fill``).
-STOP_HOLDING_OPTIONS = ("max_wind_misfit",)
+#: Planner options a run without them answers for some episodes (``--fill``), and which:
+#: ``max_wind_misfit`` only holds stops (a stop test that passed returns False instead), so an
+#: episode that ended at its deadline is the same with it; ``deadline_estimate_radius_m`` only
+#: changes what a deadline stop declares, so an episode that stopped before is the same.
+FILL_OPTIONS = {"max_wind_misfit": "deadline", "deadline_estimate_radius_m": "converged"}
 
 
 def _without(settings: dict[str, Any], option: str | None) -> dict[str, Any]:
@@ -239,11 +240,10 @@ def merge(paths: list[Path], fill: Path | None = None, fill_option: str | None =
     """One result of several runs' JSON files (their cases in the given order, their settings
     checked equal but for ``set``; the aggregate and the stops recomputed).
 
-    ``fill``: a run without the stop-holding planner option ``fill_option``
-    (:data:`STOP_HOLDING_OPTIONS`) whose other settings equal the runs'; its episodes of the
-    cases the runs lack are added, each checked to have ended at the deadline (never stopped,
-    so the option could not have changed it).  The runs then need only the episodes that
-    stopped without the option."""
+    ``fill``: a run without the planner option ``fill_option`` (a key of :data:`FILL_OPTIONS`)
+    whose other settings equal the runs'; its episodes of the cases the runs lack are added,
+    each checked to have ended as the option cannot change (``FILL_OPTIONS[fill_option]``).
+    The runs then need only the other episodes."""
     from dgse.search.metrics import aggregate
 
     results = [json.loads(p.read_text()) for p in paths]
@@ -254,8 +254,9 @@ def merge(paths: list[Path], fill: Path | None = None, fill_option: str | None =
     per_case = [c for r in results for c in r["per_case"]]
     filled: list[str] = []
     if fill is not None:
-        if fill_option not in STOP_HOLDING_OPTIONS:
-            raise SystemExit(f"--fill needs --fill-option, one of {STOP_HOLDING_OPTIONS}")
+        if fill_option not in FILL_OPTIONS:
+            raise SystemExit(f"--fill needs --fill-option, one of {sorted(FILL_OPTIONS)}")
+        unchanged = FILL_OPTIONS[fill_option]
         base = json.loads(fill.read_text())
         base_settings = {**base["settings"], "set": settings["set"]}
         if _without(base_settings, fill_option) != _without(settings, fill_option):
@@ -265,8 +266,8 @@ def merge(paths: list[Path], fill: Path | None = None, fill_option: str | None =
             name = Path(c["file"]).name
             if name in have:
                 continue
-            if any(t["reason"] != "deadline" for t in c["trials"]):
-                raise SystemExit(f"{fill}: {name} stopped before its deadline: run it with the option")
+            if any(t["reason"] != unchanged for t in c["trials"]):
+                raise SystemExit(f"{fill}: {name} did not end {unchanged!r}: run it with {fill_option}")
             per_case.append(c)
             filled.append(name)
     out = {
@@ -337,7 +338,7 @@ def main() -> None:
         help="with --merge: the deadline episodes of BASE, a run without --fill-option, for the cases "
         "the runs lack (see merge)",
     )
-    ap.add_argument("--fill-option", default=None, choices=STOP_HOLDING_OPTIONS)
+    ap.add_argument("--fill-option", default=None, choices=sorted(FILL_OPTIONS))
     args = ap.parse_args()
     if args.merge:
         if len(args.merge) < 2:

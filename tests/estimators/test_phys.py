@@ -296,10 +296,14 @@ def test_field_variances_add_a_model_error_the_planner_leaves_out(case):
         get_estimator("dgse-phys", field_error=(0.1, -1, 0, 0))
 
 
-def test_search_planner_holds_map_stops_on_unexplained_wind():
-    """At ``map`` a search stop waits for a flow that explains the wind; other levels do not."""
+def test_search_planner_at_map_holds_stops_and_declares_the_heaviest_disk():
+    """At ``map`` a search stop waits for a flow that explains the wind and a deadline stop
+    declares the 1 m disk with the most mass; other levels do neither."""
     from dgse.search.planners import get_planner
 
-    assert get_planner("utility", **search_planner("map")).max_wind_misfit == pytest.approx(0.7)
+    at_map = get_planner("utility", **search_planner("map"))
+    assert at_map.max_wind_misfit == pytest.approx(0.7)
+    assert at_map.deadline_estimate_radius_m == pytest.approx(1.0)
     for level in ("openings", "wind"):
-        assert get_planner("utility", **search_planner(level)).max_wind_misfit is None
+        planner = get_planner("utility", **search_planner(level))
+        assert planner.max_wind_misfit is None and planner.deadline_estimate_radius_m is None

@@ -80,6 +80,13 @@ def test_deadline_stop_ends_before_the_limit():
     r = run_episode(case, UniformEstimator(), UtilityPlanner(deadline_margin_s=10.0), rng=2, time_limit=100.0)
     assert r.reason == "deadline" and r.terminated
     assert 90.0 <= r.search_time_s < 100.0
+    # deadline_estimate_radius_m: the declared source, not the belief's mean (which the steps keep)
+    planner = UtilityPlanner(deadline_margin_s=10.0, deadline_estimate_radius_m=0.3)
+    d = run_episode(case, UniformEstimator(), planner, rng=2, time_limit=100.0)
+    assert d.reason == "deadline" and d.steps[-1].estimate_xy == pytest.approx(r.estimate_xy)
+    assert d.estimate_xy != pytest.approx(r.estimate_xy)
+    sx, sy = d.source_xy
+    assert d.error_m == pytest.approx(math.hypot(d.estimate_xy[0] - sx, d.estimate_xy[1] - sy))
 
 
 def test_a_stop_in_clean_air_is_held_and_recorded():

@@ -14,6 +14,7 @@ from dgse.search.planners import (
     Planner,
     SearchHistory,
     UtilityPlanner,
+    declared_source,
     get_planner,
     mass_near_mode,
     mass_within,
@@ -233,6 +234,26 @@ def test_a_stop_waits_for_a_flow_that_explains_the_wind():
     for bad in (0.0, -1.0, math.inf, math.nan):
         with pytest.raises(InputDataError, match="max_wind_misfit"):
             UtilityPlanner(max_wind_misfit=bad)
+
+
+def test_a_deadline_stop_can_declare_the_disk_with_the_most_mass():
+    """deadline_estimate_radius_m: a split posterior's mean lies between its parts; the disk doesn't."""
+    occ = np.zeros((20, 20), np.uint8)
+    p = np.full((20, 20), 1e-9)
+    p[10, 2] = 0.45  # one sharp cell on the west
+    p[9:12, 16:19] = 0.55 / 9  # a broader blob on the east holding more
+    belief = _belief(occ, p, res=0.1)
+    plain = UtilityPlanner()
+    disk = UtilityPlanner(deadline_estimate_radius_m=0.15)
+    mean = belief.source_estimate()
+    assert declared_source(plain, belief, True) == mean
+    assert declared_source(disk, belief, False) == mean  # a mass stop declares the mean
+    x, y = declared_source(disk, belief, True)
+    assert (x, y) == pytest.approx((1.75, 1.05))  # the east blob's centre cell
+    assert abs(mean[0] - 1.0) < 0.1  # the mean: between the two, where neither is
+    assert declared_source(object(), belief, True) == mean  # other planners: the mean
+    with pytest.raises(InputDataError, match="deadline_estimate_radius_m"):
+        UtilityPlanner(deadline_estimate_radius_m=-1.0)
 
 
 def test_mass_near_the_mode_stop_rule():
