@@ -107,3 +107,14 @@ def test_pieces_from_before_knowledge_levels_count_as_map() -> None:
     new = {"plan": {**old["plan"], "knowledge": "openings"}}
     assert stored_plan(new)["knowledge"] == "openings"
     assert stored_plan({"per_case": []}) is None
+
+
+def test_dgse_phys_plans_per_knowledge_level():
+    """The suite's DGSE-phys adds the map level's planner options there only, and says so."""
+    from dgse.bench.search import _map_extras
+
+    phys = next(m for m in METHODS if m.key == "dgse-phys")
+    at_map = phys.planner_options_at("map")
+    assert at_map["max_wind_misfit"] == 0.7 and at_map["deadline_estimate_radius_m"] == 1.0
+    assert "max_wind_misfit" not in phys.planner_options_at("openings")
+    assert "1 m disk" in _map_extras("map") and _map_extras("openings") == ""
