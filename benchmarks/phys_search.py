@@ -36,8 +36,9 @@ Stop rules (``--rule``):
   Every trial records the stops the confirmation held (``held_stops``) and the error of the
   first (``first_held_error_m``): what the rule without it would have reported, in the same run.
   This rule is :data:`dgse.estimators.phys.SEARCH_PLANNER` (since 2026-11-27 d); at knowledge
-  ``map`` a search adds ``max_wind_misfit=0.7`` (``SEARCH_PLANNER_AT_LEVEL``, since 2026-11-27 g):
-  run it with ``-P max_wind_misfit=0.7`` (files tagged ``fit0.7``).
+  ``map`` a search adds ``max_wind_misfit=0.7`` and ``deadline_estimate_radius_m=1``
+  (``SEARCH_PLANNER_AT_LEVEL``, since 2026-11-27 g): run it with ``-P max_wind_misfit=0.7 -P
+  deadline_estimate_radius_m=1.0`` (files tagged ``fit0.7-disk1``).
 
 ``dgse-phys`` runs with :data:`dgse.estimators.phys.SEARCH_ESTIMATOR` (the options ``dgse demo``
 uses: ``noise_weights="mixture"`` since 2026-11-27; the files recorded before ran the plug-in
