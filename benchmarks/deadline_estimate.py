@@ -23,12 +23,10 @@ import math
 from pathlib import Path
 
 import numpy as np
+from phys_search import journal_episodes, map_estimator_at_end, step_observations  # this folder's
 
-from dgse.estimators.knowledge import Knowledge
 from dgse.estimators.phys import SEARCH_ESTIMATOR
-from dgse.estimators.registry import get_estimator
 from dgse.search.planners import UtilityPlanner, declared_source
-from dgse.sensing.sensors import Observations
 from dgse.world.case import Case
 
 RADII = (0.5, 1.0, 2.0)
@@ -36,14 +34,9 @@ SUCCESS_M = 2.0
 
 
 def episode_row(case: Case, row: dict) -> dict:
-    steps = row["steps"]
-    cells = np.array([s["cell"] for s in steps], dtype=np.int64)
-    wind = np.array([s["wind"] for s in steps], dtype=np.float64)
-    gas = np.array([s["gas"] for s in steps], dtype=np.float64)
-    held = 1 << (len(steps).bit_length() - 1)  # the proposals the search held at its end
-    est = get_estimator("dgse-phys", knowledge=Knowledge.from_case(case, "map"), **SEARCH_ESTIMATOR)
-    est.hypotheses(Observations(cells[:held], gas[:held], wind[:held]))
-    belief = est.estimate(case.occupancy, case.resolution, Observations(cells, gas, wind))
+    obs = step_observations(row["steps"])
+    est = map_estimator_at_end(case, obs, **SEARCH_ESTIMATOR)
+    belief = est.estimate(case.occupancy, case.resolution, obs)
     sx, sy = (float(v) for v in case.source)
 
     def error(xy: tuple[float, float]) -> float:
@@ -69,21 +62,11 @@ def main() -> None:
     ap.add_argument("journals", type=Path, nargs="+", help="search journals written with --steps")
     ap.add_argument("-o", "--out", type=Path, required=True)
     args = ap.parse_args()
-    entries: dict[str, tuple[Path, dict]] = {}
-    for journal in args.journals:
-        for line in journal.read_text().splitlines()[1:]:
-            entry = json.loads(line)
-            if "steps" not in entry["row"]:
-                raise SystemExit(f"{journal}: no steps recorded; run the search with --steps")
-            entries[entry["case"]] = (journal, entry)
     rows = {}
-    for name, (journal, entry) in sorted(entries.items()):
-        if entry["row"]["reason"] != "deadline":
+    for name, (case, row) in sorted(journal_episodes(args.journals).items()):
+        if row["reason"] != "deadline":
             continue
-        found = sorted(journal.parent.glob(f"_cases_*/{name}.npz"))
-        if not found:
-            raise SystemExit(f"no case file {name}.npz beside {journal}")
-        rows[name] = episode_row(Case.load(found[0]), entry["row"])
+        rows[name] = episode_row(case, row)
         print(name, {k: round(v, 2) for k, v in rows[name].items()}, flush=True)
     keys = ["mean", "mode", *(f"disk{r:g}m" for r in RADII)]
     summary = {

@@ -19,12 +19,12 @@ import json
 from pathlib import Path
 
 import numpy as np
+from phys_search import journal_episodes, map_estimator_at_end, step_observations  # this folder's
 
 from dgse.estimators.knowledge import Knowledge
-from dgse.estimators.phys import relative_wind_misfit
+from dgse.estimators.phys import fitted_wind_scale, relative_wind_misfit
 from dgse.estimators.registry import get_estimator
 from dgse.physics.openings import potential_flow_proposals
-from dgse.sensing.sensors import Observations
 from dgse.world.case import Case
 from dgse.world.layout import Opening
 
@@ -40,36 +40,28 @@ def _hits(opening: Opening, truth: dict) -> bool:
     )
 
 
-def _misfit(hyp, cells: np.ndarray, wind: np.ndarray) -> float:
+def _misfit(hyp, obs) -> float:
     """``dgse-phys``'s ``wind_misfit`` of one proposal: its flow scaled to fit the readings."""
-    u = hyp.flow.wind[:, cells[:, 0], cells[:, 1]].T
-    scale = max(float((u * wind).sum() / max(float((u * u).sum()), 1e-12)), 0.0)
-    return relative_wind_misfit(scale * u, wind)
+    u = hyp.flow.wind[:, obs.cells[:, 0], obs.cells[:, 1]].T
+    return relative_wind_misfit(fitted_wind_scale(u, obs.wind) * u, obs.wind)
 
 
 def episode_row(name: str, case: Case, row: dict) -> dict:
     steps = row["steps"]
     n = min(READINGS, len(steps))
-    cells = np.array([s["cell"] for s in steps[:n]], dtype=np.int64)
-    wind = np.array([s["wind"] for s in steps[:n]], dtype=np.float64)
-    gas = np.array([s["gas"] for s in steps[:n]], dtype=np.float64)
+    obs = step_observations(steps[:n])
     est = get_estimator("dgse-phys", knowledge=Knowledge.from_case(case, "map"))
-    hyps = est.hypotheses(Observations(cells, gas, wind))
+    hyps = est.hypotheses(obs)  # proposed from these readings
     # the same call the estimator makes, for the openings themselves (its hypotheses keep labels)
-    props = potential_flow_proposals(case.occupancy, case.resolution, cells, wind, top=est.map_proposals)
+    props = potential_flow_proposals(
+        case.occupancy, case.resolution, obs.cells, obs.wind, top=est.map_proposals
+    )
     if [p.label() for p in props] != [h.label for h in hyps]:
         raise SystemExit(f"{name}: the proposals differ from dgse-phys's hypotheses")
-    misfits = [_misfit(h, cells, wind) for h in hyps]
-    # at the episode's end: the proposals dgse-phys held then (made at the last power of two
-    # readings, see PhysicsGuidedEstimator._map_hypotheses) against all its readings
-    m = len(steps)
-    held = 1 << (m.bit_length() - 1)
-    cells_m = np.array([s["cell"] for s in steps], dtype=np.int64)
-    wind_m = np.array([s["wind"] for s in steps], dtype=np.float64)
-    gas_m = np.array([s["gas"] for s in steps], dtype=np.float64)
-    est_end = get_estimator("dgse-phys", knowledge=Knowledge.from_case(case, "map"))
-    est_end.hypotheses(Observations(cells_m[:held], gas_m[:held], wind_m[:held]))
-    end_hyps = est_end.hypotheses(Observations(cells_m, gas_m, wind_m))
+    misfits = [_misfit(h, obs) for h in hyps]
+    # at the episode's end: the proposals dgse-phys held then against all its readings
+    obs_m = step_observations(steps)
+    end_hyps = map_estimator_at_end(case, obs_m).hypotheses(obs_m)
     inlet = [_hits(p.inlets[0], case.meta["inlet"]) for p in props]
     outlet = [_hits(p.outlets[0], case.meta["outlet"]) for p in props]
     return {
@@ -80,7 +72,7 @@ def episode_row(name: str, case: Case, row: dict) -> dict:
         "n_steps": row["n_steps"],
         "readings_used": n,
         "best_misfit": min(misfits),
-        "end_misfit": min(_misfit(h, cells_m, wind_m) for h in end_hyps),
+        "end_misfit": min(_misfit(h, obs_m) for h in end_hyps),
         "true_inlet_proposed": any(inlet),
         "true_pair_proposed": any(i and o for i, o in zip(inlet, outlet, strict=True)),
     }
@@ -92,23 +84,15 @@ def main() -> None:
     ap.add_argument("-o", "--out", type=Path, required=True)
     args = ap.parse_args()
     rows = []
-    for journal in args.journals:
-        lines = journal.read_text().splitlines()
-        for line in lines[1:]:
-            entry = json.loads(line)
-            if "steps" not in entry["row"]:
-                raise SystemExit(f"{journal}: no steps recorded; run the search with --steps")
-            found = sorted(journal.parent.glob(f"_cases_*/{entry['case']}.npz"))
-            if not found:
-                raise SystemExit(f"no case file {entry['case']}.npz beside {journal}")
-            rows.append(episode_row(entry["case"], Case.load(found[0]), entry["row"]))
-            r = rows[-1]
-            print(
-                f"{r['case']}: {'found' if r['success'] else 'FAILED'} {r['error_m']:.2f} m ({r['reason']}), "
-                f"misfit {r['best_misfit']:.2f} (end {r['end_misfit']:.2f}), "
-                f"inlet proposed {r['true_inlet_proposed']}, pair {r['true_pair_proposed']}",
-                flush=True,
-            )
+    for name, (case, row) in journal_episodes(args.journals).items():
+        rows.append(episode_row(name, case, row))
+        r = rows[-1]
+        print(
+            f"{r['case']}: {'found' if r['success'] else 'FAILED'} {r['error_m']:.2f} m ({r['reason']}), "
+            f"misfit {r['best_misfit']:.2f} (end {r['end_misfit']:.2f}), "
+            f"inlet proposed {r['true_inlet_proposed']}, pair {r['true_pair_proposed']}",
+            flush=True,
+        )
     summary = {}
     found_rows = [r for r in rows if r["success"]]
     failed_rows = [r for r in rows if not r["success"]]

@@ -120,6 +120,49 @@ RULES["mass1m90-disk1m-deadline60s-revisit0.5m-gas1m"] = {
 }
 
 
+def journal_episodes(journals: list[Path]) -> dict[str, tuple[Any, dict[str, Any]]]:
+    """``{case stem: (Case, journal row)}`` of searches journaled with ``--steps`` (a later
+    journal's episode replaces an earlier one's of the same case)."""
+    from dgse.world.case import Case
+
+    out: dict[str, tuple[Any, dict[str, Any]]] = {}
+    for journal in journals:
+        for line in journal.read_text().splitlines()[1:]:
+            entry = json.loads(line)
+            if "steps" not in entry["row"]:
+                raise SystemExit(f"{journal}: no steps recorded; run the search with --steps")
+            found = sorted(journal.parent.glob(f"_cases_*/{entry['case']}.npz"))
+            if not found:
+                raise SystemExit(f"no case file {entry['case']}.npz beside {journal}")
+            out[entry["case"]] = (Case.load(found[0]), entry["row"])
+    return out
+
+
+def step_observations(steps: list[dict[str, Any]]) -> Any:
+    """The readings of a journaled episode's steps as :class:`~dgse.sensing.sensors.Observations`."""
+    import numpy as np
+
+    from dgse.sensing.sensors import Observations
+
+    cells = np.array([s["cell"] for s in steps], dtype=np.int64)
+    gas = np.array([s["gas"] for s in steps], dtype=np.float64)
+    wind = np.array([s["wind"] for s in steps], dtype=np.float64)
+    return Observations(cells, gas, wind)
+
+
+def map_estimator_at_end(case: Any, obs: Any, **options: Any) -> Any:
+    """dgse-phys at ``map`` holding the opening proposals a search held after the readings ``obs``:
+    those made from the last power of two of them (a search estimates after every reading, and
+    ``PhysicsGuidedEstimator`` proposes anew when the readings have doubled)."""
+    from dgse.estimators.knowledge import Knowledge
+    from dgse.estimators.registry import get_estimator
+
+    est = get_estimator("dgse-phys", knowledge=Knowledge.from_case(case, "map"), **options)
+    held = 1 << (len(obs).bit_length() - 1)
+    est.hypotheses(obs.take(slice(0, held)))
+    return est
+
+
 def cases_dir(out: Path, name: str, limit: int | None = None) -> Path:
     """The generated scenarios of a set (the first ``limit``) as case files (made once)."""
     from dgse.errors import ConvergenceError

@@ -35,6 +35,14 @@ def _belief(occ, probs, res=1.0, wind_var=None, conc_var=None) -> Belief:
     return Belief(occ, res, normalize_source_probs(probs, occ), **kw)
 
 
+def _peaked_room() -> tuple[Belief, FreeSpaceGraph]:
+    """A 5 x 5 m empty room (0.5 m cells) and a belief sure of its centre cell (5, 5)."""
+    occ = np.zeros((10, 10), np.uint8)
+    peaked = np.zeros((10, 10))
+    peaked[5, 5] = 1.0
+    return _belief(occ, peaked, res=0.5), FreeSpaceGraph(occ, 0.5)
+
+
 def _history(graph, cells=()) -> SearchHistory:
     c = np.array(cells, np.int64).reshape(-1, 2)
     return SearchHistory(graph, Observations(c, np.zeros(len(c)), np.zeros((len(c), 2))))
@@ -146,11 +154,7 @@ def test_min_observations_delays_the_entropy_test():
 
 def test_a_stop_needs_readings_near_the_mode():
     """confirm_radius_m: a confident mode nobody measured at is visited before the stop."""
-    occ = np.zeros((10, 10), np.uint8)
-    peaked = np.zeros((10, 10))
-    peaked[5, 5] = 1.0
-    belief = _belief(occ, peaked, res=0.5)
-    g = FreeSpaceGraph(occ, 0.5)
+    belief, g = _peaked_room()
     planner = UtilityPlanner(confirm_radius_m=1.0, confirm_readings=2)
     far = _history(g, [(0, 0), (0, 1), (9, 9)])
     assert UtilityPlanner().should_stop(belief, far)  # the paper's rule stops from afar
@@ -164,7 +168,7 @@ def test_a_stop_needs_readings_near_the_mode():
     two = _history(g, [(0, 0), (5, 5), (5, 7)])  # (5, 7) is 1.0 m from the mode
     assert planner.should_stop(belief, two)
     # without a confident belief the rule changes nothing
-    flat = _belief(occ, np.ones((10, 10)), res=0.5)
+    flat = _belief(belief.occupancy, np.ones((10, 10)), res=0.5)
     assert not planner.should_stop(flat, two)
     assert planner.next_goal(flat, (0, 0), g.distances_from((0, 0)), far) == UtilityPlanner().next_goal(
         flat, (0, 0), g.distances_from((0, 0)), far
@@ -176,12 +180,8 @@ def test_a_stop_needs_readings_near_the_mode():
 
 def test_a_stop_can_need_gas_above_the_noise_floor_near_the_mode():
     """confirm_sigmas: readings near the mode count only above that many noise floors."""
-    occ = np.zeros((10, 10), np.uint8)
-    peaked = np.zeros((10, 10))
-    peaked[5, 5] = 1.0
-    belief = _belief(occ, peaked, res=0.5)
+    belief, g = _peaked_room()
     belief.info["noise_floor_ppm"] = 10.0
-    g = FreeSpaceGraph(occ, 0.5)
     planner = UtilityPlanner(confirm_radius_m=1.0, confirm_readings=1, confirm_sigmas=2.0)
     h = _history(g, [(0, 0), (5, 5), (5, 6)])
     h.step = 3
@@ -201,7 +201,7 @@ def test_a_stop_can_need_gas_above_the_noise_floor_near_the_mode():
     h.observations.gas[1] = 0.5
     assert planner.should_stop(belief, h)
     # a flat belief holds nothing; other planners hold nothing
-    flat = _belief(occ, np.ones((10, 10)), res=0.5)
+    flat = _belief(belief.occupancy, np.ones((10, 10)), res=0.5)
     assert not planner.should_stop(flat, h) and not planner.stop_held(h)
     assert not stop_held(object(), h)
     for bad in (-1.0, math.inf, math.nan):
@@ -211,11 +211,7 @@ def test_a_stop_can_need_gas_above_the_noise_floor_near_the_mode():
 
 def test_a_stop_waits_for_a_flow_that_explains_the_wind():
     """max_wind_misfit: a sharp posterior on a flow that misses the wind readings holds the stop."""
-    occ = np.zeros((10, 10), np.uint8)
-    peaked = np.zeros((10, 10))
-    peaked[5, 5] = 1.0
-    belief = _belief(occ, peaked, res=0.5)
-    g = FreeSpaceGraph(occ, 0.5)
+    belief, g = _peaked_room()
     h = _history(g, [(0, 0), (5, 5)])
     h.step = 2
     planner = UtilityPlanner(max_wind_misfit=0.7)

@@ -101,6 +101,7 @@ __all__ = [
     "FlowHypothesis",
     "PhysicsGuidedEstimator",
     "field_error_variance",
+    "fitted_wind_scale",
     "make_dgse_phys",
     "mix_posteriors",
     "predictive_sources",
@@ -168,8 +169,8 @@ SEARCH_PLANNER: dict[str, float] = {
 #:   Held, 925 stopped 1.52 m off (was 2.67 m) once renewed proposals fitted, 951 ended at the
 #:   deadline 0.44 m off (was a stop 1.57 m off), 960 stopped 5.72 m off later (was 5.66 m):
 #:   31 of 39 found, against 30.  At ``openings`` the true openings' flows left up to 0.72 of
-#:   the wind unexplained on the same readings (951, from 32 readings), so that level does
-#:   not use it;
+#:   the wind unexplained on the same readings (951, from 32 readings; a scratch measurement,
+#:   not kept as a command), so that level does not use it;
 #: * ``map``: a deadline stop declares the centre of the 1 m disk holding the most posterior
 #:   mass, not the posterior mean (``deadline_estimate_radius_m=1``): on the 27 deadline stops
 #:   of those validation searches, rebuilt from their readings, 23 within 2 m against 20 for
@@ -359,6 +360,20 @@ def wind_log_likelihood(
         var = (r * r) * s2u + floor * floor
         vals.append(float((-np.log(2.0 * math.pi * var) - 0.5 * d2 / var).sum()))
     return _logsumexp(np.array(vals)) - math.log(len(vals))
+
+
+def fitted_wind_scale(predicted: np.ndarray, readings: np.ndarray) -> float:
+    """The non-negative factor that best fits a flow's winds to the readings (least squares).
+
+    ``predicted``, ``readings``: ``(m, 2)`` winds at the reading cells, m/s.  1 where the flow
+    is still at every reading (no factor changes it).  At knowledge ``map`` each proposal is
+    solved at one inlet speed and scaled so.
+    """
+    u = np.asarray(predicted, dtype=np.float64)
+    uu = float((u * u).sum())
+    if uu <= 0:
+        return 1.0
+    return max(float((u * np.asarray(readings, dtype=np.float64)).sum()) / uu, 0.0)
 
 
 def relative_wind_misfit(predicted: np.ndarray, readings: np.ndarray) -> float:
@@ -767,8 +782,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         temp = max(temp, len(obs) / m_eff)
         for h in hyps:
             u = h.flow.wind[:, cells[:, 0], cells[:, 1]].T
-            uu = float((u * u).sum())
-            scale = max(float((u * obs.wind).sum()) / uu, 0.0) if free_scale and uu > 0 else 1.0
+            scale = fitted_wind_scale(u, obs.wind) if free_scale else 1.0
             scales.append(scale)
             misfits.append(relative_wind_misfit(scale * u, obs.wind))
             lw = wind_log_likelihood(scale * u, obs.wind, self.wind_noise_levels, self.wind_noise_floor)
