@@ -19,6 +19,8 @@
 #     --max-time MAX_TIME, exporting the best checkpoint.
 #  4. The new weights are evaluated like the shipped ones in 2 (EVAL_LIMIT can be
 #     changed while it runs by writing a number into $W/eval_limit).
+# TRAIN_ARGS adds options to 3 (e.g. "--set batch_size=4" for a quick check on a CPU).
+# EVAL=0 skips 2 and 4 (the whole lease trains; evaluate on a CPU afterwards).
 # dgse runs through a small wrapper that restores Python's Ctrl-C handler (a
 # background job ignores SIGINT) and turns on cudnn.benchmark (fixed shapes).
 set -u
@@ -40,6 +42,7 @@ EVAL_LIMIT=${EVAL_LIMIT:-120}
 ACCEL=${ACCEL:-gpu}
 PRECISION=${PRECISION:-bf16-mixed}
 EVAL_DEVICE=${EVAL_DEVICE:-cuda}
+EVAL=${EVAL:-1}
 OBS="5 20 50 150 300"
 
 mkdir -p "$W"
@@ -107,20 +110,22 @@ EOF
 stamp "store finalized"
 
 # 2. the shipped model, while training runs
-( evaluate default shipped ) > "$W/eval-shipped.out" 2>&1 &
-epid=$!
+epid=
+[ "$EVAL" = 1 ] && { ( evaluate default shipped ) > "$W/eval-shipped.out" 2>&1 & epid=$!; }
 
 # 3. training
 stamp "train: $CONFIG, max-time $MAX_TIME"
 dgse_gpu train --config "$W/train-config.yaml" --data "$W/data.h5" --out "$W/run" --accelerator "$ACCEL" --devices 1 \
     --precision "$PRECISION" --max-time "$MAX_TIME" --workers "$TRAIN_WORKERS" --seed "$SEED" \
     --set configs_per_env="$CONFIGS_PER_ENV" --set val_configs_per_env="$VAL_CONFIGS_PER_ENV" \
-    --set log_every_n_steps=20 --export "$W/dgse-s-gpu.safetensors" --no-progress > "$W/train.log" 2>&1
+    --set log_every_n_steps=20 ${TRAIN_ARGS:-} --export "$W/dgse-s-gpu.safetensors" --no-progress > "$W/train.log" 2>&1
 stamp "train exited with $?"
 cat "$W/train.log"
 
 # 4. the new model
-wait $epid
-evaluate "$W/dgse-s-gpu.safetensors" new
+if [ "$EVAL" = 1 ]; then
+    wait $epid
+    evaluate "$W/dgse-s-gpu.safetensors" new
+fi
 stamp "pipeline done"
 touch "$W/DONE"
