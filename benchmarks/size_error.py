@@ -78,6 +78,11 @@ def main() -> None:
     ap.add_argument("--trials", type=int, default=4, help="reading sets per scenario")
     ap.add_argument("--readings", type=int, default=50)
     ap.add_argument("--bins", type=float, nargs="+", default=[v for b in BINS for v in b], metavar="LO HI")
+    ap.add_argument(
+        "--dtype",
+        default="auto",
+        help="inference dtype: auto (bf16 where the CPU computes it natively), float32, bf16",
+    )
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/size_error"))
     args = ap.parse_args()
     if len(args.bins) % 2:
@@ -85,7 +90,7 @@ def main() -> None:
     bins = list(zip(args.bins[::2], args.bins[1::2], strict=True))
     args.out.mkdir(parents=True, exist_ok=True)
     estimators = {
-        m: get_estimator("dgse-s", model=m, seed=0, dtype="bf16", channels_last=True) for m in args.model
+        m: get_estimator("dgse-s", model=m, seed=0, dtype=args.dtype, channels_last=True) for m in args.model
     }
     rows = []
     for b, (lo, hi) in enumerate(bins):
@@ -108,25 +113,43 @@ def main() -> None:
     summary = {
         f"{lo:g}-{hi:g}": {k: _mean(rows, f"{lo:g}-{hi:g}", k) for k in _keys(args.model)} for lo, hi in bins
     }
-    settings = {"readings": args.readings, "trials": args.trials, "cases_per_bin": args.cases, "bins": bins}
+    settings = {
+        "readings": args.readings,
+        "trials": args.trials,
+        "cases_per_bin": args.cases,
+        "bins": bins,
+        "dtype": args.dtype,
+        "dtype_ran": str(next(iter(estimators.values())).dtype).removeprefix("torch."),
+    }
     result = {"settings": settings, "models": args.model, "mean_error_m": summary, "rows": rows}
-    (args.out / "size_error.json").write_text(json.dumps(result, indent=1))
+    write_report(result, args.out)
+
+
+def write_report(result: dict, out: Path) -> None:
+    """``OUT/size_error.{json,md,png}`` of one run's ``result`` (main's dictionary)."""
+    models, settings, summary = result["models"], result["settings"], result["mean_error_m"]
+    (out / "size_error.json").write_text(json.dumps(result, indent=1))
     lines = [
         "# DGSE-S error against map size",
         "",
-        f"`python benchmarks/size_error.py --model {' '.join(args.model)}`: mean source-localization "
-        f"error (m) from {args.readings} random readings, {args.cases} scenarios x {args.trials} "
-        "trials per bin.",
+        f"`python benchmarks/size_error.py --model {' '.join(models)}`: mean source-localization "
+        f"error (m) from {settings['readings']} random readings, {settings['cases_per_bin']} scenarios x "
+        f"{settings['trials']} trials per bin, inference in {settings.get('dtype_ran', 'bf16')}.",
         "",
-        "| map side (m) | " + " | ".join(_keys(args.model)) + " |",
-        "|---" * (len(args.model) + 2) + "|",
+        "| map side (m) | " + " | ".join(_label(k) for k in _keys(models)) + " |",
+        "|---" * (len(models) + 2) + "|",
     ]
     for name, means in summary.items():
         lines.append(f"| {name} | " + " | ".join(f"{v:.2f}" for v in means.values()) + " |")
-    (args.out / "size_error.md").write_text("\n".join(lines) + "\n")
-    _plot(summary, args.out / "size_error.png")
+    (out / "size_error.md").write_text("\n".join(lines) + "\n")
+    _plot(summary, out / "size_error.png")
     print("\n".join(lines))
-    print(f"wrote {args.out}/size_error.{{json,md,png}}")
+    print(f"wrote {out}/size_error.{{json,md,png}}")
+
+
+def _label(key: str) -> str:
+    """A model's short name: ``default``, ``highest_reading`` or a weights file's stem."""
+    return Path(key).stem
 
 
 def _keys(models: list[str]) -> list[str]:
@@ -146,7 +169,7 @@ def _plot(summary: dict[str, dict[str, float]], path: Path) -> None:
     names = list(summary)
     fig, ax = plt.subplots(figsize=(5.5, 3.5))
     for key in next(iter(summary.values())):
-        ax.plot(names, [summary[n][key] for n in names], marker="o", label=Path(key).parent.name or key)
+        ax.plot(names, [summary[n][key] for n in names], marker="o", label=_label(key))
     ax.set_xlabel("map side (m)")
     ax.set_ylabel("mean SL error (m)")
     ax.grid(alpha=0.3)
