@@ -131,6 +131,35 @@ def test_map_level_proposes_openings_from_the_wind_readings(case):
         est.hypotheses(None)
 
 
+def test_map_level_adds_proposals_from_a_network_wind(case, monkeypatch):
+    """``map_learned_proposals`` adds the pairs a wind belief shows that the potential flow did not."""
+    est = get_estimator(
+        "dgse-phys", knowledge=Knowledge.from_case(case, "map"), map_proposals=1, map_learned_proposals=2
+    )
+    wind = np.zeros((2, *case.occupancy.shape))
+    wind[1, :, 3:8] = 1.0  # a belief blowing south to north through columns 3-7
+    monkeypatch.setattr(est, "_proposal_wind", lambda occ, res, obs: wind)
+    drawn = draw_observations(case, 40, seed=4)
+    inner = (drawn.cells[:, 0] > 0) & (drawn.cells[:, 0] < case.occupancy.shape[0] - 1)
+    obs = Observations(drawn.cells[inner], drawn.gas[inner], drawn.wind[inner])
+    labels = [h.label for h in est.hypotheses(obs)]
+    assert len(labels) == 2 and labels[0] == "in west 1.0-2.0 m, out east 0.0-1.0 m"
+    assert labels[1] == "in south 0.2-0.9 m, out north 0.2-0.9 m (network wind)"
+
+
+@pytest.mark.parametrize(
+    ("options", "match"),
+    [
+        ({"map_learned_proposals": -1}, "map_learned_proposals"),
+        ({"map_proposals": 0}, "map_proposals"),
+        ({"map_proposal_model": "no/such/weights.safetensors"}, "not a weights file"),
+    ],
+)
+def test_map_proposal_options_are_checked(options, match):
+    with pytest.raises(InputDataError, match=match):
+        PhysicsGuidedEstimator(**options)
+
+
 def test_wind_misfit_says_how_much_of_the_wind_the_flows_miss(case):
     u = np.array([[1.0, 0.0], [0.5, 0.5]])
     assert relative_wind_misfit(u, u) == 0.0

@@ -60,6 +60,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, ClassVar, Literal
 
 import numpy as np
@@ -85,7 +86,7 @@ from dgse.localization.adjoint import (
 )
 from dgse.options import options_from
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
-from dgse.physics.openings import potential_flow_proposals
+from dgse.physics.openings import merge_proposals, potential_flow_proposals, wind_field_proposals
 from dgse.physics.projection import project_wind, transport_from_wind
 from dgse.physics.rans import FlowSettings
 from dgse.sensing.sensors import Observations
@@ -464,6 +465,12 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             candidates only.
         map_proposals: opening hypotheses at knowledge ``map`` (the best pairs of
             :func:`~dgse.physics.openings.potential_flow_proposals`).
+        map_learned_proposals: at knowledge ``map``, up to this many more hypotheses from
+            a network's wind belief (:func:`~dgse.physics.openings.wind_field_proposals`
+            on DGSE-S's mean wind from the same readings), those the potential flow
+            did not already propose; 0: none.
+        map_proposal_model: the DGSE-S weights whose wind those come from (``"default"``:
+            the shipped network, or a weights file).
         temperature: the gas evidence is divided by it (a power posterior: ``T > 1``
             absorbs model error by counting the readings as ``m / T`` independent ones).
         effective_readings: beyond this many readings the evidence is tempered further,
@@ -513,6 +520,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     censored: bool = True
     censored_ranking: str = CENSORED_RANKING
     map_proposals: int = 5
+    map_learned_proposals: int = 0
+    map_proposal_model: str = "default"
     learned_weight: float = LEARNED_WEIGHT
     learned_readings: float = LEARNED_READINGS
     learned_floor: float = 0.0
@@ -530,6 +539,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     _proposed_at: int = field(default=0, init=False, repr=False)
     _proposed_from: tuple[np.ndarray, np.ndarray] | None = field(default=None, init=False, repr=False)
     _learned: Any = field(default=None, init=False, repr=False)
+    _proposal_net: Any = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         check_noise_floor_mode(self.noise_floor_prior)
@@ -565,6 +575,13 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             raise InputDataError(f"refine_speeds must be an integer >= 0, got {self.refine_speeds!r}")
         if not (self.refine_ratio > 1.0 and math.isfinite(self.refine_ratio)):
             raise InputDataError(f"refine_ratio must be a number > 1, got {self.refine_ratio}")
+        for key, least in (("map_proposals", 1), ("map_learned_proposals", 0)):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, int | float) or int(v) != v or v < least:
+                raise InputDataError(f"{key} must be an integer >= {least}, got {v!r}")
+        mpm = str(self.map_proposal_model)
+        if mpm != "default" and not Path(mpm).is_file():
+            raise InputDataError(f"map_proposal_model: {mpm} is not a weights file (or 'default')")
         if int(self.conc_components) < 1:
             raise InputDataError(f"conc_components must be >= 1, got {self.conc_components}")
         if self.field_error is not None:
@@ -601,14 +618,22 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         proposals = potential_flow_proposals(
             k.occupancy, k.resolution, obs.cells, obs.wind, top=self.map_proposals
         )
+        n_flow = len(proposals)
+        if self.map_learned_proposals > 0:
+            wind = self._proposal_wind(k.occupancy, k.resolution, obs)
+            learned = wind_field_proposals(
+                k.occupancy, k.resolution, wind, obs.cells, obs.wind, top=self.map_learned_proposals
+            )
+            proposals = merge_proposals(proposals, learned)
         hyps = []
-        for prop in proposals:
+        for n, prop in enumerate(proposals):
             layout = Layout(
                 k.occupancy, prop.inlets, prop.outlets, resolution=k.resolution, name=k.name or "map"
             )
             # the flow's shape is what matters: one speed, the wind fit scales it (see estimate)
             fm = flow_model(layout, MAP_SPEED, self.physics, self.flow_settings)
-            hyps.append(FlowHypothesis(prop.label(), fm, 1.0 / len(proposals)))
+            label = prop.label() + (" (network wind)" if n >= n_flow else "")
+            hyps.append(FlowHypothesis(label, fm, 1.0 / len(proposals)))
         self._hypotheses = hyps
         self._proposed_at = len(obs)
         self._proposed_from = (obs.cells.copy(), obs.wind.copy())
@@ -703,6 +728,16 @@ class PhysicsGuidedEstimator(KnowledgeUser):
 
             self._learned = get_estimator("dgse-s", seed=0, dtype="auto", channels_last=True)
         return self._learned.estimate(occupancy, resolution, obs)
+
+    def _proposal_wind(self, occupancy: np.ndarray, resolution: float, obs: Observations) -> np.ndarray:
+        """DGSE-S's mean wind from ``obs`` with ``map_proposal_model``'s weights (built on first use)."""
+        if self._proposal_net is None:
+            from dgse.estimators.registry import get_estimator
+
+            self._proposal_net = get_estimator(
+                "dgse-s", model=self.map_proposal_model, seed=0, dtype="auto", channels_last=True
+            )
+        return np.asarray(self._proposal_net.estimate(occupancy, resolution, obs).wind_mean)
 
     def _gas_posterior(
         self,
