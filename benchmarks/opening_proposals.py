@@ -6,8 +6,8 @@ readings: does a proposal pair an inlet and an outlet whose centres lie within
 
 * ``potential_flow``: :func:`dgse.physics.openings.potential_flow_proposals` from the
   readings, the best 5 pairs (what ``dgse-phys --knowledge map`` uses);
-* ``dgse_s_wind``: :func:`dgse.physics.openings.propose_openings` on DGSE-S's mean
-  wind from the same readings (``--model``: the shipped network by default, or a
+* ``dgse_s_wind``: :func:`dgse.physics.openings.wind_field_proposals` on DGSE-S's
+  mean wind from the same readings (``--model``: the shipped network by default, or a
   weights file; up to 5 x 5 pairs).
 
     python benchmarks/opening_proposals.py -o benchmarks/results/opening_proposals.json
@@ -21,10 +21,9 @@ import argparse
 import json
 from pathlib import Path
 
-from dgse.errors import InputDataError
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.evaluate import draw_observations
-from dgse.physics.openings import potential_flow_proposals, propose_openings
+from dgse.physics.openings import potential_flow_proposals, wind_field_proposals
 from dgse.physics.scenario import random_cases
 
 SEEDS = range(900, 916)
@@ -50,19 +49,15 @@ def main() -> None:
         layout = case.layout
         for n in COUNTS:
             obs = draw_observations(case, n, seed=1)
-            wind = net.estimate(case.occupancy, case.resolution, obs).wind_mean.copy()
-            wind[:, obs.cells[:, 0], obs.cells[:, 1]] = obs.wind.T  # the readings where they were taken
+            wind = net.estimate(case.occupancy, case.resolution, obs).wind_mean
             found = {
                 "potential_flow": potential_flow_proposals(
                     case.occupancy, case.resolution, obs.cells, obs.wind
-                )
+                ),
+                "dgse_s_wind": wind_field_proposals(
+                    case.occupancy, case.resolution, wind, obs.cells, obs.wind, top=25
+                ),
             }
-            try:
-                found["dgse_s_wind"] = propose_openings(
-                    case.occupancy, case.resolution, wind, min_fraction=0.1, max_inlets=5, max_outlets=5
-                )
-            except InputDataError:
-                found["dgse_s_wind"] = []
             for name, props in found.items():
                 rank = next(
                     (

@@ -82,6 +82,8 @@ def test_wind_field_proposals_read_the_belief_with_the_readings_put_in():
     assert wind[0, 5, 0] == 1.0  # the caller's belief is not changed
     with pytest.raises(InputDataError, match="do not match"):
         wind_field_proposals(occ, 0.1, wind, band, np.zeros((3, 2)))
+    with pytest.raises(InputDataError, match="do not match"):
+        wind_field_proposals(occ, 0.1, wind[:, :10], band[:0], np.zeros((0, 2)))
 
 
 def test_merge_proposals_keeps_the_first_and_adds_only_new_pairs():

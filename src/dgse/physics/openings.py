@@ -320,12 +320,15 @@ def wind_field_proposals(
     w = np.array(wind, dtype=np.float64, copy=True)
     c = np.asarray(cells, dtype=np.int64).reshape(-1, 2)
     r = np.asarray(readings, dtype=np.float64).reshape(-1, 2)
-    if w.ndim != 3 or w.shape[0] != 2 or c.shape[0] != r.shape[0]:
-        raise InputDataError(f"wind {w.shape}, {c.shape[0]} cells and {r.shape[0]} readings do not match")
+    occ = np.asarray(occupancy)
+    if w.shape != (2, *occ.shape) or c.shape[0] != r.shape[0]:
+        raise InputDataError(
+            f"wind {w.shape} for a map {occ.shape}, {c.shape[0]} cells and {r.shape[0]} readings do not match"
+        )
     w[:, c[:, 0], c[:, 1]] = r.T
     try:
-        props = propose_openings(occupancy, resolution, w, min_fraction=0.1, max_inlets=5, max_outlets=5)
-    except InputDataError:
+        props = propose_openings(occ, resolution, w, min_fraction=0.1, max_inlets=5, max_outlets=5)
+    except InputDataError:  # no air crosses the edge, or no separate inflow and outflow
         return []
     return props[: max(0, int(top))]
 
