@@ -34,7 +34,7 @@ def main() -> None:
     net = get_estimator("dgse-s", seed=0, dtype="bf16", channels_last=True)  # one network for all
 
     def share_network(est: Any) -> None:
-        est._learned = net
+        est._networks["default"] = net
 
     err, ce = sweep(
         "map",

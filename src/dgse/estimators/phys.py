@@ -538,8 +538,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     _hypotheses: list[FlowHypothesis] | None = field(default=None, init=False, repr=False)
     _proposed_at: int = field(default=0, init=False, repr=False)
     _proposed_from: tuple[np.ndarray, np.ndarray] | None = field(default=None, init=False, repr=False)
-    _learned: Any = field(default=None, init=False, repr=False)
-    _proposal_net: Any = field(default=None, init=False, repr=False)
+    _networks: dict[str, Any] = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
         check_noise_floor_mode(self.noise_floor_prior)
@@ -723,21 +722,22 @@ class PhysicsGuidedEstimator(KnowledgeUser):
 
     def _learned_belief(self, occupancy: np.ndarray, resolution: float, obs: Observations) -> Belief:
         """DGSE-S's belief from the same readings (the shipped network, built on first use)."""
-        if self._learned is None:
-            from dgse.estimators.registry import get_estimator
-
-            self._learned = get_estimator("dgse-s", seed=0, dtype="auto", channels_last=True)
-        return self._learned.estimate(occupancy, resolution, obs)
+        return self._network("default").estimate(occupancy, resolution, obs)
 
     def _proposal_wind(self, occupancy: np.ndarray, resolution: float, obs: Observations) -> np.ndarray:
         """DGSE-S's mean wind from ``obs`` with ``map_proposal_model``'s weights (built on first use)."""
-        if self._proposal_net is None:
+        net = self._network(self.map_proposal_model)
+        return np.asarray(net.estimate(occupancy, resolution, obs).wind_mean)
+
+    def _network(self, model: str) -> Any:
+        """The DGSE-S estimator with weights ``model``, built on first use and shared by every use."""
+        if model not in self._networks:
             from dgse.estimators.registry import get_estimator
 
-            self._proposal_net = get_estimator(
-                "dgse-s", model=self.map_proposal_model, seed=0, dtype="auto", channels_last=True
+            self._networks[model] = get_estimator(
+                "dgse-s", model=model, seed=0, dtype="auto", channels_last=True
             )
-        return np.asarray(self._proposal_net.estimate(occupancy, resolution, obs).wind_mean)
+        return self._networks[model]
 
     def _gas_posterior(
         self,
