@@ -16,14 +16,28 @@ never used for tuning).  Every finished estimate is kept in a journal beside
 each JSON file, so an interrupted run resumes.
 
     python benchmarks/phys_gsl.py --trials 2 -o benchmarks/results/phys_gsl
+
+On a machine with many cores, ``--workers N`` runs one process per case and
+reading count of a row, ``--rounds R`` trials at a time for every case before the next R (so
+a run cut short covers the cases evenly), each process with its own part of
+the journal; the parts are joined into the row's journal as each round
+ends.  ``--time-limit S`` stops the workers after ``S`` seconds, keeping
+every finished estimate: the same command resumes, and ``--trials`` down to
+what every case has written the table from the journal alone.
+
+    python benchmarks/phys_gsl.py --trials 20 --workers 14 --rounds 2 --time-limit 480 \\
+        --methods dgse-phys@map -o benchmarks/results/phys_gsl_20
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import multiprocessing
 import os
+import time
 from pathlib import Path
+from typing import Any
 
 from dgse.evaluation.evaluate import evaluate, write_json
 from dgse.journal import journal_path
@@ -53,6 +67,125 @@ def _test_cases(out: Path) -> Path:
     return d
 
 
+def _run_part(task: tuple[str, int, str, str, int, str]) -> int:
+    """One case and reading count of one row with ``trials`` trials, into its own journal part
+    (a worker process)."""
+    case, n, method, level, trials, part = task
+    res = evaluate(case, method, [n], trials=trials, seed=0, knowledge=level, journal=part)
+    return len(res["per_case"])
+
+
+def _entries(path: Path) -> list[dict[str, Any]]:
+    """A journal's lines, decoded (header first); a line torn by a kill is dropped."""
+    out = []
+    for line in path.read_text().splitlines() if path.exists() else []:
+        try:
+            out.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue
+    return out
+
+
+def _join(journal: Path, parts: list[Path]) -> int:
+    """Append the parts' estimates that ``journal`` lacks to it (the parts are then removed);
+    returns how many it holds."""
+    header, entries = None, {}
+    for path in [journal, *parts]:
+        lines = _entries(path)
+        if not lines:
+            continue
+        if header is None:
+            header = lines[0]
+        elif lines[0].get("identity") != header.get("identity"):
+            raise SystemExit(f"{path}: written with other settings than {journal}")
+        for e in lines[1:]:
+            r = e.get("record", {})
+            entries.setdefault((r.get("case"), r.get("n_obs"), r.get("trial")), e)
+    if header is None:
+        return 0
+    tmp = journal.with_suffix(".tmp")
+    tmp.write_text("".join(json.dumps(x) + "\n" for x in [header, *entries.values()]))
+    os.replace(tmp, journal)
+    for path in parts:
+        path.unlink(missing_ok=True)
+    return len(entries)
+
+
+def run_parallel(
+    rows: list[tuple[str, str]],
+    sources: dict[str, Path],
+    out: Path,
+    trials: int,
+    workers: int,
+    rounds: int,
+    time_limit: float | None,
+) -> bool:
+    """Every (set, row) with ``trials`` trials on ``workers`` processes, one case and count per task,
+    ``rounds`` trials at a time; True when all of it is done (else stopped at ``time_limit``)."""
+    t0 = time.monotonic()
+    ctx = multiprocessing.get_context("spawn")
+    cases = {name: sorted(src.glob("*.npz")) if src.is_dir() else [src] for name, src in sources.items()}
+    parts_dir = out / "_parts"
+    parts_dir.mkdir(exist_ok=True)
+    for upto in range(min(rounds, trials), trials + rounds, rounds):
+        upto = min(upto, trials)
+        tasks: list[tuple[str, int, str, str, int, str]] = []
+        parts: dict[Path, list[Path]] = {}
+        for name, files in cases.items():
+            for method, level in rows:
+                journal = journal_path(out / f"{name}_{method}_{level}.json")
+                _join(journal, sorted(parts_dir.glob(f"{journal.stem}.*.jsonl")))  # an earlier run's
+                kept = _kept(journal)
+                lines = _entries(journal)
+                for f in files:
+                    for n in COUNTS:
+                        if all((n, t) in kept.get(f.stem, set()) for t in range(upto)):
+                            continue
+                        part = parts_dir / f"{journal.stem}.{f.stem}.{n}.jsonl"
+                        if lines:  # the part starts with what the journal has of this case and count
+                            mine = [
+                                x
+                                for x in lines[1:]
+                                if (x["record"]["case"], x["record"]["n_obs"]) == (f.stem, n)
+                            ]
+                            part.write_text("".join(json.dumps(x) + "\n" for x in [lines[0], *mine]))
+                        tasks.append((str(f), n, method, level, upto, str(part)))
+                        parts.setdefault(journal, []).append(part)
+        if not tasks:
+            continue
+        print(f"trials up to {upto}: {len(tasks)} tasks on {workers} workers", flush=True)
+        pool = ctx.Pool(workers)
+        finished = False
+        try:
+            pending = pool.map_async(_run_part, tasks, chunksize=1)
+            left = None if time_limit is None else time_limit - (time.monotonic() - t0)
+            pending.wait(left)
+            finished = pending.ready()
+        finally:  # Ctrl-C, an error or the time limit: what the workers finished is kept
+            if finished:
+                pool.close()
+            else:
+                pool.terminate()
+            pool.join()
+            for journal, ps in parts.items():
+                print(f"{journal.name}: {_join(journal, ps)} estimates kept", flush=True)
+        if finished:
+            pending.get()  # a worker's error ends the run here, with its traceback
+        else:
+            print(f"stopped after {time.monotonic() - t0:.0f} s (--time-limit); the same command resumes")
+            return False
+    return True
+
+
+def _kept(journal: Path) -> dict[str, set[tuple[Any, Any]]]:
+    """``{case: {(n_obs, trial)}}`` of the estimates a journal keeps."""
+    out: dict[str, set[tuple[Any, Any]]] = {}
+    for e in _entries(journal)[1:]:
+        r = e["record"]
+        out.setdefault(r["case"], set()).add((r["n_obs"], r["trial"]))
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/phys_gsl"))
@@ -75,6 +208,9 @@ def main() -> None:
         ),
     )
     ap.add_argument("--summary-only", action="store_true", help="summarize the folder's results, run nothing")
+    ap.add_argument("--workers", type=int, default=1, help="processes, one case of one row each (module doc)")
+    ap.add_argument("--rounds", type=int, default=None, help="with --workers: trials per round (default all)")
+    ap.add_argument("--time-limit", type=float, default=None, help="with --workers: stop after this many s")
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     rows = METHODS
@@ -87,6 +223,14 @@ def main() -> None:
     table: dict = {}
     sets = [] if args.summary_only else args.sets
     sources = {name: args.reference if name == "reference" else _test_cases(args.out) for name in sets}
+    if args.workers < 1 or (args.rounds is not None and args.rounds < 1):
+        ap.error("--workers and --rounds must be at least 1")
+    if sets and args.workers > 1:
+        done = run_parallel(
+            rows, sources, args.out, args.trials, args.workers, args.rounds or args.trials, args.time_limit
+        )
+        if not done:
+            return
     for name in sets:
         for method, level in rows:
             out = args.out / f"{name}_{method}_{level}.json"
