@@ -12,6 +12,7 @@ from dgse.estimators.phys import (
     PhysicsGuidedEstimator,
     mix_posteriors,
     predictive_sources,
+    profile_wind_log_likelihood,
     relative_wind_misfit,
     search_planner,
     wind_log_likelihood,
@@ -48,6 +49,26 @@ def test_wind_likelihood_prefers_the_right_flow():
     assert wind_log_likelihood(u, u, (0.2,), 0.05) > wind_log_likelihood(2 * u, u, (0.2,), 0.05)
 
 
+def test_profile_wind_likelihood_counts_readings_up_to_a_cap():
+    """Two flows that leave 41 % and 42 % of 500 readings' wind unexplained: the sensor-noise
+    likelihood separates them by far more than the profile one, which counts 30 readings."""
+    rng = np.random.default_rng(3)
+    w = rng.normal(size=(500, 2))
+    err = rng.normal(size=(500, 2))
+    err *= np.linalg.norm(w) / np.linalg.norm(err)
+    a, b = w + 0.41 * err, w + 0.42 * err
+    gap = profile_wind_log_likelihood(a, w, 30) - profile_wind_log_likelihood(b, w, 30)
+    assert gap == pytest.approx(30 * np.log(0.42 / 0.41))
+    sensor = wind_log_likelihood(a, w, (0.2,), 0.05) - wind_log_likelihood(b, w, (0.2,), 0.05)
+    assert sensor > 10 * gap > 0
+    # fewer readings than the cap count each once
+    assert profile_wind_log_likelihood(a[:10], w[:10], 30) == pytest.approx(
+        -5 * np.log(((a[:10] - w[:10]) ** 2).sum() / 10)
+    )
+    with pytest.raises(InputDataError, match="wind_likelihood"):
+        PhysicsGuidedEstimator(wind_likelihood="gaussian")
+
+
 def test_one_hypothesis_equals_the_adjoint_posterior(case):
     """With one flow hypothesis, dgse-phys's source posterior is the adjoint evidence's."""
     est = PhysicsGuidedEstimator()
@@ -59,7 +80,17 @@ def test_one_hypothesis_equals_the_adjoint_posterior(case):
     logl, _ = adjoint_log_evidence(fm.responses(obs.cells), obs.gas)
     p = np.exp(logl - logl.max())
     assert np.allclose(b.source_probs[case.free], p / p.sum())
-    assert b.info["hypotheses"][0]["weight"] == pytest.approx(1.0)
+    h = b.info["hypotheses"][0]
+    assert h["weight"] == pytest.approx(1.0)
+    # the hypothesis's own terms: its posterior's peak is the belief's, the wind terms its flow's
+    i, j = np.unravel_index(int(np.argmax(b.source_probs)), b.shape)
+    assert h["source_mode_xy"] == pytest.approx([(j + 0.5) * case.resolution, (i + 0.5) * case.resolution])
+    u = fm.wind[:, obs.cells[:, 0], obs.cells[:, 1]].T
+    assert h["wind_misfit"] == pytest.approx(relative_wind_misfit(u, obs.wind))
+    assert h["wind_log_likelihood"] == pytest.approx(
+        wind_log_likelihood(u, obs.wind, est.wind_noise_levels, est.wind_noise_floor)
+    )
+    assert np.isfinite(h["gas_log_evidence"])
 
 
 def test_noise_weight_mixture_averages_the_two_posteriors(case):
@@ -120,6 +151,9 @@ def test_map_level_proposes_openings_from_the_wind_readings(case):
     assert hyps[0]["label"] == "in west 1.0-2.0 m, out east 0.0-1.0 m"
     assert sum(h["weight"] for h in hyps) == pytest.approx(1.0)
     assert b.localization_error(tuple(case.source)) < 1.0
+    # the weights follow the hypotheses' wind and gas terms (at map the wind fit has a free scale)
+    best = max(hyps, key=lambda h: h["weight"])
+    assert best["wind_log_likelihood"] == max(h["wind_log_likelihood"] for h in hyps)
     # more of the same readings keep the proposals; other readings get their own (no leak across trials)
     first = est.hypotheses(obs)
     more = obs.concat(draw_observations(case, 10, seed=5))
