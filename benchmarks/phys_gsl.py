@@ -186,6 +186,58 @@ def _kept(journal: Path) -> dict[str, set[tuple[Any, Any]]]:
     return out
 
 
+#: (row, against it, what the issue asks): paired on the same case, count and trial
+PAIRS = [
+    ("dgse-phys@openings", "adjoint-oracle@wind", "within 10 % of the oracle from 50 readings on"),
+    ("dgse-phys@openings", "dgse-s@map", "better than DGSE-S at every count"),
+    ("dgse-phys@map", "dgse-s@map", "better than DGSE-S at every count"),
+    ("dgse-phys@map", "adjoint-oracle@wind", "goal: within 1.5x of the oracle at 150 and 300"),
+]
+
+
+def _comparisons(out: Path) -> list[str]:
+    """Mean SL error ratios of :data:`PAIRS` on the estimates both rows have, with the paired
+    difference's mean and standard error (m)."""
+    import numpy as np
+
+    lines: list[str] = []
+    for name in ("reference", "test"):
+        errors = {}
+        for method, level in METHODS:
+            path = out / f"{name}_{method}_{level}.json"
+            if path.exists():
+                res = json.loads(path.read_text())
+                errors[f"{method}@{level}"] = {
+                    (r["case"], r["n_obs"], r["trial"]): r["sl_error_m"] for r in res["per_case"]
+                }
+        rows = [(a, b, goal) for a, b, goal in PAIRS if a in errors and b in errors]
+        if not rows:
+            continue
+        lines += [
+            f"## {name}: paired comparisons",
+            "",
+            "mean SL error ratio A / B (paired difference A - B, m, mean +- standard error; estimates)",
+            "",
+            "| A | B | " + " | ".join(str(n) for n in COUNTS) + " | asked |",
+            "|---|---|" + "---|" * len(COUNTS) + "---|",
+        ]
+        for a, b, goal in rows:
+            cells = []
+            for n in COUNTS:
+                keys = sorted(k for k in errors[a] if k[1] == n and k in errors[b])
+                x = np.array([errors[a][k] for k in keys])
+                y = np.array([errors[b][k] for k in keys])
+                if len(keys) < 2:
+                    cells.append("-")
+                    continue
+                d = x - y
+                se = d.std(ddof=1) / np.sqrt(len(d))
+                cells.append(f"{x.mean() / y.mean():.2f} ({d.mean():+.2f} +- {se:.2f}; {len(d)})")
+            lines.append(f"| {a} | {b} | " + " | ".join(cells) + f" | {goal} |")
+        lines.append("")
+    return lines
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/phys_gsl"))
@@ -248,29 +300,29 @@ def main() -> None:
                 continue
             res = json.loads(path.read_text())
             table.setdefault(name, {})[f"{method}@{level}"] = {
-                n: {
-                    k: res["aggregate"][str(n)].get(k)
-                    for k in ("sl_error_m_mean", "sl_error_m_median", "ce_mean")
-                }
-                for n in COUNTS
+                "trials": res["trials"],
+                **{
+                    n: {
+                        k: res["aggregate"][str(n)].get(k)
+                        for k in ("sl_error_m_mean", "sl_error_m_median", "ce_mean")
+                    }
+                    for n in COUNTS
+                },
             }
     lines = []
     for name, rows in table.items():
-        lines += [
-            f"## {name} ({args.trials} trials per case)",
-            "",
-            "SL error mean / median (m), CE mean (nats)",
-            "",
-        ]
-        lines.append("| method@knowledge | " + " | ".join(str(n) for n in COUNTS) + " |")
-        lines.append("|---|" + "---|" * len(COUNTS))
+        lines += [f"## {name}", "", "SL error mean / median (m), CE mean (nats); trials per case", ""]
+        lines.append("| method@knowledge | trials | " + " | ".join(str(n) for n in COUNTS) + " |")
+        lines.append("|---|---|" + "---|" * len(COUNTS))
         for key, by_n in rows.items():
             cells = [
                 f"{v['sl_error_m_mean']:.2f} / {v['sl_error_m_median']:.2f} / {v['ce_mean']:.1f}"
-                for v in by_n.values()
+                for n, v in by_n.items()
+                if n != "trials"
             ]
-            lines.append(f"| {key} | " + " | ".join(cells) + " |")
+            lines.append(f"| {key} | {by_n['trials']} | " + " | ".join(cells) + " |")
         lines.append("")
+    lines += _comparisons(args.out)
     (args.out / "summary.md").write_text("\n".join(lines))
     (args.out / "summary.json").write_text(json.dumps(table, indent=1))
     print("\n".join(lines))
