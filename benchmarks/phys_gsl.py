@@ -278,9 +278,20 @@ def main() -> None:
     if args.workers < 1 or (args.rounds is not None and args.rounds < 1):
         ap.error("--workers and --rounds must be at least 1")
     if sets and args.workers > 1:
-        done = run_parallel(
-            rows, sources, args.out, args.trials, args.workers, args.rounds or args.trials, args.time_limit
-        )
+        try:
+            done = run_parallel(
+                rows,
+                sources,
+                args.out,
+                args.trials,
+                args.workers,
+                args.rounds or args.trials,
+                args.time_limit,
+            )
+        except KeyboardInterrupt:
+            raise SystemExit(
+                "interrupted: the finished estimates are kept; the same command resumes"
+            ) from None
         if not done:
             return
     for name in sets:
