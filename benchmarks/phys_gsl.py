@@ -22,8 +22,8 @@ reading count of a row, ``--rounds R`` trials at a time for every case before th
 a run cut short covers the cases evenly), each process with its own part of
 the journal; the parts are joined into the row's journal as each round
 ends.  ``--time-limit S`` stops the workers after ``S`` seconds, keeping
-every finished estimate: the same command resumes, and ``--trials`` down to
-what every case has written the table from the journal alone.
+every finished estimate: the same command resumes, and with ``--trials`` no
+more than every case has, the table is written from the journal alone.
 
     python benchmarks/phys_gsl.py --trials 20 --workers 14 --rounds 2 --time-limit 480 \\
         --methods dgse-phys@map -o benchmarks/results/phys_gsl_20
@@ -260,7 +260,9 @@ def main() -> None:
         ),
     )
     ap.add_argument("--summary-only", action="store_true", help="summarize the folder's results, run nothing")
-    ap.add_argument("--workers", type=int, default=1, help="processes, one case of one row each (module doc)")
+    ap.add_argument(
+        "--workers", type=int, default=1, help="processes, one case and count of a row each (module doc)"
+    )
     ap.add_argument("--rounds", type=int, default=None, help="with --workers: trials per round (default all)")
     ap.add_argument("--time-limit", type=float, default=None, help="with --workers: stop after this many s")
     args = ap.parse_args()
