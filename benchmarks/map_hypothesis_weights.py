@@ -22,12 +22,10 @@ import math
 from pathlib import Path
 from typing import Any
 
+from opening_proposals import _near
 from phys_search import journal_episodes, map_estimator_at_end, step_observations
 
-
-def _near(side: str, start: float, end: float, true: Any) -> bool:
-    c = 0.5 * (start + end)
-    return any(side == t.side and abs(c - 0.5 * (t.start_m + t.end_m)) <= 1.0 for t in true)
+from dgse.world.layout import Opening
 
 
 def _match(label: str, layout: Any) -> str:
@@ -39,7 +37,7 @@ def _match(label: str, layout: Any) -> str:
         c, d = map(float, r_out.removesuffix("m").split("-"))
     except ValueError:
         return "?"
-    ok_in, ok_out = _near(s_in, a, b, layout.inlets), _near(s_out, c, d, layout.outlets)
+    ok_in, ok_out = _near(Opening(s_in, a, b), layout.inlets), _near(Opening(s_out, c, d), layout.outlets)
     return "T" if ok_in and ok_out else "i" if ok_in else "o" if ok_out else "-"
 
 

@@ -127,6 +127,10 @@ def run_parallel(
     cases = {name: sorted(src.glob("*.npz")) if src.is_dir() else [src] for name, src in sources.items()}
     parts_dir = out / "_parts"
     parts_dir.mkdir(exist_ok=True)
+    for name in cases:  # an interrupted run's parts
+        for method, level in rows:
+            journal = journal_path(out / f"{name}_{method}_{level}.json")
+            _join(journal, sorted(parts_dir.glob(f"{journal.stem}.*.jsonl")))
     for upto in range(min(rounds, trials), trials + rounds, rounds):
         upto = min(upto, trials)
         tasks: list[tuple[str, int, str, str, int, str]] = []
@@ -134,9 +138,8 @@ def run_parallel(
         for name, files in cases.items():
             for method, level in rows:
                 journal = journal_path(out / f"{name}_{method}_{level}.json")
-                _join(journal, sorted(parts_dir.glob(f"{journal.stem}.*.jsonl")))  # an earlier run's
-                kept = _kept(journal)
                 lines = _entries(journal)
+                kept = _kept(lines)
                 for f in files:
                     for n in COUNTS:
                         if all((n, t) in kept.get(f.stem, set()) for t in range(upto)):
@@ -177,10 +180,10 @@ def run_parallel(
     return True
 
 
-def _kept(journal: Path) -> dict[str, set[tuple[Any, Any]]]:
-    """``{case: {(n_obs, trial)}}`` of the estimates a journal keeps."""
+def _kept(lines: list[dict[str, Any]]) -> dict[str, set[tuple[Any, Any]]]:
+    """``{case: {(n_obs, trial)}}`` of the estimates a journal's lines (:func:`_entries`) keep."""
     out: dict[str, set[tuple[Any, Any]]] = {}
-    for e in _entries(journal)[1:]:
+    for e in lines[1:]:
         r = e["record"]
         out.setdefault(r["case"], set()).add((r["n_obs"], r["trial"]))
     return out

@@ -91,6 +91,7 @@ from dgse.physics.projection import project_wind, transport_from_wind
 from dgse.physics.rans import FlowSettings
 from dgse.sensing.sensors import Observations
 from dgse.threads import map_threads, side_by_side, with_one_blas_thread
+from dgse.world.grid import Grid
 from dgse.world.layout import Layout
 
 __all__ = [
@@ -968,7 +969,7 @@ def _hypothesis_info(
     mode = None
     if live:
         i, j = mesh.cells[int(np.argmax(log_ev))]
-        mode = [(float(j) + 0.5) * res, (float(i) + 0.5) * res]
+        mode = list(Grid(mesh.shape, res).center_of(int(i), int(j)))
     return {
         "label": h.label,
         "weight": weight,
