@@ -13,12 +13,15 @@ Writes ``benchmarks/results/solver_robustness.{json,md}``.
 paper-size maps; 0: no SER), back to back, and compares iterations, CPU
 seconds and the wind against the first value's; it writes
 ``benchmarks/results/solver_ser_small.{json,md}`` (how the default was chosen).
+``--variants "pressure_solver=lu" "pressure_solver=dic,p_rel_tol=0.03" --name NAME`` does the
+same for any ``FlowSettings`` fields (JSON values) and writes ``NAME.{json,md}``.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 from dgse.physics.builtin import flow_and_transport
@@ -32,9 +35,16 @@ def main() -> None:
     ap.add_argument("--start", type=int, default=100)
     ap.add_argument("--count", type=int, default=40)
     ap.add_argument("--ser-small", type=float, nargs="+", default=None, metavar="ALPHA")
+    ap.add_argument("--variants", nargs="+", default=None, metavar="FIELD=VALUE[,...]")
+    ap.add_argument("--name", default="solver_variants", help="result file name of --variants")
     args = ap.parse_args()
+    command = "python benchmarks/solver_robustness.py " + " ".join(sys.argv[1:])
     if args.ser_small:
-        compare_ser_small(args.start, args.count, args.ser_small)
+        variants = [f"alpha_turb_max_small={a:g}" for a in args.ser_small]
+        compare(args.start, args.count, variants, "solver_ser_small", command)
+        return
+    if args.variants:
+        compare(args.start, args.count, args.variants, args.name, command)
         return
     rows = []
     for seed in range(args.start, args.start + args.count):
@@ -98,15 +108,36 @@ def main() -> None:
     print(md[0])
 
 
-def compare_ser_small(start: int, count: int, values: list[float]) -> None:
-    """Each layout solved with every ``alpha_turb_max_small`` in turn (interleaved, so that a
-    busy machine slows them alike); CPU seconds, as wall time on a shared machine is noisy."""
+def _parse_variant(text: str) -> dict:
+    """``"key=value,key=value"`` (values as JSON where they parse, else strings) -> FlowSettings fields."""
+    from dataclasses import fields
+
+    from dgse.physics.rans import FlowSettings
+
+    known = {f.name for f in fields(FlowSettings)}
+    out = {}
+    for part in filter(None, text.split(",")):
+        key, sep, value = part.partition("=")
+        if not sep or key not in known:
+            raise SystemExit(f"--variants: {part!r} is not FIELD=VALUE of a FlowSettings field")
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key] = value
+    return out
+
+
+def compare(start: int, count: int, variants: list[str], name: str, command: str) -> None:
+    """Each layout solved with every settings variant in turn (interleaved, so that a busy
+    machine slows them alike); CPU seconds, as wall time on a shared machine is noisy; the
+    wind against the first variant's."""
     import time
 
     import numpy as np
 
     from dgse.physics.rans import FlowSettings
 
+    settings = [FlowSettings(**_parse_variant(v)) for v in variants]
     rows = []
     for seed in range(start, start + count):
         rng = as_generator(seed)
@@ -115,36 +146,35 @@ def compare_ser_small(start: int, count: int, values: list[float]) -> None:
         if seed == start:
             flow_and_transport(layout, v)  # numba's kernels loaded: not timed
         winds = []
-        for a in values:
+        for label, st in zip(variants, settings, strict=True):
             c = time.process_time()
-            flow, _ = flow_and_transport(layout, v, settings=FlowSettings(alpha_turb_max_small=a))
+            flow, _ = flow_and_transport(layout, v, settings=st)
             i = flow.info
             rows.append(
                 {
                     "seed": seed,
-                    "alpha_turb_max_small": a,
+                    "variant": label,
                     "cells": int(layout.free.sum()),
                     "iterations": i["iterations"],
+                    "attempts": len(i["attempts"]),
                     "converged": i["converged"],
                     "cpu_s": time.process_time() - c,
                 }
             )
             winds.append(flow.wind)
-        for r, w in zip(rows[-len(values) :], winds, strict=True):
+        for r, w in zip(rows[-len(variants) :], winds, strict=True):
             r["wind_rel_diff"] = float(np.linalg.norm(w - winds[0]) / np.linalg.norm(winds[0]))
-        print(json.dumps(rows[-len(values) :]), flush=True)
+        print(json.dumps(rows[-len(variants) :]), flush=True)
+    first = [r for r in rows if r["variant"] == variants[0]]
     summary = []
-    for a in values:
-        rr = [r for r in rows if r["alpha_turb_max_small"] == a]
-        both = [
-            (r, b)
-            for r, b in zip(rr, [r for r in rows if r["alpha_turb_max_small"] == values[0]], strict=True)
-            if r["converged"] and b["converged"]
-        ]
+    for label in variants:
+        rr = [r for r in rows if r["variant"] == label]
+        both = [(r, b) for r, b in zip(rr, first, strict=True) if r["converged"] and b["converged"]]
         summary.append(
             {
-                "alpha_turb_max_small": a,
+                "variant": label,
                 "converged": sum(r["converged"] for r in rr),
+                "retried": sum(r["attempts"] > 1 for r in rr),
                 "median_iterations": float(np.median([r["iterations"] for r in rr])),
                 "median_cpu_s": float(np.median([r["cpu_s"] for r in rr])),
                 "total_cpu_s": float(sum(r["cpu_s"] for r in rr)),
@@ -155,24 +185,24 @@ def compare_ser_small(start: int, count: int, values: list[float]) -> None:
         )
     out = REPO / "benchmarks" / "results"
     out.mkdir(parents=True, exist_ok=True)
-    (out / "solver_ser_small.json").write_text(json.dumps({"summary": summary, "runs": rows}, indent=1))
+    (out / f"{name}.json").write_text(json.dumps({"summary": summary, "runs": rows}, indent=1))
     md = [
         f"Seeds {start}-{start + count - 1} (training-distribution layouts, all under 12k free cells), "
-        "each solved with every `FlowSettings.alpha_turb_max_small` back to back "
-        f"(`python benchmarks/solver_robustness.py --start {start} --count {count} --ser-small "
-        f"{' '.join(f'{a:g}' for a in values)}`); wind difference against the first value's flow.",
+        f"each solved with every settings variant back to back (`{command}`); CPU seconds of the "
+        "flow in a warm process; wind difference against the first variant's flow (where both converged).",
         "",
-        "| alpha_turb_max_small | converged | median iterations | median CPU s | total CPU s | "
+        "| settings | converged | retried | median iterations | median CPU s | total CPU s | "
         "more iterations than the first | wind rel. diff median / max |",
-        "|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for r in summary:
         md.append(
-            f"| {r['alpha_turb_max_small']:g} | {r['converged']} of {count} | {r['median_iterations']:.0f} | "
+            f"| `{r['variant']}` | {r['converged']} of {count} | {r['retried']} | "
+            f"{r['median_iterations']:.0f} | "
             f"{r['median_cpu_s']:.2f} | {r['total_cpu_s']:.1f} | {r['more_iterations_than_first']} | "
             f"{r['median_wind_rel_diff']:.1e} / {r['max_wind_rel_diff']:.1e} |"
         )
-    (out / "solver_ser_small.md").write_text("\n".join(md) + "\n")
+    (out / f"{name}.md").write_text("\n".join(md) + "\n")
     print("\n".join(md))
 
 

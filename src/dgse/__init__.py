@@ -8,9 +8,18 @@ interface), ``mapping`` and ``localization`` (the field's baselines),
 command.
 """
 
-from importlib.metadata import PackageNotFoundError, version
 
-try:
-    __version__ = version("dgse")
-except PackageNotFoundError:  # running from a source tree that is not installed
-    __version__ = "0+unknown"
+
+def __getattr__(name: str) -> str:
+    # the version is looked up on first use: importlib.metadata costs ~50 ms of every
+    # process's start-up, and most commands never print it
+    if name != "__version__":
+        raise AttributeError(f"module 'dgse' has no attribute {name!r}")
+    from importlib.metadata import PackageNotFoundError, version
+
+    global __version__
+    try:
+        __version__ = version("dgse")
+    except PackageNotFoundError:  # running from a source tree that is not installed
+        __version__ = "0+unknown"
+    return __version__

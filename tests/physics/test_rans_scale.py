@@ -60,6 +60,33 @@ def test_pressure_solvers_agree():
         PressureSolver(8, "gmg")
 
 
+def test_own_pcg_loop_is_scipys_cg_bit_for_bit():
+    """The pressure solve's CG loop repeats SciPy's iteration exactly (same iterates, same
+    stopping), so replacing the library call changed no recorded flow."""
+    import scipy.sparse.linalg as spla
+
+    from dgse.physics.rans import _pcg
+
+    n = 30
+    lap1 = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(n, n))
+    A = (sp.kron(lap1, sp.identity(n)) + sp.kron(sp.identity(n), lap1)).tocsr()
+    rng = np.random.default_rng(3)
+    b, x0 = rng.normal(size=n * n), rng.normal(size=n * n)
+    stale = A + sp.diags(rng.uniform(0.0, 0.5, n * n))  # a stale preconditioner, as in the flow
+    lu = spla.splu(stale.tocsc())
+    M = spla.LinearOperator(A.shape, matvec=lu.solve)
+    atol = 1e-3 * np.linalg.norm(b - A @ x0)
+    iterates: list[np.ndarray] = []
+    for maxiter in (2, 50):
+        iterates.clear()
+        ref, info = spla.cg(A, b, x0=x0, rtol=0.0, atol=atol, maxiter=maxiter, M=M, callback=iterates.append)
+        x, converged, its = _pcg(A, b, x0, atol, maxiter, lu.solve)
+        assert np.array_equal(x, ref) and converged == (info == 0) and its == len(iterates)
+    assert converged and 2 < its < 50
+    x, converged, its = _pcg(A, np.zeros(n * n), x0, atol, 5, lu.solve)
+    assert converged and its == 0 and not x.any()
+
+
 @pytest.mark.parametrize(
     "settings",
     [

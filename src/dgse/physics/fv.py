@@ -111,26 +111,26 @@ class StencilMatrix:
         n = mesh.n
         rows = [np.arange(n)]
         cols = [np.arange(n)]
-        self._sel = []
+        flat = [np.arange(n)]  # where each entry's value sits in [aP, a.ravel()]
         for d in range(4):
             m = mesh.nb[:, d] >= 0
             rows.append(np.nonzero(m)[0])
             cols.append(mesh.nb[m, d])
-            self._sel.append(m)
+            flat.append(n + 4 * np.nonzero(m)[0] + d)
         r = np.concatenate(rows)
         c = np.concatenate(cols)
         tmpl = sp.csr_matrix((np.arange(r.size, dtype=np.float64) + 1.0, (r, c)), shape=(n, n))
         tmpl.sort_indices()
-        self._perm = (tmpl.data - 1.0).astype(np.int64)
+        self._gather = np.concatenate(flat)[(tmpl.data - 1.0).astype(np.int64)]
+        self._diag = self._gather < n  # the entries that take aP (the others take -a)
         self._indices = tmpl.indices
         self._indptr = tmpl.indptr
         self.n = n
 
     def assemble(self, aP: np.ndarray, a: np.ndarray) -> sp.csr_matrix:
-        data = np.concatenate([aP] + [-a[m, d] for d, m in enumerate(self._sel)])
-        return sp.csr_matrix(
-            (data[self._perm], self._indices.copy(), self._indptr.copy()), shape=(self.n, self.n)
-        )
+        data = np.concatenate([aP, a.ravel()])[self._gather]
+        np.negative(data, out=data, where=~self._diag)
+        return sp.csr_matrix((data, self._indices.copy(), self._indptr.copy()), shape=(self.n, self.n))
 
 
 # ----------------------------------------------------------------------------------------

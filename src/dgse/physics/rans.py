@@ -332,7 +332,7 @@ class PressureSolver:
                 # symmetric positive definite: minimum degree on A^T + A, no pivoting
                 opts = {"SymmetricMode": True}
                 lu = spla.splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options=opts)
-                self._M = spla.LinearOperator(A.shape, matvec=lu.solve)
+                self._M = lu.solve
                 self.factorizations += 1
             return self._M
         import pyamg  # imported here: small maps never need it
@@ -352,7 +352,7 @@ class PressureSolver:
             for g, fine, coarse in zip(self._maps, levels[:-1], levels[1:], strict=True):
                 coarse.A = g.apply(fine.A.data)
             self._ml.coarse_solver = pyamg.multilevel.coarse_grid_solver("splu")
-        return self._ml.aspreconditioner(cycle="V")
+        return self._ml.aspreconditioner(cycle="V").matvec
 
     def solve(self, A, b: np.ndarray, x0: np.ndarray, rel_tol: float) -> np.ndarray:
         """``x`` with ``|b - A x| <= rel_tol |b - A x0|`` (2-norm), starting from ``x0``."""
@@ -360,22 +360,47 @@ class PressureSolver:
         r0 = float(np.linalg.norm(b - A @ x0))
         if r0 == 0.0:
             return x0.copy()
-        count = [0]
-
-        def tick(_x: np.ndarray) -> None:
-            count[0] += 1
-
         for attempt in range(2):
-            M = self._preconditioner(A, rebuild=attempt == 1)
-            count[0] = 0
+            psolve = self._preconditioner(A, rebuild=attempt == 1)
             with np.errstate(all="ignore"):
-                x, info = spla.cg(
-                    A, b, x0=x0, rtol=0.0, atol=rel_tol * r0, maxiter=self.max_krylov, M=M, callback=tick
-                )
-            self.krylov_iterations += count[0]
-            if info == 0 and np.isfinite(x).all():
+                x, converged, its = _pcg(A, b, x0, rel_tol * r0, self.max_krylov, psolve)
+            self.krylov_iterations += its
+            if converged and np.isfinite(x).all():
                 return x
         return spla.spsolve(A.tocsc(), b)
+
+
+def _pcg(
+    A: sp.csr_matrix, b: np.ndarray, x0: np.ndarray, atol: float, maxiter: int, psolve: Callable
+) -> tuple[np.ndarray, bool, int]:
+    """Preconditioned conjugate gradients: ``(x, converged, iterations)``, converged when
+    ``|b - A x| < atol`` within ``maxiter`` iterations.
+
+    The iteration of SciPy's ``cg`` (the same operations in the same order, so the same
+    iterates bit for bit) without its per-call and per-iteration wrapping, which cost a third
+    of the pressure solve on paper-size maps.
+    """
+    x = np.array(x0, dtype=float)
+    if not np.linalg.norm(b):
+        return np.array(b, dtype=float), True, 0
+    r = b - A @ x if x.any() else b.copy()
+    rho_prev, p = 1.0, None
+    for it in range(maxiter):
+        if np.linalg.norm(r) < atol:
+            return x, True, it
+        z = psolve(r)
+        rho = np.dot(r, z)
+        if p is None:
+            p = z.copy()
+        else:
+            p *= rho / rho_prev
+            p += z
+        q = A @ p
+        alpha = rho / np.dot(p, q)
+        x += alpha * p
+        r -= alpha * q
+        rho_prev = rho
+    return x, False, maxiter
 
 
 @_jit
