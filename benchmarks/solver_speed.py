@@ -255,6 +255,12 @@ def main() -> None:
             "cpu_count": os.cpu_count(),
             "platform": platform.platform(),
             "python": platform.python_version(),
+            # the interpreter both engines' workers run in: a virtual environment made by the
+            # README's install holds only the project's dependencies (a system Python with more
+            # packages can start slower: numba imports cffi, NumPy's f2py charset_normalizer,
+            # where they are installed)
+            "executable": sys.executable,
+            "virtual_env": sys.prefix != sys.base_prefix,
         },
         "openfoam": use_foam,
         "shared": args.shared,
@@ -434,8 +440,12 @@ def markdown(r: dict) -> str:
             f"\nNon-converging flow (random layout, seed 25, an oscillating flow): reported after "
             f"{nc['wall_s']:.1f} s, {nc.get('iterations')} iterations: {nc.get('error', '')}"
         )
+    m = r["machine"]
     if r.get("shared"):
-        lines.append(f"\nMachine: {r['machine']['cpu_count']} cores, shared: {r['shared']}.")
+        lines.append(f"\nMachine: {m['cpu_count']} cores, shared: {r['shared']}.")
+    if "virtual_env" in m:
+        where = "a virtual environment" if m["virtual_env"] else "a system interpreter"
+        lines.append(f"Python {m['python']} in {where} (`{m['executable']}`).")
     lines.append("\n" + DIAGNOSIS)
     return "\n".join(lines) + "\n"
 
