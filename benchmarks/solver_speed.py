@@ -38,7 +38,18 @@ REFERENCE = Path(os.environ.get("DGSE_REFERENCE_CASES", REPO.parent / "shared" /
 
 # ------------------------------------------------------------------------------ worker
 def worker(args: argparse.Namespace) -> None:
-    """Solve one layout with four sources and save the fields (runs in its own process)."""
+    """Solve one layout with four sources and save the fields (runs in its own process, with the
+    garbage-collector settings of the ``dgse`` console script, for either engine)."""
+    from dgse.cli import process
+
+    process.start()
+    try:
+        _solve_and_save(args)
+    finally:
+        process.finish()
+
+
+def _solve_and_save(args: argparse.Namespace) -> None:
     from dgse.errors import ConvergenceError
     from dgse.physics.engines import Source
 

@@ -377,3 +377,26 @@ def test_errors_in_a_real_process(solved, tmp_path):
     assert r.returncode == 2
     assert r.stderr.strip().startswith("error: ") and "Traceback" not in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize(("argv", "status"), [(["engines"], 0), (["solve", "missing.npz", "-o", "x.npz"], 2)])
+def test_console_script_exits_with_mains_status_and_sets_the_collector(monkeypatch, argv, status):
+    """``run`` (the installed ``dgse``) exits with ``main``'s status; it raised the collector's
+    first threshold before the command and froze the live objects after it."""
+    import gc
+
+    from dgse.cli import process
+    from dgse.cli.main import run
+
+    monkeypatch.setattr(sys, "argv", ["dgse", *argv])
+    before = gc.get_threshold()
+    assert before[0] != process.GEN0_THRESHOLD
+    try:
+        with pytest.raises(SystemExit) as exit_:
+            run()
+        assert exit_.value.code == status
+        assert gc.get_threshold() == (process.GEN0_THRESHOLD, *before[1:])
+        assert gc.get_freeze_count() > 0
+    finally:
+        gc.unfreeze()
+        gc.set_threshold(*before)

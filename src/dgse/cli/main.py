@@ -611,5 +611,16 @@ def main(args: Sequence[str] | None = None) -> int:
     return 0
 
 
+def run() -> None:
+    """The ``dgse`` console script: :func:`main` in a process set up to run once and exit
+    (:mod:`dgse.cli.process`: fewer collector passes)."""
+    from dgse.cli import process
+
+    process.start()
+    status = main()
+    process.finish()
+    sys.exit(status)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    run()
