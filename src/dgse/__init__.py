@@ -9,7 +9,6 @@ command.
 """
 
 
-
 def __getattr__(name: str) -> str:
     # the version is looked up on first use: importlib.metadata costs ~50 ms of every
     # process's start-up, and most commands never print it

@@ -2,13 +2,14 @@
 
 A command imports NumPy, SciPy, numba and its own modules: some 10^5 objects
 that live until the process ends.  With CPython's default thresholds the
-cyclic collector scans them about 160 times while they are imported and solved
-with (0.11 s of a 1.6 s paper-size ``solve``), and once more, in full, while
-the interpreter shuts down (0.15-0.2 s).  :func:`start` raises the
-first-generation threshold so that those scans are rare, :func:`finish`
+cyclic collector runs some 250 times while they are imported and solved with
+(0.08 s of a 1.55 s paper-size solve), and once more, over all of them, while
+the interpreter shuts down (0.15 s).  :func:`start` raises the
+first-generation threshold so that those passes are rare, :func:`finish`
 moves every live object to the collector's permanent generation
-(:func:`gc.freeze`) so that the shutdown does not scan them.  Measured in
-``benchmarks/results/solver_speed.md``.
+(:func:`gc.freeze`) so that the shutdown does not scan them: 1.37 s for the
+same solve (``python benchmarks/process_startup.py``,
+``benchmarks/results/process_startup.md``).
 
 Only the console script calls them (:func:`dgse.cli.main.run`), never a
 library function or :func:`dgse.cli.main.main` called in-process: a
