@@ -112,18 +112,17 @@ def _parse_variant(text: str) -> dict:
     """``"key=value,key=value"`` (values as JSON where they parse, else strings) -> FlowSettings fields."""
     from dataclasses import fields
 
+    from dgse.cli.common import parse_params
+    from dgse.errors import InputDataError
     from dgse.physics.rans import FlowSettings
 
-    known = {f.name for f in fields(FlowSettings)}
-    out = {}
-    for part in filter(None, text.split(",")):
-        key, sep, value = part.partition("=")
-        if not sep or key not in known:
-            raise SystemExit(f"--variants: {part!r} is not FIELD=VALUE of a FlowSettings field")
-        try:
-            out[key] = json.loads(value)
-        except json.JSONDecodeError:
-            out[key] = value
+    try:
+        out = parse_params(list(filter(None, text.split(","))), "--variants")
+    except InputDataError as e:
+        raise SystemExit(str(e)) from None
+    unknown = set(out) - {f.name for f in fields(FlowSettings)}
+    if unknown:
+        raise SystemExit(f"--variants: {sorted(unknown)} are not FlowSettings fields")
     return out
 
 
