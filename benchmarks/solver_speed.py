@@ -38,8 +38,8 @@ REFERENCE = Path(os.environ.get("DGSE_REFERENCE_CASES", REPO.parent / "shared" /
 
 # ------------------------------------------------------------------------------ worker
 def worker(args: argparse.Namespace) -> None:
-    """Solve one layout with four sources and save the fields (runs in its own process, with the
-    garbage-collector settings of the ``dgse`` console script, for either engine)."""
+    """Solve one layout with its first ``--sources`` sources and save the fields (runs in its own
+    process, with the garbage-collector settings of the ``dgse`` console script, for either engine)."""
     from dgse.cli import process
 
     process.start()
@@ -54,6 +54,7 @@ def _solve_and_save(args: argparse.Namespace) -> None:
     from dgse.physics.engines import Source
 
     layout, v_in, sources = _load_scenario(args.scenario)
+    sources = sources[: args.sources]
     if args.warm:
         json.dump(warm_start(layout, v_in, args.warm), open(args.out + ".json", "w"))
         return
@@ -211,11 +212,17 @@ def prepare(scenario: str, tmp: Path) -> Path:
 
 
 def run(
-    engine: str, scenario: str, tmp: Path, tolerance: float | None = None, warm: list[float] | None = None
+    engine: str,
+    scenario: str,
+    tmp: Path,
+    tolerance: float | None = None,
+    warm: list[float] | None = None,
+    sources: int = 4,
 ) -> dict:
     out = str(tmp / f"{engine}_{scenario.replace(':', '_')}{'_warm' if warm else ''}")
     file = str(prepare(scenario, tmp))
     cmd = [sys.executable, __file__, "--worker", "--engine", engine, "--scenario", file, "--out", out]
+    cmd += ["--sources", str(sources)]
     if tolerance:
         cmd += ["--tolerance", str(tolerance)]
     if warm:
@@ -252,6 +259,9 @@ def main() -> None:
     ap.add_argument("--shared", default="", help="a note on other work running on the machine meanwhile")
     ap.add_argument("--no-openfoam", action="store_true")
     ap.add_argument("--repeat", type=int, default=1, help="side-by-side passes (timing only after the first)")
+    ap.add_argument(
+        "--sources", type=int, default=4, choices=range(1, 5), help="gas sources per paper-size layout (1-4)"
+    )
     args = ap.parse_args()
     if args.worker:
         worker(args)
@@ -274,6 +284,7 @@ def main() -> None:
             "virtual_env": sys.prefix != sys.base_prefix,
         },
         "openfoam": use_foam,
+        "sources": args.sources,
         "shared": args.shared,
         "layouts": [],
         "repeats": [],
@@ -288,17 +299,17 @@ def main() -> None:
         scenarios = [f"ref:s1_l00{i}" for i in range(3)] + [f"rand:{1000 + i}" for i in range(args.random)]
         for sc in scenarios:
             row: dict = {"scenario": sc}
-            b = run("builtin", sc, tmp)
+            b = run("builtin", sc, tmp, sources=args.sources)
             row["builtin"] = {k: v for k, v in b.items() if not k.startswith("_")}
             if sc.startswith("ref:"):
-                refs = [Case.load(p) for p in sorted(REFERENCE.glob(f"{sc[4:]}_src*.npz"))]
+                refs = [Case.load(p) for p in sorted(REFERENCE.glob(f"{sc[4:]}_src*.npz"))][: args.sources]
                 free = refs[0].free
                 ref_wind = refs[0].wind
                 ref_conc = np.stack([c.concentration for c in refs])
                 row["builtin_vs_reference"] = errors(b["_wind"], b["_conc"], ref_wind, ref_conc, free)
                 row["reference_openfoam_s"] = refs[0].meta["wall_clock_s"]["layout_total"]
             if use_foam:
-                f = run("openfoam", sc, tmp)
+                f = run("openfoam", sc, tmp, sources=args.sources)
                 row["openfoam"] = {k: v for k, v in f.items() if not k.startswith("_")}
                 row["speedup"] = f["wall_s"] / b["wall_s"]
                 if f["converged"] and b["converged"]:
@@ -312,7 +323,8 @@ def main() -> None:
         # more passes, timing only: on a 2-core machine one pass's times vary by tens of percent
         for rep in range(1, args.repeat if use_foam else 1):
             for sc in scenarios:
-                b, f = run("builtin", sc, tmp), run("openfoam", sc, tmp)
+                b = run("builtin", sc, tmp, sources=args.sources)
+                f = run("openfoam", sc, tmp, sources=args.sources)
                 rrow = {"pass": rep + 1, "scenario": sc, "builtin_s": b["wall_s"], "openfoam_s": f["wall_s"]}
                 rrow["speedup"] = f["wall_s"] / b["wall_s"]
                 results["repeats"].append(rrow)
@@ -391,8 +403,10 @@ def _repeats_markdown(r: dict) -> list[str]:
 
 
 def markdown(r: dict) -> str:
+    n_src = r.get("sources", 4)
     lines = [
-        "Wall seconds per layout with four sources, each in a fresh process (start-up included); "
+        f"Wall seconds per layout with {n_src} gas source{'s' if n_src > 1 else ''}, "
+        "each in a fresh process (start-up included); "
         "accuracy of the built-in solution against OpenFOAM's on the same layout.",
         "",
         "| layout | built-in s | OpenFOAM s | speed-up | built-in iterations | velocity rel. L2 | "
