@@ -85,10 +85,9 @@ def main() -> None:
     args = ap.parse_args()
     names = args.estimators or estimator_names()
     paths = sorted(cases_dir(RESULTS / "phys_search", "test", args.paper).glob("*.npz"))
-    paths += sorted(make_cases(RESULTS / "building_search", args.floors, 0.2, (20.0, 30.0)).glob("*.npz"))
-    paths = [p for p in paths if p.stem.startswith("test")][: args.paper] + [
-        p for p in paths if p.stem.startswith("building")
-    ][: args.floors]
+    # the floors' folder is the building search's: it may hold more floors than asked for
+    floors = make_cases(RESULTS / "building_search", args.floors, 0.2, (20.0, 30.0))
+    paths += sorted(floors.glob("building*.npz"))[: args.floors]
     rows = []
     for path in paths:
         case = Case.load(path)

@@ -25,6 +25,7 @@ from typing import Any
 from opening_proposals import _near
 from phys_search import journal_episodes, map_estimator_at_end, step_observations
 
+from dgse.cli.common import parse_params
 from dgse.world.layout import Opening
 
 
@@ -49,10 +50,7 @@ def main() -> None:
     ap.add_argument("-E", dest="options", action="append", default=[], help="dgse-phys option key=json")
     ap.add_argument("-o", "--out", type=Path, required=True)
     args = ap.parse_args()
-    options = {}
-    for o in args.options:
-        key, _, value = o.partition("=")
-        options[key] = json.loads(value)
+    options = parse_params(args.options, "-E")
     rows = {}
     for name, (case, row) in sorted(journal_episodes(args.journals).items()):
         if args.cases and not any(c in name for c in args.cases):

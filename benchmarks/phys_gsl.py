@@ -198,21 +198,14 @@ PAIRS = [
 ]
 
 
-def _comparisons(out: Path) -> list[str]:
+def _comparisons(per_estimate: dict[str, dict[str, dict[tuple, float]]]) -> list[str]:
     """Mean SL error ratios of :data:`PAIRS` on the estimates both rows have, with the paired
-    difference's mean and standard error (m)."""
+    difference's mean and standard error (m).  ``per_estimate``: ``{set: {row: {(case, n_obs,
+    trial): SL error}}}``."""
     import numpy as np
 
     lines: list[str] = []
-    for name in ("reference", "test"):
-        errors = {}
-        for method, level in METHODS:
-            path = out / f"{name}_{method}_{level}.json"
-            if path.exists():
-                res = json.loads(path.read_text())
-                errors[f"{method}@{level}"] = {
-                    (r["case"], r["n_obs"], r["trial"]): r["sl_error_m"] for r in res["per_case"]
-                }
+    for name, errors in per_estimate.items():
         rows = [(a, b, goal) for a, b, goal in PAIRS if a in errors and b in errors]
         if not rows:
             continue
@@ -309,12 +302,16 @@ def main() -> None:
             write_json(res, out)
     # the summary covers every row in the folder, this run's and earlier runs' (one method per
     # process is the way to use both cores)
+    per_estimate: dict[str, dict[str, dict[tuple, float]]] = {}
     for name in ("reference", "test"):
         for method, level in METHODS:
             path = args.out / f"{name}_{method}_{level}.json"
             if not path.exists():
                 continue
             res = json.loads(path.read_text())
+            per_estimate.setdefault(name, {})[f"{method}@{level}"] = {
+                (r["case"], r["n_obs"], r["trial"]): r["sl_error_m"] for r in res["per_case"]
+            }
             table.setdefault(name, {})[f"{method}@{level}"] = {
                 "trials": res["trials"],
                 **{
@@ -338,7 +335,7 @@ def main() -> None:
             ]
             lines.append(f"| {key} | {by_n['trials']} | " + " | ".join(cells) + " |")
         lines.append("")
-    lines += _comparisons(args.out)
+    lines += _comparisons(per_estimate)
     (args.out / "summary.md").write_text("\n".join(lines))
     (args.out / "summary.json").write_text(json.dumps(table, indent=1))
     print("\n".join(lines))
