@@ -16,7 +16,13 @@ candidates does the same arithmetic in registers.  The normal distribution's
   precision's ``p``) and takes a Newton step on ``log Phi(x) = y`` (in the kernel only
   where the rate nodes need more than Acklam's precision).
 
-Both are tested against SciPy (``tests/localization/test_censored_kernel.py``).
+Both are tested against SciPy (``tests/localization/test_censored_kernel.py``).  The sums of
+the zeros' ``log Phi`` (:func:`_log_phi_sum`, and the Mills ratio of the Newton steps over
+``log tau``) read ``log Phi`` on ``[-38, 0)`` from a table instead (:func:`log_ndtr_table`:
+cubic Hermite between nodes 1/64 apart, values and slopes from SciPy, within 1e-10 nats):
+3.5 ns a value against 24 ns for ``erfc`` and ``log``, which took 4-8 % off the kernel's
+time on the recorded calls of two search episodes (2026-11-28).  The quantiles of the rate
+nodes (:func:`_rate_nodes`) are the larger share and keep the exact functions.
 
 The integral over ``log tau`` is Gauss-Hermite around a Newton mode found with the rate at
 its estimate from the positive readings.  Where those leave a rate near 0 plausible (few
@@ -35,6 +41,7 @@ import math
 
 import numba
 import numpy as np
+from scipy import special
 
 _jit = numba.njit(cache=True, nogil=True)
 
@@ -84,6 +91,22 @@ _D = np.array([7.784695709041462e-03, 3.224671290700398e-01, 2.445134137142996e0
 _P_LOW = 0.02425
 _LOG_P_LOW = math.log(_P_LOW)
 
+#: :func:`log_ndtr_table`'s range ``[_TABLE_LO, 0)`` and its nodes per unit of the argument.
+_TABLE_LO = -38.0
+_TABLE_PER_UNIT = 64
+
+
+def _log_ndtr_nodes() -> tuple[np.ndarray, np.ndarray]:
+    """``log Phi`` and its slope ``phi / Phi`` (times the node spacing) at the table's nodes."""
+    a = np.linspace(_TABLE_LO, 0.0, int(-_TABLE_LO) * _TABLE_PER_UNIT + 1)
+    f = special.log_ndtr(a)
+    slope = np.exp(-0.5 * a * a - f - _LOG_SQRT_2PI)
+    return f, slope / _TABLE_PER_UNIT
+
+
+_TABLE_F, _TABLE_D = _log_ndtr_nodes()
+_TABLE_LAST = _TABLE_F.size - 2
+
 
 @_jit
 def log_ndtr(a: float) -> float:
@@ -116,6 +139,27 @@ def log_ndtr(a: float) -> float:
 
 
 @_jit
+def log_ndtr_table(a: float) -> float:
+    """``log Phi(a)`` from the table on ``[-38, 0)`` (cubic Hermite; :func:`log_ndtr` elsewhere).
+
+    The interpolant's error is below ``h^4 / 384`` times the fourth derivative (``h = 1/64``;
+    that derivative stays below 0.12 in magnitude, largest near 0): under 2e-11 nats; the
+    tests hold it to 1e-10 against SciPy.
+    """
+    if not (a < 0.0 and a >= _TABLE_LO):
+        return log_ndtr(a)
+    x = (a - _TABLE_LO) * _TABLE_PER_UNIT
+    i = min(int(x), _TABLE_LAST)
+    t = x - i
+    f0 = _TABLE_F[i]
+    f1 = _TABLE_F[i + 1]
+    d0 = _TABLE_D[i]
+    d1 = _TABLE_D[i + 1]
+    df = f1 - f0
+    return f0 + t * (d0 + t * ((3.0 * df - 2.0 * d0 - d1) + t * (d0 + d1 - 2.0 * df)))
+
+
+@_jit
 def _acklam(p: float, y: float) -> float:
     """Acklam's approximation of the normal quantile of ``p <= 1/2`` (``y = log p``, or nan to
     take it from ``p`` when needed; ``p`` may underflow to 0 when ``y`` is given)."""
@@ -137,7 +181,7 @@ def _mills(x: float) -> float:
     if abs(x) < _SMALL:
         x2 = x * x
         return _PHI0 * (1.0 - 0.5 * x2 * (1.0 - 0.25 * x2)) / (0.5 - _PHI0 * x * (1.0 - x2 / 6.0))
-    return math.exp(-0.5 * x * x - log_ndtr(-x)) / _SQRT_2PI
+    return math.exp(-0.5 * x * x - log_ndtr_table(-x)) / _SQRT_2PI
 
 
 @_jit
@@ -196,7 +240,7 @@ def _log_phi_sum(lam: float, b: np.ndarray) -> float:
     """``G(lambda) = sum_i log Phi(-lambda b_i)``: the zeros' log factor at ``lambda = q sqrt(tau)``."""
     acc = 0.0
     for i in range(b.size):
-        acc += log_ndtr(-lam * b[i])
+        acc += log_ndtr_table(-lam * b[i])
     return acc
 
 
