@@ -113,6 +113,39 @@ def test_help_as_a_subprocess():
         assert cmd in r.stdout
 
 
+def test_a_command_imports_only_its_own_module():
+    """``dgse engines`` (a command of ``dgse.cli.main``) imports none of the other command modules,
+    ``dgse search --help`` only ``dgse.cli.search``; ``dgse --help`` all of them (fresh processes)."""
+    from dgse.cli.main import COMMAND_MODULES
+
+    probe = (
+        "import sys; from dgse.cli.main import main; main(sys.argv[1:]); "
+        f"print(sorted(m for m in sys.modules if m in {set(COMMAND_MODULES)!r}), file=sys.stderr)"
+    )
+    for argv, expected in ((["engines"], []), (["search", "--help"], ["dgse.cli.search"])):
+        r = subprocess.run([sys.executable, "-c", probe, *argv], capture_output=True, text=True, timeout=120)
+        assert r.returncode == 0, r.stderr
+        assert r.stderr.strip().splitlines()[-1] == repr(expected)
+    r = subprocess.run([sys.executable, "-c", probe, "--help"], capture_output=True, text=True, timeout=120)
+    assert r.stderr.strip().splitlines()[-1] == repr(sorted(COMMAND_MODULES))
+
+
+def test_command_modules_name_every_command_they_add():
+    """The map of :data:`COMMAND_MODULES` is what the modules register (a command missing from it
+    would still run, but import every command module first)."""
+    import importlib
+
+    import typer
+
+    from dgse.cli.main import COMMAND_MODULES
+
+    for module, names in COMMAND_MODULES.items():
+        scratch = typer.Typer()
+        importlib.import_module(module).register(scratch)
+        added = {c.name for c in scratch.registered_commands} | {g.name for g in scratch.registered_groups}
+        assert added == set(names), module
+
+
 @pytest.mark.parametrize("cmd", COMMANDS)
 def test_help_of_every_command(capsys, cmd):
     code, out, _ = _run(capsys, cmd, "--help")

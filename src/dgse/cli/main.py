@@ -27,8 +27,8 @@ the traceback (:func:`dgse.cli.common.write_crash_log`) and exits with 1.
 
 from __future__ import annotations
 
+import importlib
 import math
-import secrets
 import sys
 import time
 from collections.abc import Sequence
@@ -95,6 +95,8 @@ def _root(
 
 
 def _new_seed() -> int:
+    import secrets
+
     return secrets.randbelow(2**31)
 
 
@@ -564,22 +566,35 @@ def engines_cmd() -> None:
     console.print(table)
 
 
-# the dataset commands: generate, export, import at the top level, `data stats`
-from dgse.cli.bench import register as _register_bench  # noqa: E402
-from dgse.cli.data import register as _register_data  # noqa: E402
-from dgse.cli.demo import register as _register_demo  # noqa: E402
-from dgse.cli.models import register as _register_models  # noqa: E402
-from dgse.cli.plume import register as _register_plume  # noqa: E402
-from dgse.cli.search import register as _register_search  # noqa: E402
-from dgse.cli.train import register as _register_train  # noqa: E402
+# -- the other modules' commands, imported for the command that runs -------------------------
+#: The modules that add commands to ``app`` (their ``register``), in the order ``dgse --help``
+#: lists them, with the commands each adds (``data`` is a group: ``dgse data stats``).
+COMMAND_MODULES: dict[str, tuple[str, ...]] = {
+    "dgse.cli.demo": ("demo",),
+    "dgse.cli.data": ("generate", "export", "import", "import-gaden", "data"),
+    "dgse.cli.models": ("estimate", "evaluate", "export-onnx"),
+    "dgse.cli.plume": ("plume",),
+    "dgse.cli.search": ("search",),
+    "dgse.cli.train": ("train",),
+    "dgse.cli.bench": ("bench", "report"),
+}
+#: The commands this module defines itself.
+OWN_COMMANDS = frozenset(c.name for c in app.registered_commands)
+_registered: set[str] = set()
 
-_register_demo(app)
-_register_data(app)
-_register_models(app)
-_register_plume(app)
-_register_search(app)
-_register_train(app)
-_register_bench(app)
+
+def register_commands(argv: Sequence[str]) -> None:
+    """Add to ``app`` the commands that ``argv`` may run: none for a command of this module
+    (``dgse solve`` imports no estimator, search or plotting module), the module of another
+    known command, and every module otherwise (help, completion, a mistyped command)."""
+    command = argv[0] if argv else ""
+    if command in OWN_COMMANDS:
+        return
+    wanted = [m for m, names in COMMAND_MODULES.items() if command in names] or list(COMMAND_MODULES)
+    for module in wanted:
+        if module not in _registered:
+            importlib.import_module(module).register(app)
+            _registered.add(module)
 
 
 # -- entry point -------------------------------------------------------------------------
@@ -592,6 +607,7 @@ def main(args: Sequence[str] | None = None) -> int:
     """
     argv = list(args) if args is not None else sys.argv[1:]
     try:
+        register_commands(argv)
         app(args=argv, prog_name="dgse", standalone_mode=True)
     except SystemExit as e:
         code = e.code
