@@ -252,6 +252,18 @@ def stop_quality(result: dict[str, Any]) -> dict[str, Any]:
                 "mass_stops_within_2m": sum(e <= 2.0 for e in w_stops),
             },
         }
+    # the deadline stops read every way (``end_errors_m``: what each point estimate of the final
+    # belief would have declared), so that ``deadline_estimate_radius_m`` is chosen from one run
+    recorded = [t for t in late if t.get("end_errors_m")]
+    if recorded:
+        ways = sorted(recorded[0]["end_errors_m"])
+        out["deadline_estimates"] = {
+            w: {
+                "error_m_mean": sum(t["end_errors_m"][w] for t in recorded) / len(recorded),
+                "within_2m": sum(t["end_errors_m"][w] <= 2.0 for t in recorded),
+            }
+            for w in ways
+        }
     return out
 
 

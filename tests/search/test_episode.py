@@ -70,7 +70,7 @@ def test_no_gas_ends_at_the_time_limit():
     assert r.recorded and r.steps[0].wind_mean is None and r.steps[0].source_probs.shape == (10, 30)
     # shorter than one dwell: no measurement at all, the estimate is the free-cell centroid
     none = run_episode(case, UniformEstimator(), UtilityPlanner(), rng=2, time_limit=2.0)
-    assert none.n_steps == 0 and none.reason == "time_limit"
+    assert none.n_steps == 0 and none.reason == "time_limit" and none.end_errors_m == {}
     assert none.estimate_xy == pytest.approx(r.estimate_xy)
 
 
@@ -87,6 +87,11 @@ def test_deadline_stop_ends_before_the_limit():
     assert d.estimate_xy != pytest.approx(r.estimate_xy)
     sx, sy = d.source_xy
     assert d.error_m == pytest.approx(math.hypot(d.estimate_xy[0] - sx, d.estimate_xy[1] - sy))
+    # both record every point estimate's error: the mean's is the plain run's, the 0.3 m disk's
+    # is not among them (the radii are 0.5, 1 and 2 m), the mode's is the same in both
+    assert r.end_errors_m["mean"] == pytest.approx(r.error_m) == pytest.approx(d.end_errors_m["mean"])
+    assert set(d.end_errors_m) == {"mean", "mode", "disk0.5m", "disk1m", "disk2m"}
+    assert d.to_dict()["end_errors_m"] == d.end_errors_m
 
 
 def test_a_stop_in_clean_air_is_held_and_recorded():

@@ -15,10 +15,12 @@ from dgse.search.planners import (
     SearchHistory,
     UtilityPlanner,
     declared_source,
+    disk_estimate,
     get_planner,
     mass_near_mode,
     mass_within,
     planner_names,
+    point_estimates,
     register_planner,
     stop_held,
 )
@@ -250,6 +252,13 @@ def test_a_deadline_stop_can_declare_the_disk_with_the_most_mass():
     assert declared_source(object(), belief, True) == mean  # other planners: the mean
     with pytest.raises(InputDataError, match="deadline_estimate_radius_m"):
         UtilityPlanner(deadline_estimate_radius_m=-1.0)
+    # every reading of it at once: the mode is the sharp west cell, 0.5-2 m disks the east blob
+    est = point_estimates(belief)
+    assert est["mean"] == mean and est["mode"] == pytest.approx((0.25, 1.05))
+    assert set(est) == {"mean", "mode", "disk0.5m", "disk1m", "disk2m"}
+    # a 0.5 m disk holds the whole blob from several centres: one of them, east of the mean
+    assert math.dist(est["disk0.5m"], (1.75, 1.05)) <= 0.5 and est["disk0.5m"][0] > 1.3
+    assert est["disk1m"] == disk_estimate(belief, 1.0)
 
 
 def test_mass_near_the_mode_stop_rule():

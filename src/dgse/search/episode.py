@@ -59,7 +59,14 @@ from dgse.estimators.belief import Belief
 from dgse.estimators.knowledge import DEFAULT_LEVEL, Knowledge
 from dgse.estimators.registry import Estimator, StreamingEstimator
 from dgse.search.paths import Cell, graph_for
-from dgse.search.planners import Planner, SearchHistory, declared_source, stop_held, stopped_by_deadline
+from dgse.search.planners import (
+    Planner,
+    SearchHistory,
+    declared_source,
+    point_estimates,
+    stop_held,
+    stopped_by_deadline,
+)
 from dgse.search.robot import DEFAULT_DWELL, DEFAULT_SPEED, Robot, random_start_cell
 from dgse.sensing.noise import NoiseModel, NoiseParams
 from dgse.world.case import Case
@@ -177,6 +184,9 @@ class EpisodeResult:
         record_factor: block size of the recorded maps (1: full resolution).
         resolution: the map's cell size, m.
         settings: the episode's settings (speed, dwell, flags, noise parameters, ...).
+        end_errors_m: the error, m, of each point estimate of the final belief
+            (:func:`~dgse.search.planners.point_estimates`: mean, mode, disks), whatever the
+            episode declared; empty when it ended before any reading.
     """
 
     case_name: str
@@ -198,6 +208,7 @@ class EpisodeResult:
     record_factor: int = 1
     resolution: float = 0.1
     settings: dict[str, Any] = field(default_factory=dict)
+    end_errors_m: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.reason not in REASONS:
@@ -244,6 +255,7 @@ class EpisodeResult:
             "held_stops": sum(s.held for s in self.steps),
             # the error had the search stopped at its first held stop (without the confirmation)
             "first_held_error_m": next((s.error_m for s in self.steps if s.held), None),
+            "end_errors_m": self.end_errors_m,
             "settings": self.settings,
         }
         if steps:
@@ -454,10 +466,13 @@ def run_episode(
         search_time = time_limit
     else:
         search_time = robot.clock
+    end_errors: dict[str, float] = {}
     if belief is None:
         estimate = _free_centroid(case)
     else:
         estimate = declared_source(planner, belief, reason == "deadline")
+        for name, (x, y) in point_estimates(belief).items():
+            end_errors[name] = math.hypot(x - source_xy[0], y - source_xy[1])
     return EpisodeResult(
         case_name=case.name,
         method=_estimator_name(estimator, belief),
@@ -485,4 +500,5 @@ def run_episode(
             "connectivity": graph.connectivity,
             "noise": robot.noise_params.to_dict(),
         },
+        end_errors_m=end_errors,
     )

@@ -553,9 +553,33 @@ def declared_source(planner: Planner, belief: Belief, deadline: bool) -> tuple[f
     radius = getattr(planner, "deadline_estimate_radius_m", None)
     if radius is None or not deadline:
         return belief.source_estimate()
-    mass = np.where(belief.free, mass_within(belief.source_probs, belief.resolution, radius), -np.inf)
+    return disk_estimate(belief, radius)
+
+
+def disk_estimate(belief: Belief, radius_m: float) -> tuple[float, float]:
+    """The centre ``(x, y)``, m, of the free cell whose disk of ``radius_m`` holds the most posterior mass."""
+    mass = np.where(belief.free, mass_within(belief.source_probs, belief.resolution, radius_m), -np.inf)
     i, j = np.unravel_index(int(np.argmax(mass)), mass.shape)
     return (float((j + 0.5) * belief.resolution), float((i + 0.5) * belief.resolution))
+
+
+#: The disks of :func:`point_estimates` (m): the values ``deadline_estimate_radius_m`` is chosen among.
+POINT_ESTIMATE_RADII = (0.5, 1.0, 2.0)
+
+
+def point_estimates(belief: Belief) -> dict[str, tuple[float, float]]:
+    """The source ``(x, y)``, m, that each way of reading ``belief`` declares: ``mean`` (the
+    posterior mean, what a search declares by default), ``mode`` (the most probable cell's
+    centre) and ``disk<r>m`` (:func:`disk_estimate` for each of :data:`POINT_ESTIMATE_RADII`).
+    Every episode records their errors, so a deadline rule can be chosen from one run."""
+    i, j = belief.most_likely_cell()
+    out = {
+        "mean": belief.source_estimate(),
+        "mode": (float((j + 0.5) * belief.resolution), float((i + 0.5) * belief.resolution)),
+    }
+    for r in POINT_ESTIMATE_RADII:
+        out[f"disk{r:g}m"] = disk_estimate(belief, r)
+    return out
 
 
 # -- registry -------------------------------------------------------------------------
