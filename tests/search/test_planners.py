@@ -17,6 +17,7 @@ from dgse.search.planners import (
     declared_source,
     disk_estimate,
     get_planner,
+    local_mean,
     mass_near_mode,
     mass_within,
     planner_names,
@@ -255,10 +256,15 @@ def test_a_deadline_stop_can_declare_the_disk_with_the_most_mass():
     # every reading of it at once: the mode is the sharp west cell, 0.5-2 m disks the east blob
     est = point_estimates(belief)
     assert est["mean"] == mean and est["mode"] == pytest.approx((0.25, 1.05))
-    assert set(est) == {"mean", "mode", "disk0.5m", "disk1m", "disk2m"}
-    # a 0.5 m disk holds the whole blob from several centres: one of them, east of the mean
+    radii = ("0.5m", "1m", "2m")
+    assert set(est) == {"mean", "mode", *(f"{w}{r}" for w in ("disk", "local") for r in radii)}
+    # a 0.5 m disk holds the whole blob from several centres: one of them, east of the mean;
+    # the mean within it is the blob's centre
     assert math.dist(est["disk0.5m"], (1.75, 1.05)) <= 0.5 and est["disk0.5m"][0] > 1.3
+    assert est["local0.5m"] == pytest.approx((1.75, 1.05), abs=1e-6)
     assert est["disk1m"] == disk_estimate(belief, 1.0)
+    # a 2 m disk holds both parts: its mean is the posterior's
+    assert local_mean(belief, 2.0) == pytest.approx(mean, abs=1e-6)
 
 
 def test_mass_near_the_mode_stop_rule():

@@ -567,11 +567,29 @@ def disk_estimate(belief: Belief, radius_m: float) -> tuple[float, float]:
 POINT_ESTIMATE_RADII = (0.5, 1.0, 2.0)
 
 
+def local_mean(belief: Belief, radius_m: float) -> tuple[float, float]:
+    """The posterior mean ``(x, y)``, m, of the cells within ``radius_m`` of :func:`disk_estimate`'s
+    centre: the mean of the heaviest part of a split posterior.  (A sharp posterior fits in
+    many disks, whose centres tie; the mean within one of them is the posterior's mean.)"""
+    x0, y0 = disk_estimate(belief, radius_m)
+    res = belief.resolution
+    H, W = belief.shape
+    ys = (np.arange(H) + 0.5) * res
+    xs = (np.arange(W) + 0.5) * res
+    near = np.hypot(xs[None, :] - x0, ys[:, None] - y0) <= radius_m + 1e-9
+    p = np.where(near & belief.free, belief.source_probs, 0.0)
+    total = float(p.sum())
+    if total <= 0.0:
+        return x0, y0
+    return float((p.sum(axis=0) * xs).sum() / total), float((p.sum(axis=1) * ys).sum() / total)
+
+
 def point_estimates(belief: Belief) -> dict[str, tuple[float, float]]:
     """The source ``(x, y)``, m, that each way of reading ``belief`` declares: ``mean`` (the
     posterior mean, what a search declares by default), ``mode`` (the most probable cell's
-    centre) and ``disk<r>m`` (:func:`disk_estimate` for each of :data:`POINT_ESTIMATE_RADII`).
-    Every episode records their errors, so a deadline rule can be chosen from one run."""
+    centre), ``disk<r>m`` (:func:`disk_estimate`) and ``local<r>m`` (:func:`local_mean`) for
+    each of :data:`POINT_ESTIMATE_RADII`.  Every episode records their errors, so a deadline
+    rule can be chosen from one run."""
     i, j = belief.most_likely_cell()
     out = {
         "mean": belief.source_estimate(),
@@ -579,6 +597,7 @@ def point_estimates(belief: Belief) -> dict[str, tuple[float, float]]:
     }
     for r in POINT_ESTIMATE_RADII:
         out[f"disk{r:g}m"] = disk_estimate(belief, r)
+        out[f"local{r:g}m"] = local_mean(belief, r)
     return out
 
 
