@@ -265,6 +265,12 @@ def test_a_deadline_stop_can_declare_the_disk_with_the_most_mass():
     assert est["disk1m"] == disk_estimate(belief, 1.0)
     # a 2 m disk holds both parts: its mean is the posterior's
     assert local_mean(belief, 2.0) == pytest.approx(mean, abs=1e-6)
+    # deadline_estimate="local": a deadline stop declares that mean within the heaviest disk
+    local = UtilityPlanner(deadline_estimate_radius_m=0.5, deadline_estimate="local")
+    assert declared_source(local, belief, True) == est["local0.5m"]
+    assert declared_source(local, belief, False) == mean
+    with pytest.raises(InputDataError, match="deadline_estimate"):
+        UtilityPlanner(deadline_estimate="median")
 
 
 def test_mass_near_the_mode_stop_rule():

@@ -20,9 +20,10 @@ Methods (estimator + planner, registry names):
   knowledge level with the planner settings chosen for it on the validation split
   (:data:`dgse.estimators.phys.SEARCH_PLANNER`: a stop on 90 % of the posterior within 1 m
   instead of the entropy test, held until gas above the noise floor was read within 1 m of
-  the mode, a deadline stop, revisit damping; at ``map`` also
-  :data:`~dgse.estimators.phys.SEARCH_PLANNER_AT_LEVEL`: stops held while no flow explains the
-  wind, a deadline stop declaring the heaviest 1 m disk) and the estimator options
+  the mode, a deadline stop, revisit damping; and
+  :data:`~dgse.estimators.phys.SEARCH_PLANNER_AT_LEVEL`: at ``map`` stops held while no flow
+  explains the wind and a deadline stop declaring the heaviest 1 m disk, at ``openings`` a
+  deadline stop declaring the posterior mean within that disk) and the estimator options
   chosen with them (:data:`dgse.estimators.phys.SEARCH_ESTIMATOR`);
 * **Dual-mode** (``dualmode`` + ``dualmode``): particle filter and the
   local/global information planner;
@@ -609,7 +610,7 @@ def _report_comparison(
         f"at the run's knowledge level ({ctx.knowledge!r}), utility planner with the settings "
         f"chosen for it on the validation split (stop once 90 % of the posterior lies within 1 m "
         f"of its mode, from the {MIN_SENSORS}th reading; a stop 60 s before the time limit"
-        f"{_map_extras(ctx.knowledge)}). "
+        f"{_level_extras(ctx.knowledge)}). "
         f"Baselines with their own planners: dual-mode "
         f"particle filter + dual-mode planner, GrGSL + Infotaxis, PMFS + PMFS planner, and Infotaxis "
         f"on the particle filter's posterior (an extra reference, not in the paper). Step time: the "
@@ -769,7 +770,7 @@ def _report_process(
     animate_episode(result, case, ctx.out / "search_process.gif", max_frames=ctx.pick(20, 4), dpi=60)
 
 
-def _map_extras(level: str) -> str:
+def _level_extras(level: str) -> str:
     """The report's words for what ``SEARCH_PLANNER_AT_LEVEL`` adds at ``level`` ('' for nothing)."""
     extra = SEARCH_PLANNER_AT_LEVEL.get(level, {})
     words = []
@@ -777,10 +778,10 @@ def _map_extras(level: str) -> str:
         share = f"{extra['max_wind_misfit']:.0%}"
         words.append(f"no stop while the best flow leaves over {share} of the wind unexplained")
     if "deadline_estimate_radius_m" in extra:
-        words.append(
-            f"a deadline stop declares the {extra['deadline_estimate_radius_m']:g} m disk "
-            "with the most posterior mass"
-        )
+        disk = f"the {extra['deadline_estimate_radius_m']:g} m disk with the most posterior mass"
+        if extra.get("deadline_estimate") == "local":
+            disk = f"the posterior mean within {disk}"
+        words.append(f"a deadline stop declares {disk}")
     return "".join(f"; {w}" for w in words)
 
 

@@ -260,6 +260,8 @@ class UtilityPlanner:
             whose disk of this radius holds the most posterior mass
             (:func:`declared_source`).  A search that never passed its stop test often ends
             with a posterior split between two places, whose mean lies between them.
+        deadline_estimate: what that disk gives at a deadline stop: ``"disk"`` its centre,
+            ``"local"`` the posterior mean within it (:func:`local_mean`).
     """
 
     w_d: float = 0.1
@@ -282,6 +284,7 @@ class UtilityPlanner:
     stop_readings: int = 1
     max_wind_misfit: float | None = None
     deadline_estimate_radius_m: float | None = None
+    deadline_estimate: Literal["disk", "local"] = "disk"
     name: str = field(default="utility", init=False)
     _streak: list[tuple[int, int, int]] = field(default_factory=list, init=False, repr=False)
     _held_step: int | None = field(default=None, init=False, repr=False)
@@ -322,6 +325,10 @@ class UtilityPlanner:
         self.deadline_estimate_radius_m = _radius_or_none(
             "deadline_estimate_radius_m", self.deadline_estimate_radius_m
         )
+        if self.deadline_estimate not in ("disk", "local"):
+            raise InputDataError(
+                f"deadline_estimate must be 'disk' or 'local', got {self.deadline_estimate!r}"
+            )
         if isinstance(self.stop_readings, bool) or int(self.stop_readings) != self.stop_readings:
             raise InputDataError(f"stop_readings must be an integer, got {self.stop_readings!r}")
         if self.stop_readings < 1:
@@ -548,11 +555,14 @@ def declared_source(planner: Planner, belief: Belief, deadline: bool) -> tuple[f
     The belief's posterior mean (:meth:`~dgse.estimators.belief.Belief.source_estimate`),
     except at a deadline stop (``deadline``) of a :class:`UtilityPlanner` with
     ``deadline_estimate_radius_m``: there the centre of the free cell whose disk of that
-    radius holds the most posterior mass.
+    radius holds the most posterior mass, or with ``deadline_estimate="local"`` the
+    posterior mean within that disk.
     """
     radius = getattr(planner, "deadline_estimate_radius_m", None)
     if radius is None or not deadline:
         return belief.source_estimate()
+    if getattr(planner, "deadline_estimate", "disk") == "local":
+        return local_mean(belief, radius)
     return disk_estimate(belief, radius)
 
 
