@@ -20,10 +20,9 @@ Methods (estimator + planner, registry names):
   knowledge level with the planner settings chosen for it on the validation split
   (:data:`dgse.estimators.phys.SEARCH_PLANNER`: a stop on 90 % of the posterior within 1 m
   instead of the entropy test, held until gas above the noise floor was read within 1 m of
-  the mode, a deadline stop, revisit damping; and
-  :data:`~dgse.estimators.phys.SEARCH_PLANNER_AT_LEVEL`: at ``map`` stops held while no flow
-  explains the wind and a deadline stop declaring the heaviest 1 m disk, at ``openings`` a
-  deadline stop declaring the posterior mean within that disk) and the estimator options
+  the mode, a deadline stop, revisit damping; at ``map`` also
+  :data:`~dgse.estimators.phys.SEARCH_PLANNER_AT_LEVEL`: stops held while no flow explains the
+  wind, a deadline stop declaring the heaviest 1 m disk) and the estimator options
   chosen with them (:data:`dgse.estimators.phys.SEARCH_ESTIMATOR`);
 * **Dual-mode** (``dualmode`` + ``dualmode``): particle filter and the
   local/global information planner;
