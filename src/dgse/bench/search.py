@@ -777,10 +777,10 @@ def _level_extras(level: str) -> str:
         share = f"{extra['max_wind_misfit']:.0%}"
         words.append(f"no stop while the best flow leaves over {share} of the wind unexplained")
     if "deadline_estimate_radius_m" in extra:
-        disk = f"the {extra['deadline_estimate_radius_m']:g} m disk with the most posterior mass"
-        if extra.get("deadline_estimate") == "local":
-            disk = f"the posterior mean within {disk}"
-        words.append(f"a deadline stop declares {disk}")
+        words.append(
+            f"a deadline stop declares the {extra['deadline_estimate_radius_m']:g} m disk "
+            "with the most posterior mass"
+        )
     return "".join(f"; {w}" for w in words)
 
 

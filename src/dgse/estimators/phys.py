@@ -186,12 +186,12 @@ SEARCH_PLANNER: dict[str, float] = {
 #:   put 13 of them within 2 m at a mean error of 1.90 m, the mean within the heaviest 1 m
 #:   disk also 13 at 2.19 m, that disk's centre 15 at 2.23 m, the mode 10.  (Seed 0 alone had
 #:   favoured the disk's mean, 9 of 10 against 7.)  ``wind`` is not measured.
-SEARCH_PLANNER_AT_LEVEL: dict[str, dict[str, float | str]] = {
+SEARCH_PLANNER_AT_LEVEL: dict[str, dict[str, float]] = {
     "map": {"max_wind_misfit": 0.7, "deadline_estimate_radius_m": 1.0},
 }
 
 
-def search_planner(level: str) -> dict[str, float | str]:
+def search_planner(level: str) -> dict[str, float]:
     """The utility planner's settings for a dgse-phys search at knowledge ``level``:
     ``SEARCH_PLANNER`` and ``SEARCH_PLANNER_AT_LEVEL[level]``."""
     return {**SEARCH_PLANNER, **SEARCH_PLANNER_AT_LEVEL.get(level, {})}

@@ -570,7 +570,7 @@ def disk_estimate(belief: Belief, radius_m: float) -> tuple[float, float]:
     """The centre ``(x, y)``, m, of the free cell whose disk of ``radius_m`` holds the most posterior mass."""
     mass = np.where(belief.free, mass_within(belief.source_probs, belief.resolution, radius_m), -np.inf)
     i, j = np.unravel_index(int(np.argmax(mass)), mass.shape)
-    return (float((j + 0.5) * belief.resolution), float((i + 0.5) * belief.resolution))
+    return belief.grid.center_of(int(i), int(j))
 
 
 #: The disks of :func:`point_estimates` (m): the values ``deadline_estimate_radius_m`` is chosen among.
@@ -581,17 +581,19 @@ def local_mean(belief: Belief, radius_m: float) -> tuple[float, float]:
     """The posterior mean ``(x, y)``, m, of the cells within ``radius_m`` of :func:`disk_estimate`'s
     centre: the mean of the heaviest part of a split posterior.  (A sharp posterior fits in
     many disks, whose centres tie; the mean within one of them is the posterior's mean.)"""
-    x0, y0 = disk_estimate(belief, radius_m)
-    res = belief.resolution
-    H, W = belief.shape
-    ys = (np.arange(H) + 0.5) * res
-    xs = (np.arange(W) + 0.5) * res
-    near = np.hypot(xs[None, :] - x0, ys[:, None] - y0) <= radius_m + 1e-9
+    return _mean_within(belief, disk_estimate(belief, radius_m), radius_m)
+
+
+def _mean_within(belief: Belief, centre: tuple[float, float], radius_m: float) -> tuple[float, float]:
+    """The posterior mean of the free cells within ``radius_m`` of ``centre`` (``centre`` where
+    they hold no mass)."""
+    grid = belief.grid
+    near = np.hypot(grid.x[None, :] - centre[0], grid.y[:, None] - centre[1]) <= radius_m + 1e-9
     p = np.where(near & belief.free, belief.source_probs, 0.0)
     total = float(p.sum())
     if total <= 0.0:
-        return x0, y0
-    return float((p.sum(axis=0) * xs).sum() / total), float((p.sum(axis=1) * ys).sum() / total)
+        return centre
+    return float((p.sum(axis=0) * grid.x).sum() / total), float((p.sum(axis=1) * grid.y).sum() / total)
 
 
 def point_estimates(belief: Belief) -> dict[str, tuple[float, float]]:
@@ -600,14 +602,10 @@ def point_estimates(belief: Belief) -> dict[str, tuple[float, float]]:
     centre), ``disk<r>m`` (:func:`disk_estimate`) and ``local<r>m`` (:func:`local_mean`) for
     each of :data:`POINT_ESTIMATE_RADII`.  Every episode records their errors, so a deadline
     rule can be chosen from one run."""
-    i, j = belief.most_likely_cell()
-    out = {
-        "mean": belief.source_estimate(),
-        "mode": (float((j + 0.5) * belief.resolution), float((i + 0.5) * belief.resolution)),
-    }
+    out = {"mean": belief.source_estimate(), "mode": belief.grid.center_of(*belief.most_likely_cell())}
     for r in POINT_ESTIMATE_RADII:
         out[f"disk{r:g}m"] = disk_estimate(belief, r)
-        out[f"local{r:g}m"] = local_mean(belief, r)
+        out[f"local{r:g}m"] = _mean_within(belief, out[f"disk{r:g}m"], r)
     return out
 
 
