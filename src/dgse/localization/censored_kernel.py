@@ -22,8 +22,9 @@ the zeros' ``log Phi`` (:func:`_log_phi_sum`, and the Mills ratio of the Newton 
 cubic Hermite between nodes 1/64 apart, values and slopes from SciPy, within 1e-10 nats):
 3.5 ns a value against 24 ns for ``erfc`` and ``log``, which took 4-8 % off the kernel's
 time on the recorded calls of two search episodes (2026-11-28, timed by throwaway scripts
-that are not kept; ``benchmarks/phys_step_time.py`` is the kept measure of a search step).  The quantiles of the rate
-nodes (:func:`_rate_nodes`) are the larger share and keep the exact functions.
+that are not kept; ``benchmarks/phys_step_time.py`` is the kept measure of a search
+step).  The quantiles of the rate nodes (:func:`_rate_nodes`) are the larger share and keep
+the exact functions.
 
 The integral over ``log tau`` is Gauss-Hermite around a Newton mode found with the rate at
 its estimate from the positive readings.  Where those leave a rate near 0 plausible (few
