@@ -43,11 +43,13 @@ from dgse.physics.fv import (
     StencilMatrix,
     assemble,
     bound,
+    boundary_gamma,
     build_mesh,
     gauss_seidel,
     gradient,
     ho_source,
     neighbour_sum,
+    pin_cells,
     relax,
     residual_norm,
     row_dot,
@@ -357,13 +359,14 @@ class PressureSolver:
     def solve(self, A, b: np.ndarray, x0: np.ndarray, rel_tol: float) -> np.ndarray:
         """``x`` with ``|b - A x| <= rel_tol |b - A x0|`` (2-norm), starting from ``x0``."""
         A = A.tocsr()
-        r0 = float(np.linalg.norm(b - A @ x0))
+        res0 = b - A @ x0
+        r0 = float(np.linalg.norm(res0))
         if r0 == 0.0:
             return x0.copy()
         for attempt in range(2):
             psolve = self._preconditioner(A, rebuild=attempt == 1)
             with np.errstate(all="ignore"):
-                x, converged, its = _pcg(A, b, x0, rel_tol * r0, self.max_krylov, psolve)
+                x, converged, its = _pcg(A, b, x0, rel_tol * r0, self.max_krylov, psolve, res0.copy())
             self.krylov_iterations += its
             if converged and np.isfinite(x).all():
                 return x
@@ -371,10 +374,17 @@ class PressureSolver:
 
 
 def _pcg(
-    A: sp.csr_matrix, b: np.ndarray, x0: np.ndarray, atol: float, maxiter: int, psolve: Callable
+    A: sp.csr_matrix,
+    b: np.ndarray,
+    x0: np.ndarray,
+    atol: float,
+    maxiter: int,
+    psolve: Callable,
+    r0: np.ndarray | None = None,
 ) -> tuple[np.ndarray, bool, int]:
     """Preconditioned conjugate gradients: ``(x, converged, iterations)``, converged when
-    ``|b - A x| < atol`` within ``maxiter`` iterations.
+    ``|b - A x| < atol`` within ``maxiter`` iterations.  ``r0``: the residual ``b - A x0``
+    when the caller has it (it is overwritten), else computed here.
 
     The iteration of SciPy's ``cg`` (the same operations in the same order, so the same
     iterates bit for bit) without its per-call and per-iteration wrapping, which cost a third
@@ -383,7 +393,10 @@ def _pcg(
     x = np.array(x0, dtype=float)
     if not np.linalg.norm(b):
         return np.array(b, dtype=float), True, 0
-    r = b - A @ x if x.any() else b.copy()
+    if r0 is not None:
+        r = r0
+    else:
+        r = b - A @ x if x.any() else b.copy()
     rho_prev, p = 1.0, None
     for it in range(maxiter):
         if np.linalg.norm(r) < atol:
@@ -560,6 +573,14 @@ class KEpsilon:
         self.max_length = max(mesh.shape) * mesh.h
         self.k_b = np.full((mesh.n, 4), self.k_in)  # face values where k is fixed (inlets)
         self.eps_b = np.full((mesh.n, 4), self.eps_in)
+        self.no_face = np.zeros((mesh.n, 4), dtype=bool)
+
+    def velocity_gradients(self, st: FlowState) -> tuple[np.ndarray, np.ndarray]:
+        """The cell gradients ``(n, 2)`` of ``st.ux`` and ``st.uy`` (fixed values at walls and inlets)."""
+        mesh = self.mesh
+        gux = gradient(st.ux, self.ubx, self.fixed_u, mesh.nb, mesh.ft, mesh.h, False)
+        guy = gradient(st.uy, self.uby, self.fixed_u, mesh.nb, mesh.ft, mesh.h, False)
+        return gux, guy
 
     def wall_functions(self, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(y+, nu_t at walls)`` of the cells for turbulent kinetic energy ``k``."""
@@ -579,8 +600,13 @@ class KEpsilon:
         nutw: np.ndarray,
         residuals: dict[str, float],
         sweeps: dict[str, int],
+        velocity_gradients: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> int:
-        """One update of ``st.k``, ``st.eps``, ``st.nut``; returns the cells whose length scale was capped."""
+        """One update of ``st.k``, ``st.eps``, ``st.nut``; returns the cells whose length scale was capped.
+
+        ``velocity_gradients``: the cell gradients ``(gux, guy)`` of ``st.ux`` and ``st.uy``
+        (:func:`velocity_gradients`) when the caller has them, else computed here.
+        """
         mesh, physics = self.mesh, self.physics
         nb, ft, h = mesh.nb, mesh.ft, mesh.h
         V = h * h
@@ -590,8 +616,7 @@ class KEpsilon:
         inlet, outlet, wall_cell = self.inlet, self.outlet, self.wall_cell
         k_in, eps_in, nut_in = self.k_in, self.eps_in, self.nut_in
         F = st.F
-        gux = gradient(st.ux, self.ubx, self.fixed_u, nb, ft, h, False)
-        guy = gradient(st.uy, self.uby, self.fixed_u, nb, ft, h, False)
+        gux, guy = velocity_gradients or self.velocity_gradients(st)
         k_old, eps_old = st.k, st.eps
         G, eps_wall = turbulence_production(
             gux, guy, st.nut, yplus, nutw, st.ux, st.uy, k_old, wall_cell,
@@ -600,7 +625,7 @@ class KEpsilon:
         fixed_t = inlet | (outlet & (F < 0))  # inletOutlet at outlets
 
         deff = nu + st.nut / physics.sigma_eps
-        gam_b = np.where(inlet, nu + nut_in / physics.sigma_eps, deff[:, None])
+        gam_b = boundary_gamma(deff, inlet, nu + nut_in / physics.sigma_eps, self.no_face, deff)
         aP, a, cb = assemble(F, deff, fixed_t, gam_b, nb, ft, True)
         b = row_sum(cb) * eps_in + physics.C_1 * G * eps_old / k_old * V
         aP = aP + physics.C_2 * eps_old / k_old * V
@@ -608,9 +633,7 @@ class KEpsilon:
             b += ho_source(st.eps, gradient(st.eps, self.eps_b, fixed_t, nb, ft, h, True), F, nb, ft, h)
         aP, b = relax(aP, a, b, st.eps, s.alpha_turb)
         # wall cells take the wall-function value (OpenFOAM's setValues)
-        aP = np.where(wall_cell, 1.0, aP)
-        b = np.where(wall_cell, eps_wall, b)
-        a = np.where(wall_cell[:, None], 0.0, a)
+        pin_cells(wall_cell, aP, a, b, eps_wall)
         eps_new = st.eps.copy()[:, None]
         n_sw, res = gauss_seidel(aP, a, b[:, None], nb, eps_new, s.rel_tol, s.max_sweeps, s.short_chain)
         sweeps["epsilon"] += n_sw
@@ -619,7 +642,7 @@ class KEpsilon:
         eps_new = bound(eps_new, nb, ft, 1e-15)
 
         dk = nu + st.nut / physics.sigma_k
-        gam_b = np.where(inlet, nu + nut_in / physics.sigma_k, dk[:, None])
+        gam_b = boundary_gamma(dk, inlet, nu + nut_in / physics.sigma_k, self.no_face, dk)
         aP, a, cb = assemble(F, dk, fixed_t, gam_b, nb, ft, True)
         b = row_sum(cb) * k_in + G * V
         aP = aP + eps_new / k_old * V
@@ -679,12 +702,13 @@ def solve_turbulence(
     residuals: dict[str, float] = {}
     sweeps = {"k": 0, "epsilon": 0}
     converged = False
+    grad_u = turb.velocity_gradients(st)  # the flow is frozen
     it = 0
     while it < s.max_iterations:
         it += 1
         yplus, nutw = turb.wall_functions(st.k)
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # tested just below
-            turb.step(st, s, yplus, nutw, residuals, sweeps)
+            turb.step(st, s, yplus, nutw, residuals, sweeps, grad_u)
         if not (np.isfinite(st.k).all() and np.isfinite(st.eps).all()):
             break
         if all(v < s.tolerance for v in residuals.values()):
@@ -895,21 +919,27 @@ def _simplec(
     uncapped_at = None
     window_start = 0  # the stall test looks at the residuals since the last switch
     s_it = s
+    grad_u = gp = None
     it = 0
     for it in range(1, s.max_iterations + 1):
         F = st.F
         if ser:
             a_t = _relaxation(s.alpha_turb, a_max, _pseudo_step_factor(worst))
-            s_it = replace(s, alpha_turb=a_t, max_sweeps=s.ser_max_sweeps if capped else s.max_sweeps)
+            n_sweeps = s.ser_max_sweeps if capped else s.max_sweeps
+            if (s_it.alpha_turb, s_it.max_sweeps) != (a_t, n_sweeps):
+                s_it = replace(s, alpha_turb=a_t, max_sweeps=n_sweeps)
         nueff = nu + st.nut
         yplus, nutw = turb.wall_functions(st.k)
         # ---- momentum predictor ---------------------------------------------------------
-        gam_b = np.where(wall, (nu + nutw)[:, None], np.where(inlet, nu + nut_in, nueff[:, None]))
+        gam_b = boundary_gamma(nueff, inlet, nu + nut_in, wall, nu + nutw)
         aP, a, cb = assemble(F, nueff, fixed_u, gam_b, nb, ft, True)
         bx = row_dot(cb, ubx)
         by = row_dot(cb, uby)
-        gux = gradient(st.ux, ubx, fixed_u, nb, ft, h, False)
-        guy = gradient(st.uy, uby, fixed_u, nb, ft, h, False)
+        # the gradients of the velocity and pressure this iteration starts from were computed
+        # at the end of the last one (k-epsilon changes neither field)
+        if grad_u is None:
+            grad_u = turb.velocity_gradients(st)
+        gux, guy = grad_u
         stress = stress_source(nueff, gux, guy, nb, ft, h)
         bx += stress[:, 0]
         by += stress[:, 1]
@@ -918,7 +948,8 @@ def _simplec(
             by += ho_source(st.uy, gradient(st.uy, uby, fixed_u, nb, ft, h, True), F, nb, ft, h)
         aPr, bx = relax(aP, a, bx, st.ux, s_it.alpha_u)
         by = by + (aPr - aP) * st.uy
-        gp = gradient(st.p, zero4, outlet, nb, ft, h, False)
+        if gp is None:
+            gp = gradient(st.p, zero4, outlet, nb, ft, h, False)
         rhs_x = bx - gp[:, 0] * V
         rhs_y = by - gp[:, 1] * V
         u_star = np.stack([st.ux, st.uy], axis=1)
@@ -946,12 +977,13 @@ def _simplec(
         gp = gradient(st.p, zero4, outlet, nb, ft, h, False)
         st.ux = hbyax - rAtU * gp[:, 0]
         st.uy = hbyay - rAtU * gp[:, 1]
+        grad_u = turb.velocity_gradients(st)
 
         # ---- k-epsilon ---------------------------------------------------------------------
         # a diverging run overflows here; the finiteness test below reports it, without
         # NumPy's warnings on the user's terminal
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-            n_limited = turb.step(st, s_it, yplus, nutw, residuals, sweeps)
+            n_limited = turb.step(st, s_it, yplus, nutw, residuals, sweeps, grad_u)
 
         history.append(dict(residuals))
         if progress is not None:
