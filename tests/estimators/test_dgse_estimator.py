@@ -76,13 +76,38 @@ def test_auto_dtype_is_bf16_only_where_the_cpu_has_it(monkeypatch: pytest.Monkey
 def test_resolution_and_observation_checks():
     occ, obs = _map()
     est = DGSEEstimator(tiny_model("dgse-o"), canvas_minimum=32)
-    with pytest.raises(InputDataError, match=r"0\.1 m cells"):
-        est.estimate(occ, 0.05, obs)
+    for resolution in (0.05, 0.15):  # finer than the network's cells, or not a whole multiple
+        with pytest.raises(InputDataError, match=r"0\.1 m cells"):
+            est.estimate(occ, resolution, obs)
     wall = Observations(np.array([[0, 15]]), np.array([1.0]), np.zeros((1, 2)))
     with pytest.raises(InputDataError):
         est.estimate(occ, 0.1, wall)
     b = est.estimate(occ, 0.1, Observations.empty())
     assert b.info["n_observations"] == 0
+
+
+@pytest.mark.parametrize("variant", ["dgse-o", "dgse-s"])
+def test_coarse_map_runs_on_the_networks_cells(variant):
+    """A 0.2 m map is the 0.1 m map of 2 x 2 blocks, its readings at one cell of their block;
+    the belief is that map's, summed (source) and averaged (fields) over the blocks."""
+    from dgse.world.grid import coarsen, refine_cells, refine_occupancy
+
+    occ, obs = _map()
+    est = DGSEEstimator(tiny_model(variant), K=2, T=2, seed=0, canvas_minimum=32)
+    coarse = est.estimate(occ, 0.2, obs)
+    fine_obs = Observations(refine_cells(obs.cells, 2), obs.gas, obs.wind)
+    fine = est.estimate(refine_occupancy(occ, 2), 0.1, fine_obs)
+    assert coarse.info["refinement"] == 2 and fine.info["refinement"] == 1
+    assert coarse.info["canvas"] == fine.info["canvas"] == (64, 64)
+    assert coarse.source_probs.shape == (20, 30) and coarse.resolution == 0.2
+    np.testing.assert_allclose(coarse.source_probs, coarsen(fine.source_probs, 2, "sum"), rtol=1e-9)
+    assert (coarse.source_probs[occ == 1] == 0).all() and coarse.source_probs.sum() == pytest.approx(1.0)
+    if variant == "dgse-s":
+        np.testing.assert_allclose(coarse.wind_mean, coarsen(fine.wind_mean, 2), rtol=1e-9)
+        np.testing.assert_allclose(coarse.log_conc_var, coarsen(fine.log_conc_var, 2), rtol=1e-9)
+    # readings are checked on the map they were given for
+    with pytest.raises(InputDataError):
+        est.estimate(occ, 0.2, Observations(np.array([[0, 15]]), np.array([1.0]), np.zeros((1, 2))))
 
 
 def test_registry_factories_with_checkpoints(tmp_path):

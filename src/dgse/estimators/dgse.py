@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 import os
 import time
+from dataclasses import replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -43,7 +44,8 @@ from dgse.models.checkpoint import load_checkpoint
 from dgse.models.inference import Prediction, make_generator, native_bf16, predict, resolve_device
 from dgse.models.networks import DGSEModel
 from dgse.options import options_from
-from dgse.sensing.sensors import Observations
+from dgse.sensing.sensors import Observations, check_sensor_cells
+from dgse.world.grid import coarsen, refine_cells, refine_occupancy, refinement_factor
 
 __all__ = ["DGSEEstimator", "default_model_path", "make_dgse_o", "make_dgse_p", "make_dgse_s"]
 
@@ -89,8 +91,12 @@ class DGSEEstimator(KnowledgeUser):
             (:func:`~dgse.models.inference.native_bf16`), else float32.
         channels_last: use the channels-last memory format (faster convolutions
             on some CPUs with bf16).
-        model_resolution: the cell size (m) the network was trained on; maps
-            of another resolution are rejected.
+        model_resolution: the cell size (m) the network was trained on.  A map whose
+            cells are a whole multiple ``f`` of it (0.2 m office floors for 0.1 m
+            networks) is refined first: each cell becomes ``f x f`` network cells (a
+            reading at the one nearest its centre), and the network's fields come back
+            as block sums (source mass) and block means (wind, concentration and their
+            variances).  Other resolutions are rejected.
         canvas_minimum, stride: canvas rule (:func:`~dgse.data.rasterize.canvas_shape_for`).
         max_batch: at most this many canvases per network call (memory bound).
 
@@ -183,16 +189,23 @@ class DGSEEstimator(KnowledgeUser):
         occ = np.asarray(occupancy)
         if occ.ndim != 2:
             raise InputDataError(f"occupancy must be 2-D, got shape {occ.shape}")
-        if not math.isclose(float(resolution), self.model_resolution, rel_tol=1e-6):
+        factor = refinement_factor(float(resolution), self.model_resolution)
+        if factor is None:
             raise InputDataError(
-                f"this {self.name} model works on {self.model_resolution} m cells; "
-                f"the map has {resolution} m cells (resample the map)"
+                f"this {self.name} model works on {self.model_resolution} m cells or whole multiples "
+                f"of them; the map has {resolution} m cells (resample the map, e.g. with "
+                "dgse.world.floorplan.resample_occupancy)"
             )
-        H, W = occ.shape
+        net_occ, net_obs = occ, observations
+        if factor > 1:  # each map cell as factor x factor network cells
+            cells = check_sensor_cells(occ, observations.cells)
+            net_occ = refine_occupancy(occ, factor)
+            net_obs = replace(observations, cells=refine_cells(cells, factor))
+        H, W = net_occ.shape
         canvas = self.canvas_shape((H, W))
-        pred = self.predict_canvas(rasterize(occ, observations, canvas))
+        pred = self.predict_canvas(rasterize(net_occ, net_obs, canvas))
         free = occ == 0
-        probs = pred.source_probs[0, :H, :W].double().cpu().numpy()
+        probs = coarsen(pred.source_probs[0, :H, :W].double().cpu().numpy(), factor, "sum")
         info: dict[str, Any] = {
             "method": self.name,
             "K": self.K if self.name == "dgse-s" else 1,
@@ -201,6 +214,7 @@ class DGSEEstimator(KnowledgeUser):
             "n_observations": len(observations),
             "dtype": str(self.dtype).removeprefix("torch."),
             "device": str(self.device),
+            "refinement": factor,  # network cells per map cell along each axis
         }
         if not (probs[free] > 0).any():  # float32 underflow: all mass on walls
             probs = free.astype(np.float64)
@@ -208,7 +222,7 @@ class DGSEEstimator(KnowledgeUser):
         probs = normalize_source_probs(probs, occ)
 
         def crop(t: torch.Tensor | None) -> np.ndarray | None:
-            return None if t is None else t[0, ..., :H, :W].double().cpu().numpy()
+            return None if t is None else coarsen(t[0, ..., :H, :W].double().cpu().numpy(), factor, "mean")
 
         info["seconds"] = time.perf_counter() - t0
         return Belief(

@@ -120,3 +120,37 @@ class Grid:
     def valid_mask(self, canvas: tuple[int, int]) -> np.ndarray:
         """Boolean canvas mask, true on the map's cells."""
         return self.embed(np.ones(self.shape, dtype=bool), canvas, fill=False)
+
+
+# -- integer refinement (a coarse map on a network's finer cells) ------------------------
+def refinement_factor(resolution: float, target: float) -> int | None:
+    """``f`` with ``resolution == f * target`` (``f >= 1`` an integer, to 1e-6), else ``None``."""
+    f = float(resolution) / float(target)
+    k = round(f)
+    if k >= 1 and math.isclose(f, k, rel_tol=1e-6):
+        return int(k)
+    return None
+
+
+def refine_occupancy(occupancy: np.ndarray, factor: int) -> np.ndarray:
+    """Each cell of ``occupancy`` ``(H, W)`` as a ``factor x factor`` block: ``(f H, f W)``."""
+    return np.kron(np.asarray(occupancy), np.ones((factor, factor), dtype=np.asarray(occupancy).dtype))
+
+
+def refine_cells(cells: np.ndarray, factor: int) -> np.ndarray:
+    """The fine cell nearest the centre of each coarse cell ``(i, j)`` (at the centre for odd ``factor``)."""
+    return np.asarray(cells, dtype=np.int64) * factor + factor // 2
+
+
+def coarsen(field: np.ndarray, factor: int, how: str = "mean") -> np.ndarray:
+    """Block sums or means (``how``: ``"sum"``, ``"mean"``) of ``(..., f H, f W)``: ``(..., H, W)``."""
+    a = np.asarray(field)
+    *lead, fh, fw = a.shape
+    if fh % factor or fw % factor:
+        raise InputDataError(f"a field of {fh} x {fw} cells is not made of {factor} x {factor} blocks")
+    blocks = a.reshape(*lead, fh // factor, factor, fw // factor, factor)
+    if how == "sum":
+        return blocks.sum(axis=(-3, -1))
+    if how == "mean":
+        return blocks.mean(axis=(-3, -1))
+    raise ValueError(f"unknown block reduction {how!r}: use sum or mean")
