@@ -605,7 +605,7 @@ class KEpsilon:
         """One update of ``st.k``, ``st.eps``, ``st.nut``; returns the cells whose length scale was capped.
 
         ``velocity_gradients``: the cell gradients ``(gux, guy)`` of ``st.ux`` and ``st.uy``
-        (:func:`velocity_gradients`) when the caller has them, else computed here.
+        (:meth:`velocity_gradients`) when the caller has them, else computed here.
         """
         mesh, physics = self.mesh, self.physics
         nb, ft, h = mesh.nb, mesh.ft, mesh.h
