@@ -207,9 +207,22 @@ def search_planner(level: str) -> dict[str, float]:
 #: stops were within 2 m, against 75 and 64 of 67 with the plug-in weights, 73 and 70 of 80
 #: with the candidate weights, 76 and 68 of 73 with ``"larger"``
 #: (``benchmarks/results/phys_search/validation*-mix.json``).  It costs a second evidence
-#: and zeros' factor per step.  Estimates from given readings keep the plug-in default
-#: (the random-readings tables were measured with it).
+#: and zeros' factor per step.  Since 2026-11-28 c it is also the estimator's default
+#: (:data:`NOISE_WEIGHTS_CHOICE`); the searches name it all the same.
 SEARCH_ESTIMATOR: dict[str, Any] = {"noise_weights": "mixture"}
+
+#: Why ``noise_weights`` defaults to ``"mixture"`` for estimates from given readings too:
+#: on validation scenarios 900-923 (5 trials each of 50 and 150 random readings, Table I
+#: noise, openings known; ``python benchmarks/phys_robustness.py --seeds 900-923 --counts
+#: 50 150 --trials 5 --variants steady filament --methods dgse-phys@openings -E
+#: 'noise_weights="W"'``, ``benchmarks/results/phys_noise_weights_validation/``), mean SL
+#: error / source CE / credible-set calibration error, plug-in against mixture: steady 50
+#: readings 0.96 m / 5.6 / 0.02 against 0.79 m / 5.2 / 0.02, 150: 0.69 / 5.6 / 0.05 against
+#: 0.61 / 4.5 / 0.08; filament 50: 1.12 / 6.9 / 0.08 against 0.91 / 6.0 / 0.06, 150: 1.00 /
+#: 7.3 / 0.08 against 0.75 / 5.7 / 0.02 (chance calibration error 0.03 on 120 estimates).
+#: Before that date the default was ``"plug-in"``, and the random-readings tables of the
+#: README up to then were measured with it.
+NOISE_WEIGHTS_CHOICE: Literal["mixture"] = "mixture"
 #: Model error of the predicted fields per knowledge level, ``(a, b, c, d)`` of
 #: :func:`field_error_variance`: chosen on generated validation scenarios by maximum
 #: likelihood of the true fields (``python benchmarks/tune_phys_fields.py``).
@@ -473,7 +486,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             candidate's own (``"candidate"``) or the larger (``"larger"``;
             :func:`~dgse.localization.adjoint.adjoint_log_evidence`); ``"mixture"``: the
             equal-weight average of the ``"plug-in"`` and ``"candidate"`` posteriors (the
-            planner follows the sharper one, a mass stop needs both; twice the evidence work).
+            planner follows the sharper one, a mass stop needs both; twice the evidence work),
+            the default since 2026-11-28 c (:data:`NOISE_WEIGHTS_CHOICE`).
         conc_components: sources per hypothesis in the concentration estimate (drawn from
             its source posterior by :func:`predictive_sources`).
         min_weight: hypotheses below this posterior weight are left out of the predictive.
@@ -544,7 +558,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     alpha0: float = 1.0
     sigma0_fraction: float = 0.25
     noise_floor_prior: Literal["always", "unscaled", "never"] = "never"
-    noise_weights: Literal["plug-in", "candidate", "larger", "mixture"] = "plug-in"
+    noise_weights: Literal["plug-in", "candidate", "larger", "mixture"] = NOISE_WEIGHTS_CHOICE
     conc_components: int = 32
     min_weight: float = 1e-4
     temperature: float = 1.0
