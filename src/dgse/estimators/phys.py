@@ -214,14 +214,16 @@ SEARCH_ESTIMATOR: dict[str, Any] = {"noise_weights": "mixture"}
 #: Why ``noise_weights`` defaults to ``"mixture"`` for estimates from given readings too:
 #: on validation scenarios 900-923 (Table I noise; ``python benchmarks/phys_robustness.py
 #: --seeds 900-923 --counts 50 150 --trials 5 --variants steady filament --methods
-#: dgse-phys@openings -E 'noise_weights="W"'``, and ``--counts 50 --trials 2 --methods
-#: dgse-phys@map``; ``benchmarks/results/phys_noise_weights_validation/LEVEL_W/``), mean SL
+#: dgse-phys@openings -E 'noise_weights="W"'``, and the same at ``map`` and ``wind`` as
+#: below; ``benchmarks/results/phys_noise_weights_validation/LEVEL_W/``), mean SL
 #: error / source CE / credible-set calibration error, plug-in against mixture.  Openings
 #: (120 estimates a cell, chance calibration error 0.03): steady 50 readings 0.96 m / 5.6 /
 #: 0.02 against 0.79 m / 5.2 / 0.02, 150: 0.69 / 5.6 / 0.05 against 0.61 / 4.5 / 0.08;
 #: filament 50: 1.12 / 6.9 / 0.08 against 0.91 / 6.0 / 0.06, 150: 1.00 / 7.3 / 0.08 against
-#: 0.75 / 5.7 / 0.02.  Map (48 estimates, chance 0.04): steady 1.35 / 7.9 / 0.09 against
-#: 1.16 / 7.1 / 0.05, filament 1.48 / 8.2 / 0.11 against 1.31 / 6.9 / 0.03.  Before that
+#: 0.75 / 5.7 / 0.02.  Map (``--counts 50 --trials 2``, 48 estimates, chance 0.04): steady
+#: 1.35 / 7.9 / 0.09 against 1.16 / 7.1 / 0.05, filament 1.48 / 8.2 / 0.11 against 1.31 /
+#: 6.9 / 0.03.  Wind (``--counts 50 --trials 5``, 120 estimates): steady 0.98 / 5.8 / 0.03
+#: against 0.82 / 5.3 / 0.02, filament 1.13 / 7.2 / 0.08 against 0.91 / 6.1 / 0.06.  Before that
 #: date the default was ``"plug-in"``, and the random-readings tables of the README up to
 #: then were measured with it.
 NOISE_WEIGHTS_CHOICE: Literal["mixture"] = "mixture"
