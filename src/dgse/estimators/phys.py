@@ -227,6 +227,7 @@ SEARCH_ESTIMATOR: dict[str, Any] = {"noise_weights": "mixture"}
 #: date the default was ``"plug-in"``, and the random-readings tables of the README up to
 #: then were measured with it.
 NOISE_WEIGHTS_CHOICE: Literal["mixture"] = "mixture"
+
 #: Model error of the predicted fields per knowledge level, ``(a, b, c, d)`` of
 #: :func:`field_error_variance`: chosen on generated validation scenarios by maximum
 #: likelihood of the true fields (``python benchmarks/tune_phys_fields.py``).
