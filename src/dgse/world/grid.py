@@ -134,7 +134,8 @@ def refinement_factor(resolution: float, target: float) -> int | None:
 
 def refine_occupancy(occupancy: np.ndarray, factor: int) -> np.ndarray:
     """Each cell of ``occupancy`` ``(H, W)`` as a ``factor x factor`` block: ``(f H, f W)``."""
-    return np.kron(np.asarray(occupancy), np.ones((factor, factor), dtype=np.asarray(occupancy).dtype))
+    occ = np.asarray(occupancy)
+    return np.kron(occ, np.ones((factor, factor), dtype=occ.dtype))
 
 
 def refine_cells(cells: np.ndarray, factor: int) -> np.ndarray:
