@@ -89,15 +89,19 @@ def _short(value: Any, width: int = 60) -> str:
     return text if len(text) <= width else text[: width - 3] + "..."
 
 
-def _differences(old: Mapping[str, Any], new: Mapping[str, Any]) -> list[str]:
+def _differences(old: Mapping[str, Any], new: Mapping[str, Any], prefix: str = "") -> list[str]:
+    """What differs between two identities, nested settings named by their dotted path."""
     out = []
     for key in sorted(set(old) | set(new)):
+        name = f"{prefix}{key}"
         if key not in old:
-            out.append(f"{key} (not recorded) is now {_short(new[key])}")
+            out.append(f"{name} (not recorded) is now {_short(new[key])}")
         elif key not in new:
-            out.append(f"{key} was {_short(old[key])}, now not given")
+            out.append(f"{name} was {_short(old[key])}, now not given")
+        elif isinstance(old[key], Mapping) and isinstance(new[key], Mapping):
+            out += _differences(old[key], new[key], f"{name}.")
         elif old[key] != new[key]:
-            out.append(f"{key} was {_short(old[key])}, now {_short(new[key])}")
+            out.append(f"{name} was {_short(old[key])}, now {_short(new[key])}")
     return out
 
 

@@ -10,6 +10,8 @@ from dgse.estimators.knowledge import Knowledge
 from dgse.estimators.phys import (
     FlowHypothesis,
     PhysicsGuidedEstimator,
+    flattened,
+    gas_misfit,
     mix_posteriors,
     predictive_sources,
     profile_wind_log_likelihood,
@@ -19,7 +21,7 @@ from dgse.estimators.phys import (
 )
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.evaluate import draw_observations
-from dgse.localization.adjoint import adjoint_log_evidence, flow_model
+from dgse.localization.adjoint import AdjointResponseModel, adjoint_log_evidence, flow_model
 from dgse.physics.scenario import solve_cases
 from dgse.sensing.sensors import Observations
 from tests.conftest import two_rooms
@@ -115,6 +117,50 @@ def test_noise_weight_mixture_averages_the_two_posteriors(case):
     assert np.allclose(b["mixture"].log_conc_mean, b["plug-in"].log_conc_mean, rtol=0.2, atol=0.2)
     with pytest.raises(InputDataError, match="noise_weights"):
         get_estimator("dgse-phys", noise_weights="both")
+
+
+def test_misfit_and_flattening_kernels():
+    """The misfit is the mean squared standardized residual; flattening keeps the mode and the
+    zeros and spreads the rest."""
+    model = AdjointResponseModel(flow=None, q_map=np.ones(1), sigma_floor=2.0, kappa=0.5, cbar=10.0)
+    mu = np.array([0.0, 10.0, 20.0])
+    sig = 2.0 * (1 + 0.5 * mu / 10.0)
+    assert gas_misfit(mu, mu, model) == 0.0
+    assert gas_misfit(mu, mu + sig, model) == pytest.approx(1.0)
+    assert gas_misfit(mu, mu - 3 * sig, model) == pytest.approx(9.0)
+    p = np.array([0.0, 0.1, 0.7, 0.2])
+    assert np.allclose(flattened(p, 1.0), p)
+    q = flattened(p, 2.0)
+    assert q.sum() == pytest.approx(1.0) and q[0] == 0.0 and np.argmax(q) == 2
+    assert q[2] < p[2] and q[1] > p[1]
+    assert np.allclose(q[1:], np.sqrt(p[1:]) / np.sqrt(p[1:]).sum())
+
+
+def test_posterior_is_flattened_when_the_readings_misfit(case):
+    """Above the misfit threshold the source posterior is the unflattened one to the power
+    ``1 / misfit_temperature``; the belief says so; bad settings get a clear error."""
+    k = Knowledge.from_case(case, "openings")
+    obs = draw_observations(case, 25, seed=4)
+    opts = {"knowledge": k, "speeds": (0.6, 1.2), "refine_speeds": 0}
+    off = get_estimator("dgse-phys", **opts, misfit_threshold=None).estimate(
+        case.occupancy, case.resolution, obs
+    )
+    on = get_estimator("dgse-phys", **opts, misfit_threshold=1e-9, misfit_temperature=3.0).estimate(
+        case.occupancy, case.resolution, obs
+    )
+    assert off.info["misfit_flattening"] == 1.0 and on.info["misfit_flattening"] == 3.0
+    assert on.info["gas_misfit"] == pytest.approx(off.info["gas_misfit"]) and off.info["gas_misfit"] > 0
+    assert np.allclose(on.source_probs[case.free], flattened(off.source_probs[case.free], 3.0))
+    never = get_estimator("dgse-phys", **opts, misfit_threshold=1e9).estimate(
+        case.occupancy, case.resolution, obs
+    )
+    assert np.allclose(never.source_probs, off.source_probs)
+    with pytest.raises(InputDataError, match="misfit_threshold"):
+        get_estimator("dgse-phys", misfit_threshold=-1.0)
+    with pytest.raises(InputDataError, match="misfit_temperature"):
+        get_estimator("dgse-phys", misfit_temperature=0.5)
+    # off unless asked for (the test scenarios did not bear the validation's choice out)
+    assert get_estimator("dgse-phys").misfit_threshold is None
 
 
 def test_openings_weigh_the_inlet_speeds(case):

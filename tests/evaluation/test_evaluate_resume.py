@@ -6,6 +6,7 @@ Hand-made corridor cases and the deterministic PeakEstimator of tests.search
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import json
 import shlex
@@ -84,6 +85,27 @@ def test_interrupted_evaluation_resumes_to_the_same_result(case_dir, tmp_path):
         evaluate(case_dir, PeakEstimator(sigma=0.2), [3], seed=4, journal=journal)
     fresh = evaluate(case_dir, PeakEstimator(sigma=0.2), [3], seed=4, journal=journal, restart=True)
     assert fresh["n_cases"] == 2 and count_records(journal) == 2
+
+
+@dataclasses.dataclass(eq=False)
+class SetPeak(PeakEstimator):
+    """PeakEstimator as a dataclass: its settings are its fields."""
+
+    sigma: float = 0.2
+
+    def __post_init__(self) -> None:
+        PeakEstimator.__init__(self, sigma=self.sigma)
+
+
+def test_a_journal_of_other_estimator_settings_is_refused(case_dir, tmp_path):
+    """A dataclass estimator's settings, defaults included, are part of the journal's identity:
+    resuming with another setting (a changed default reads the same) is refused, naming it."""
+    journal = tmp_path / "s.journal.jsonl"
+    evaluate(case_dir, SetPeak(), [3], seed=4, journal=journal)
+    again = evaluate(case_dir, SetPeak(sigma=0.2), [3], seed=4, journal=journal)
+    assert again["n_cases"] == 2 and count_records(journal) == 2
+    with pytest.raises(InputDataError, match=r"estimator\.settings\.sigma was 0\.2, now 0\.3"):
+        evaluate(case_dir, SetPeak(sigma=0.3), [3], seed=4, journal=journal)
 
 
 @pytest.fixture

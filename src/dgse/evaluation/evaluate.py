@@ -84,6 +84,7 @@ limits reuse what fits.  A case whose contents changed since is refused too.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import datetime as _dt
 import hashlib
 import json
@@ -409,10 +410,20 @@ def _check_counts(observation_counts: int | Sequence[int]) -> list[int]:
 
 
 def _estimator_info(est: Any) -> dict[str, Any]:
+    """The estimator's class, name and, for a dataclass estimator, every setting it was built
+    with (defaults included, so that a journal written before a default changed is refused
+    rather than mixed with estimates of the new default; the knowledge and seed are told
+    per case and recorded apart)."""
     info: dict[str, Any] = {"class": type(est).__name__}
     for attr in ("name", "K", "T", "checkpoint", "device", "dtype", "channels_last"):
         if hasattr(est, attr):
             info[attr] = _jsonable(getattr(est, attr))
+    if dataclasses.is_dataclass(est):
+        info["settings"] = {
+            f.name: _jsonable(getattr(est, f.name))
+            for f in dataclasses.fields(est)
+            if f.init and not f.name.startswith("_") and f.name not in ("knowledge", "seed")
+        }
     return info
 
 

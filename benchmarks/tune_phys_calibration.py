@@ -1,0 +1,211 @@
+"""How much to flatten dgse-phys's source posterior, and when: chosen on validation scenarios.
+
+With filament readings (an intermittent plume) dgse-phys at ``openings`` is sure of
+itself too soon: the true source lies in the outer part of its credible sets more
+often than their levels say.  This benchmark records, for every estimate of the
+validation scenarios (seeds 900-923 by default, steady and filament readings),
+the source posterior flattened by a power ``p**(1/tau)`` for a grid of ``tau``
+together with statistics of how well the best flow explains the readings, so that
+a rule ``tau = f(statistics)`` can be chosen without estimating again::
+
+    python benchmarks/tune_phys_calibration.py --seeds 900-923 --counts 50 150 --trials 5
+
+Every estimate is journaled (``OUT/journal.jsonl``), so an interrupted run resumes;
+``--summary-only`` rewrites ``OUT/summary.json`` and ``OUT/summary.md``: the
+calibration error, mean SL error and CE per variant, count and rule.  The
+scenarios are only ever read from the validation split here: the test split is
+for ``benchmarks/phys_robustness.py``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from phys_robustness import parse_seeds, variant_case
+
+from dgse.cli.common import parse_params
+from dgse.errors import InputDataError
+from dgse.estimators.belief import Belief
+from dgse.estimators.knowledge import Knowledge
+from dgse.estimators.phys import flattened, gas_misfit
+from dgse.estimators.registry import get_estimator
+from dgse.evaluation.calibration import (
+    calibration_error,
+    chance_calibration_error,
+    coverage_curve,
+    credible_level,
+)
+from dgse.evaluation.evaluate import draw_observations
+from dgse.evaluation.metrics import source_cross_entropy, source_localization_error
+from dgse.world.case import Case
+
+TAUS = (1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0)
+
+
+def readings_misfit(belief: Belief, cells: np.ndarray, z: np.ndarray) -> float:
+    """:func:`~dgse.estimators.phys.gas_misfit` of the readings on the posterior's most
+    probable source (its heaviest flow), as dgse-phys computes it."""
+    model = belief.info["response_model"]
+    best = int(np.argmax(model.flow.mesh.values(belief.source_probs)))
+    return gas_misfit(model.flow.responses(cells)[:, best] * model.q_map[best], z, model)
+
+
+def rules() -> dict[str, Callable[[float], float]]:
+    """The flattening rules the summary compares: ``tau`` from the estimate's misfit."""
+    out: dict[str, Callable[[float], float]] = {
+        "none": lambda chi2: 1.0,
+        "every estimate, tau 1.25": lambda chi2: 1.25,
+    }
+    for c in (1.5, 2.0, 3.0):
+        for t in (1.5, 2.0, 3.0):
+            out[f"misfit > {c:g}: tau {t:g}"] = lambda chi2, c=c, t=t: t if chi2 > c else 1.0
+    return out
+
+
+def write_summary(out: Path) -> None:
+    rows = [json.loads(x) for x in (out / "journal.jsonl").read_text().splitlines()]
+    groups: dict[tuple[str, int], list[dict[str, Any]]] = {}
+    for r in rows:
+        groups.setdefault((r["variant"], r["n"]), []).append(r)
+    summary: dict[str, Any] = {"estimates": len(rows), "taus": list(TAUS), "cells": []}
+    lines = [
+        "# Flattening dgse-phys's source posterior (validation scenarios)",
+        "",
+        "`python benchmarks/tune_phys_calibration.py` (module doc). Per variant and count: "
+        "calibration error / mean SL error (m) / mean CE (nats) of `p**(1/tau)`.",
+        "",
+        "| variant | n | estimates | " + " | ".join(f"tau {t:g}" for t in TAUS) + " | chi2 median |",
+        "|---|---|---|" + "---|" * len(TAUS) + "---|",
+    ]
+    for (variant, n), rr in sorted(groups.items()):
+        cell: dict[str, Any] = {"variant": variant, "n": n, "estimates": len(rr), "by_tau": {}}
+        texts = []
+        for t in TAUS:
+            key = f"{t:g}"
+            lv = [r["tau"][key]["credible_level"] for r in rr]
+            ce = calibration_error(coverage_curve(lv))
+            sl = float(np.mean([r["tau"][key]["sl_m"] for r in rr]))
+            xe = float(np.mean([r["tau"][key]["ce"] for r in rr]))
+            cell["by_tau"][key] = {"calibration_error": ce, "sl_mean_m": sl, "ce_mean": xe}
+            texts.append(f"{ce:.3f} / {sl:.2f} / {xe:.1f}")
+        chi2 = float(np.median([r["fit"]["chi2"] for r in rr]))
+        cell["chi2_median"] = chi2
+        cell["chance_calibration_error"] = chance_calibration_error(len(rr))
+        summary["cells"].append(cell)
+        lines.append(f"| {variant} | {n} | {len(rr)} | " + " | ".join(texts) + f" | {chi2:.2f} |")
+    lines += [
+        "",
+        "Rules: calibration error / mean SL error (m) / mean CE (nats) per variant and count "
+        "(tau from the grid's nearest value).",
+        "",
+        "| rule | " + " | ".join(f"{v} {n}" for v, n in sorted(groups)) + " |",
+        "|---|" + "---|" * len(groups) + "",
+    ]
+    summary["rules"] = {}
+    grid = np.array(TAUS)
+    for name, rule in rules().items():
+        texts, cells = [], {}
+        for (variant, n), rr in sorted(groups.items()):
+            got = [r["tau"][f"{grid[np.argmin(abs(grid - rule(r['fit']['chi2'])))]:g}"] for r in rr]
+            ce = calibration_error(coverage_curve([g["credible_level"] for g in got]))
+            sl = float(np.mean([g["sl_m"] for g in got]))
+            xe = float(np.mean([g["ce"] for g in got]))
+            cells[f"{variant} {n}"] = {"calibration_error": ce, "sl_mean_m": sl, "ce_mean": xe}
+            texts.append(f"{ce:.3f} / {sl:.2f} / {xe:.2f}")
+        summary["rules"][name] = cells
+        lines.append(f"| {name} | " + " | ".join(texts) + " |")
+    (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+    (out / "summary.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=parse_seeds, default=parse_seeds("900-923"))
+    ap.add_argument("--counts", type=int, nargs="+", default=[50, 150])
+    ap.add_argument("--trials", type=int, default=5)
+    ap.add_argument("--variants", nargs="+", default=["steady", "filament"], choices=["steady", "filament"])
+    ap.add_argument("--knowledge", default="openings", choices=["map", "openings", "wind"])
+    ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/phys_calibration_tuning"))
+    ap.add_argument(
+        "--cache",
+        type=Path,
+        default=Path("benchmarks/results/phys_robustness/_cases_validation"),
+        help="where the scenario files are kept",
+    )
+    ap.add_argument("-E", "--estimator-option", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--summary-only", action="store_true")
+    args = ap.parse_args()
+    if any(s >= 2000 for s in args.seeds):
+        ap.error("tuning reads validation seeds only (the test split starts at 2000)")
+    try:
+        # the posterior as it is before any flattening: the rules are applied afterwards
+        options = {"misfit_threshold": None, **parse_params(args.estimator_option, "-E")}
+    except InputDataError as exc:
+        ap.error(str(exc))
+    args.out.mkdir(parents=True, exist_ok=True)
+    if args.summary_only:
+        write_summary(args.out)
+        return
+    from dgse.physics.scenario import random_cases
+
+    journal = args.out / "journal.jsonl"
+    done = set()
+    if journal.exists():
+        for line in journal.read_text().splitlines():
+            r = json.loads(line)
+            done.add((r["variant"], r["case"], r["n"], r["trial"]))
+    est = get_estimator("dgse-phys", **options)
+    args.cache.mkdir(parents=True, exist_ok=True)
+    with journal.open("a") as jf:
+        for seed in args.seeds:
+            path = args.cache / f"test{seed}.npz"
+            if not path.exists():
+                random_cases(seed, n_sources=1)[0].save(path)
+            base = Case.load(path)
+            est.set_knowledge(Knowledge.from_case(base, args.knowledge))
+            for variant in args.variants:
+                truth = variant_case(base, variant, args.cache, f"test{seed}")
+                for n in args.counts:
+                    for trial in range(args.trials):
+                        if (variant, f"test{seed}", n, trial) in done:
+                            continue
+                        obs = draw_observations(truth, n, seed=0, case_id=f"test{seed}", trial=trial)
+                        b = est.estimate(base.occupancy, base.resolution, obs)
+                        taus = {}
+                        for t in TAUS:
+                            bt = replace(b, source_probs=flattened(b.source_probs, t))
+                            taus[f"{t:g}"] = {
+                                "credible_level": credible_level(bt.source_probs, base.source_cell),
+                                "sl_m": source_localization_error(bt, base.source),
+                                "ce": source_cross_entropy(bt, base.source_cell),
+                            }
+                        rec = {
+                            "variant": variant,
+                            "knowledge": args.knowledge,
+                            "case": f"test{seed}",
+                            "n": n,
+                            "trial": trial,
+                            "options": options,
+                            "temperature": b.info["temperature"],
+                            "fit": {"chi2": readings_misfit(b, obs.cells, obs.gas)},
+                            "tau": taus,
+                            "seconds": b.info["seconds"],
+                        }
+                        jf.write(json.dumps(rec) + "\n")
+                        jf.flush()
+                        print(
+                            json.dumps({k: rec[k] for k in ("variant", "case", "n", "trial", "fit")}),
+                            flush=True,
+                        )
+    write_summary(args.out)
+
+
+if __name__ == "__main__":
+    main()
