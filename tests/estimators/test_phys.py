@@ -8,6 +8,8 @@ import pytest
 from dgse.errors import InputDataError
 from dgse.estimators.knowledge import Knowledge
 from dgse.estimators.phys import (
+    LEARNED_FLOOR,
+    SEARCH_ESTIMATOR,
     FlowHypothesis,
     PhysicsGuidedEstimator,
     flattened,
@@ -267,7 +269,9 @@ def test_learned_belief_is_mixed_in_where_the_readings_are_few(case):
     b = only_net.estimate(case.occupancy, case.resolution, obs)
     assert b.info["learned_weight"] == pytest.approx(1.0)
     assert np.allclose(b.source_probs, net / net.sum(), atol=1e-7)
-    half = get_estimator("dgse-phys", knowledge=k, learned_weight=0.5, learned_readings=20.0)
+    half = get_estimator(
+        "dgse-phys", knowledge=k, learned_weight=0.5, learned_readings=20.0, learned_floor=0.0
+    )
     assert half.estimate(case.occupancy, case.resolution, obs).info["learned_weight"] == pytest.approx(0.25)
     # past learned_readings, or at a level not listed, the physics alone
     assert half._learned_weight(25) == 0.0
@@ -281,6 +285,10 @@ def test_learned_belief_is_mixed_in_where_the_readings_are_few(case):
     assert floored._learned_weight(10) == pytest.approx(0.25)
     with pytest.raises(InputDataError, match="learned_floor"):
         get_estimator("dgse-phys", learned_weight=0.5, learned_floor=0.6)
+    # by default the network keeps LEARNED_FLOOR at map past learned_readings; searches keep none
+    default = get_estimator("dgse-phys", knowledge=k)
+    assert default._learned_weight(400) == pytest.approx(LEARNED_FLOOR) and LEARNED_FLOOR > 0
+    assert get_estimator("dgse-phys", knowledge=k, **SEARCH_ESTIMATOR)._learned_weight(400) == 0.0
 
 
 def test_predictive_sources_stand_for_the_whole_posterior():

@@ -97,6 +97,7 @@ from dgse.world.layout import Layout
 __all__ = [
     "DEFAULT_SPEEDS",
     "FIELD_ERROR",
+    "LEARNED_FLOOR",
     "MISFIT_TEMPERATURE",
     "MISFIT_THRESHOLD",
     "SEARCH_ESTIMATOR",
@@ -127,6 +128,18 @@ MAP_EFFECTIVE_READINGS = 30.0
 #: chosen on validation scenarios (``python benchmarks/tune_phys_learned.py``).
 LEARNED_WEIGHT = 0.9
 LEARNED_READINGS = 50.0
+#: DGSE-S's least weight there (``learned_floor``): the physics on a proposed flow can be sure
+#: of a wrong spot, and a little of the network bounds how sure.  Chosen on validation
+#: scenarios 900-923 (``python benchmarks/tune_phys_fusion.py --knowledge map --counts 50 150
+#: --trials 1``, 24 estimates a cell, chance calibration error 0.06;
+#: ``benchmarks/results/phys_fusion_tuning/summary.md``) as the largest weight of the grid
+#: whose calibration error is nowhere more than 0.01 above the physics alone's: 0.05.  Against
+#: no floor, mean source CE at 50 readings 6.99 to 6.61 nats (steady) and 7.00 to 6.83
+#: (filament), at 150 6.34 to 6.24 and 6.28 to 6.10; mean SL error 0.00-0.02 m lower;
+#: calibration error 0.067 to 0.047, 0.055 to 0.055, 0.117 to 0.105, 0.131 to 0.134.  (0.1
+#: lowered the CE a little more but put the filament calibration at 150 readings 0.026 above.)
+#: Searches keep no floor (:data:`SEARCH_ESTIMATOR`): they were measured without it.
+LEARNED_FLOOR = 0.05
 #: The utility planner's settings for searches with dgse-phys (``dgse demo``, the search
 #: benchmarks), chosen on validation scenarios (``python benchmarks/phys_search.py --set
 #: validation --rule R``):
@@ -212,8 +225,9 @@ def search_planner(level: str) -> dict[str, float]:
 #: with the candidate weights, 76 and 68 of 73 with ``"larger"``
 #: (``benchmarks/results/phys_search/validation*-mix.json``).  It costs a second evidence
 #: and zeros' factor per step.  Since 2026-11-28 c it is also the estimator's default
-#: (:data:`NOISE_WEIGHTS_CHOICE`); the searches name it all the same.
-SEARCH_ESTIMATOR: dict[str, Any] = {"noise_weights": "mixture"}
+#: (:data:`NOISE_WEIGHTS_CHOICE`); the searches name it all the same.  They keep DGSE-S's weight
+#: at ``map`` fading to 0 by 50 readings (``learned_floor=0``, :data:`LEARNED_FLOOR`): measured so.
+SEARCH_ESTIMATOR: dict[str, Any] = {"noise_weights": "mixture", "learned_floor": 0.0}
 
 #: Why ``noise_weights`` defaults to ``"mixture"`` for estimates from given readings too:
 #: on validation scenarios 900-923 (Table I noise; ``python benchmarks/phys_robustness.py
@@ -547,7 +561,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             the physics after.
         learned_floor: the network's weight never falls below this (0: the physics alone
             from ``learned_readings`` on); a floor caps how sure of a wrong spot the mixture
-            can be, at the cost of slower mass stops.
+            can be, at the cost of slower mass stops (:data:`LEARNED_FLOOR`, 0.05 since
+            2026-11-28 d; the searches use 0).
         hypothesis_readings: beyond this many readings the flow hypotheses' weights are
             tempered, ``T = m / hypothesis_readings`` (None: not tempered).
         wind_likelihood: how the wind readings weigh the flow hypotheses: ``"sensor"``
@@ -627,7 +642,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     map_proposal_model: str = "default"
     learned_weight: float = LEARNED_WEIGHT
     learned_readings: float = LEARNED_READINGS
-    learned_floor: float = 0.0
+    learned_floor: float = LEARNED_FLOOR
     learned_levels: Sequence[str] = ("map",)
     hypothesis_readings: float | None = None
     wind_likelihood: str = "sensor"
