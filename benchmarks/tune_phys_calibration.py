@@ -19,18 +19,14 @@ for ``benchmarks/phys_robustness.py``.
 
 from __future__ import annotations
 
-import argparse
 import json
 from collections.abc import Callable
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from phys_robustness import parse_seeds, variant_case
+from validation_tuning import checked_options, scores, tuning_parser, validation_readings
 
-from dgse.cli.common import parse_params
-from dgse.errors import InputDataError
 from dgse.estimators.belief import Belief
 from dgse.estimators.knowledge import Knowledge
 from dgse.estimators.phys import flattened, gas_misfit
@@ -39,11 +35,7 @@ from dgse.evaluation.calibration import (
     calibration_error,
     chance_calibration_error,
     coverage_curve,
-    credible_level,
 )
-from dgse.evaluation.evaluate import draw_observations
-from dgse.evaluation.metrics import source_cross_entropy, source_localization_error
-from dgse.world.case import Case
 
 TAUS = (1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0)
 
@@ -126,84 +118,32 @@ def write_summary(out: Path) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=parse_seeds, default=parse_seeds("900-923"))
-    ap.add_argument("--counts", type=int, nargs="+", default=[50, 150])
-    ap.add_argument("--trials", type=int, default=5)
-    ap.add_argument("--variants", nargs="+", default=["steady", "filament"], choices=["steady", "filament"])
-    ap.add_argument("--knowledge", default="openings", choices=["map", "openings", "wind"])
-    ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/phys_calibration_tuning"))
-    ap.add_argument(
-        "--cache",
-        type=Path,
-        default=Path("benchmarks/results/phys_robustness/_cases_validation"),
-        help="where the scenario files are kept",
-    )
-    ap.add_argument("-E", "--estimator-option", action="append", default=[], metavar="KEY=VALUE")
-    ap.add_argument("--summary-only", action="store_true")
+    ap = tuning_parser(__doc__, "benchmarks/results/phys_calibration_tuning", [50, 150])
     args = ap.parse_args()
-    if any(s >= 2000 for s in args.seeds):
-        ap.error("tuning reads validation seeds only (the test split starts at 2000)")
-    try:
-        # the posterior as it is before any flattening: the rules are applied afterwards
-        options = {"misfit_threshold": None, **parse_params(args.estimator_option, "-E")}
-    except InputDataError as exc:
-        ap.error(str(exc))
+    # the posterior as it is before any flattening: the rules are applied afterwards
+    options = checked_options(ap, args, {"misfit_threshold": None})
     args.out.mkdir(parents=True, exist_ok=True)
     if args.summary_only:
         write_summary(args.out)
         return
-    from dgse.physics.scenario import random_cases
-
     journal = args.out / "journal.jsonl"
-    done = set()
-    if journal.exists():
-        for line in journal.read_text().splitlines():
-            r = json.loads(line)
-            done.add((r["variant"], r["case"], r["n"], r["trial"]))
     est = get_estimator("dgse-phys", **options)
-    args.cache.mkdir(parents=True, exist_ok=True)
     with journal.open("a") as jf:
-        for seed in args.seeds:
-            path = args.cache / f"test{seed}.npz"
-            if not path.exists():
-                random_cases(seed, n_sources=1)[0].save(path)
-            base = Case.load(path)
-            est.set_knowledge(Knowledge.from_case(base, args.knowledge))
-            for variant in args.variants:
-                truth = variant_case(base, variant, args.cache, f"test{seed}")
-                for n in args.counts:
-                    for trial in range(args.trials):
-                        if (variant, f"test{seed}", n, trial) in done:
-                            continue
-                        obs = draw_observations(truth, n, seed=0, case_id=f"test{seed}", trial=trial)
-                        b = est.estimate(base.occupancy, base.resolution, obs)
-                        taus = {}
-                        for t in TAUS:
-                            bt = replace(b, source_probs=flattened(b.source_probs, t))
-                            taus[f"{t:g}"] = {
-                                "credible_level": credible_level(bt.source_probs, base.source_cell),
-                                "sl_m": source_localization_error(bt, base.source),
-                                "ce": source_cross_entropy(bt, base.source_cell),
-                            }
-                        rec = {
-                            "variant": variant,
-                            "knowledge": args.knowledge,
-                            "case": f"test{seed}",
-                            "n": n,
-                            "trial": trial,
-                            "options": options,
-                            "temperature": b.info["temperature"],
-                            "fit": {"chi2": readings_misfit(b, obs.cells, obs.gas)},
-                            "tau": taus,
-                            "seconds": b.info["seconds"],
-                        }
-                        jf.write(json.dumps(rec) + "\n")
-                        jf.flush()
-                        print(
-                            json.dumps({k: rec[k] for k in ("variant", "case", "n", "trial", "fit")}),
-                            flush=True,
-                        )
+        for case, key, obs in validation_readings(
+            args, journal, lambda c: est.set_knowledge(Knowledge.from_case(c, args.knowledge))
+        ):
+            b = est.estimate(case.occupancy, case.resolution, obs)
+            rec = {
+                **key,
+                "options": options,
+                "temperature": b.info["temperature"],
+                "fit": {"chi2": readings_misfit(b, obs.cells, obs.gas)},
+                "tau": {f"{t:g}": scores(flattened(b.source_probs, t), case) for t in TAUS},
+                "seconds": b.info["seconds"],
+            }
+            jf.write(json.dumps(rec) + "\n")
+            jf.flush()
+            print(json.dumps({k: rec[k] for k in ("variant", "case", "n", "trial", "fit")}), flush=True)
     write_summary(args.out)
 
 

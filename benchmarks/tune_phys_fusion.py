@@ -21,46 +21,23 @@ level, variant, count and weight.  The test split is never read here.
 
 from __future__ import annotations
 
-import argparse
 import json
-import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from phys_robustness import parse_seeds, variant_case
+from validation_tuning import checked_options, scores, tuning_parser, validation_readings
 
-from dgse.cli.common import parse_params
-from dgse.errors import InputDataError
 from dgse.estimators.knowledge import Knowledge
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.calibration import (
     calibration_error,
     chance_calibration_error,
     coverage_curve,
-    credible_level,
 )
-from dgse.evaluation.evaluate import draw_observations
-from dgse.evaluation.metrics import PROB_FLOOR
-from dgse.world.case import Case
 
 #: The network's weights in the mixture ``(1 - w) physics + w network`` that are scored.
 WEIGHTS = (0.0, 0.01, 0.02, 0.05, 0.1, 0.2, 0.3, 0.5, 1.0)
-
-
-def scores(p: np.ndarray, case: Case) -> dict[str, float]:
-    """SL error of ``p``'s mean position (m), CE of the true cell (nats), the truth's credible level."""
-    H, W = p.shape
-    ii, jj = np.mgrid[:H, :W]
-    x = float(((jj + 0.5) * case.resolution * p).sum())
-    y = float(((ii + 0.5) * case.resolution * p).sum())
-    sx, sy = case.source
-    i, j = case.source_cell
-    return {
-        "sl_m": math.hypot(x - sx, y - sy),
-        "ce": -math.log(max(float(p[i, j]), PROB_FLOOR)),
-        "credible_level": credible_level(p, case.source_cell),
-    }
 
 
 def write_summary(out: Path) -> None:
@@ -99,80 +76,30 @@ def write_summary(out: Path) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=parse_seeds, default=parse_seeds("900-923"))
-    ap.add_argument("--counts", type=int, nargs="+", default=[20, 50, 150])
-    ap.add_argument("--trials", type=int, default=5)
-    ap.add_argument("--variants", nargs="+", default=["steady", "filament"], choices=["steady", "filament"])
-    ap.add_argument("--knowledge", default="openings", choices=["map", "openings", "wind"])
-    ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/phys_fusion_tuning"))
-    ap.add_argument(
-        "--cache",
-        type=Path,
-        default=Path("benchmarks/results/phys_robustness/_cases_validation"),
-        help="where the scenario files are kept",
-    )
-    ap.add_argument("-E", "--estimator-option", action="append", default=[], metavar="KEY=VALUE")
-    ap.add_argument("--summary-only", action="store_true")
+    ap = tuning_parser(__doc__, "benchmarks/results/phys_fusion_tuning", [20, 50, 150])
     args = ap.parse_args()
-    if any(s >= 2000 for s in args.seeds):
-        ap.error("tuning reads validation seeds only (the test split starts at 2000)")
-    if any(n < 1 for n in args.counts):
-        ap.error("--counts must be positive")
-    try:
-        # the physics alone: the mixtures are formed here
-        options = {"learned_levels": (), **parse_params(args.estimator_option, "-E")}
-    except InputDataError as exc:
-        ap.error(str(exc))
+    # the physics alone: the mixtures are formed here
+    options = checked_options(ap, args, {"learned_levels": ()})
     args.out.mkdir(parents=True, exist_ok=True)
     if args.summary_only:
         write_summary(args.out)
         return
-    from dgse.physics.scenario import random_cases
-
     journal = args.out / f"journal-{args.knowledge}.jsonl"
-    done = set()
-    if journal.exists():
-        for line in journal.read_text().splitlines():
-            r = json.loads(line)
-            done.add((r["variant"], r["case"], r["n"], r["trial"]))
     phys = get_estimator("dgse-phys", **options)
     # the network as dgse-phys builds it for its own mixture
     net = get_estimator("dgse-s", model="default", seed=0, dtype="auto", channels_last=True)
-    args.cache.mkdir(parents=True, exist_ok=True)
+    recorded = {k: list(v) if isinstance(v, tuple) else v for k, v in options.items()}
     with journal.open("a") as jf:
-        for seed in args.seeds:
-            path = args.cache / f"test{seed}.npz"
-            if not path.exists():
-                random_cases(seed, n_sources=1)[0].save(path)
-            base = Case.load(path)
-            phys.set_knowledge(Knowledge.from_case(base, args.knowledge))
-            for variant in args.variants:
-                truth = variant_case(base, variant, args.cache, f"test{seed}")
-                for n in args.counts:
-                    for trial in range(args.trials):
-                        if (variant, f"test{seed}", n, trial) in done:
-                            continue
-                        obs = draw_observations(truth, n, seed=0, case_id=f"test{seed}", trial=trial)
-                        p_phys = np.asarray(phys.estimate(base.occupancy, base.resolution, obs).source_probs)
-                        p_net = np.asarray(net.estimate(base.occupancy, base.resolution, obs).source_probs)
-                        p_phys = p_phys / p_phys.sum()
-                        p_net = p_net / p_net.sum()
-                        mixed = {f"{w:g}": scores((1 - w) * p_phys + w * p_net, base) for w in WEIGHTS}
-                        rec = {
-                            "variant": variant,
-                            "knowledge": args.knowledge,
-                            "case": f"test{seed}",
-                            "n": n,
-                            "trial": trial,
-                            "options": {
-                                k: list(v) if isinstance(v, tuple) else v for k, v in options.items()
-                            },
-                            "by_weight": mixed,
-                        }
-                        jf.write(json.dumps(rec) + "\n")
-                        jf.flush()
-                        print(f"{variant} test{seed} n={n} trial {trial}", flush=True)
+        for case, key, obs in validation_readings(
+            args, journal, lambda c: phys.set_knowledge(Knowledge.from_case(c, args.knowledge))
+        ):
+            p_phys = np.asarray(phys.estimate(case.occupancy, case.resolution, obs).source_probs)
+            p_net = np.asarray(net.estimate(case.occupancy, case.resolution, obs).source_probs)
+            p_phys, p_net = p_phys / p_phys.sum(), p_net / p_net.sum()
+            mixed = {f"{w:g}": scores((1 - w) * p_phys + w * p_net, case) for w in WEIGHTS}
+            jf.write(json.dumps({**key, "options": recorded, "by_weight": mixed}) + "\n")
+            jf.flush()
+            print(f"{key['variant']} {key['case']} n={key['n']} trial {key['trial']}", flush=True)
     write_summary(args.out)
 
 
