@@ -25,16 +25,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from validation_tuning import checked_options, scores, tuning_parser, validation_readings
+from validation_tuning import checked_options, pooled, scores, tuning_parser, validation_readings
 
 from dgse.estimators.belief import Belief
 from dgse.estimators.knowledge import Knowledge
 from dgse.estimators.phys import flattened, gas_misfit
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.calibration import (
-    calibration_error,
     chance_calibration_error,
-    coverage_curve,
 )
 
 TAUS = (1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0)
@@ -79,13 +77,8 @@ def write_summary(out: Path) -> None:
         cell: dict[str, Any] = {"variant": variant, "n": n, "estimates": len(rr), "by_tau": {}}
         texts = []
         for t in TAUS:
-            key = f"{t:g}"
-            lv = [r["tau"][key]["credible_level"] for r in rr]
-            ce = calibration_error(coverage_curve(lv))
-            sl = float(np.mean([r["tau"][key]["sl_m"] for r in rr]))
-            xe = float(np.mean([r["tau"][key]["ce"] for r in rr]))
-            cell["by_tau"][key] = {"calibration_error": ce, "sl_mean_m": sl, "ce_mean": xe}
-            texts.append(f"{ce:.3f} / {sl:.2f} / {xe:.1f}")
+            cell["by_tau"][f"{t:g}"], text = pooled([r["tau"][f"{t:g}"] for r in rr])
+            texts.append(text)
         chi2 = float(np.median([r["fit"]["chi2"] for r in rr]))
         cell["chi2_median"] = chi2
         cell["chance_calibration_error"] = chance_calibration_error(len(rr))
@@ -105,11 +98,8 @@ def write_summary(out: Path) -> None:
         texts, cells = [], {}
         for (variant, n), rr in sorted(groups.items()):
             got = [r["tau"][f"{grid[np.argmin(abs(grid - rule(r['fit']['chi2'])))]:g}"] for r in rr]
-            ce = calibration_error(coverage_curve([g["credible_level"] for g in got]))
-            sl = float(np.mean([g["sl_m"] for g in got]))
-            xe = float(np.mean([g["ce"] for g in got]))
-            cells[f"{variant} {n}"] = {"calibration_error": ce, "sl_mean_m": sl, "ce_mean": xe}
-            texts.append(f"{ce:.3f} / {sl:.2f} / {xe:.2f}")
+            cells[f"{variant} {n}"], text = pooled(got)
+            texts.append(text)
         summary["rules"][name] = cells
         lines.append(f"| {name} | " + " | ".join(texts) + " |")
     (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")

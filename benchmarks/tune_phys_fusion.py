@@ -26,14 +26,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from validation_tuning import checked_options, scores, tuning_parser, validation_readings
+from validation_tuning import checked_options, pooled, scores, tuning_parser, validation_readings
 
 from dgse.estimators.knowledge import Knowledge
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.calibration import (
-    calibration_error,
     chance_calibration_error,
-    coverage_curve,
 )
 
 #: The network's weights in the mixture ``(1 - w) physics + w network`` that are scored.
@@ -60,12 +58,8 @@ def write_summary(out: Path) -> None:
         cell: dict[str, Any] = {"knowledge": level, "variant": variant, "n": n, "estimates": len(rr)}
         texts = []
         for w in WEIGHTS:
-            got = [r["by_weight"][f"{w:g}"] for r in rr]
-            ce = calibration_error(coverage_curve([g["credible_level"] for g in got]))
-            sl = float(np.mean([g["sl_m"] for g in got]))
-            xe = float(np.mean([g["ce"] for g in got]))
-            cell[f"w {w:g}"] = {"calibration_error": ce, "sl_mean_m": sl, "ce_mean": xe}
-            texts.append(f"{ce:.3f} / {sl:.2f} / {xe:.2f}")
+            cell[f"w {w:g}"], text = pooled([r["by_weight"][f"{w:g}"] for r in rr])
+            texts.append(text)
         chance = chance_calibration_error(len(rr))
         cell["chance_calibration_error"] = chance
         summary["cells"].append(cell)

@@ -20,7 +20,7 @@ from phys_robustness import parse_seeds, variant_case
 
 from dgse.cli.common import parse_params
 from dgse.errors import InputDataError
-from dgse.evaluation.calibration import credible_level
+from dgse.evaluation.calibration import calibration_error, coverage_curve, credible_level
 from dgse.evaluation.evaluate import draw_observations
 from dgse.evaluation.metrics import PROB_FLOOR
 from dgse.sensing.sensors import Observations
@@ -106,3 +106,12 @@ def scores(p: np.ndarray, case: Case) -> dict[str, float]:
         "ce": -math.log(max(float(p[i, j]), PROB_FLOOR)),
         "credible_level": credible_level(p, case.source_cell),
     }
+
+
+def pooled(got: list[dict[str, float]]) -> tuple[dict[str, float], str]:
+    """The calibration error, mean SL error and mean CE of estimates' :func:`scores`, as a
+    record and as the summaries' ``"cal / sl / ce"`` text."""
+    ce = calibration_error(coverage_curve([g["credible_level"] for g in got]))
+    sl = float(np.mean([g["sl_m"] for g in got]))
+    xe = float(np.mean([g["ce"] for g in got]))
+    return {"calibration_error": ce, "sl_mean_m": sl, "ce_mean": xe}, f"{ce:.3f} / {sl:.2f} / {xe:.2f}"
