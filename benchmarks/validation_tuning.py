@@ -12,11 +12,12 @@ import argparse
 import json
 import math
 from collections.abc import Callable, Iterator
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from phys_robustness import parse_seeds, variant_case
+from phys_robustness import VARIANTS, parse_seeds, perturbed_wind, variant_case
 
 from dgse.cli.common import parse_params
 from dgse.errors import InputDataError
@@ -34,7 +35,13 @@ def tuning_parser(doc: str, out: str, counts: list[int]) -> argparse.ArgumentPar
     ap.add_argument("--seeds", type=parse_seeds, default=parse_seeds("900-923"))
     ap.add_argument("--counts", type=int, nargs="+", default=counts)
     ap.add_argument("--trials", type=int, default=5)
-    ap.add_argument("--variants", nargs="+", default=["steady", "filament"], choices=["steady", "filament"])
+    ap.add_argument(
+        "--variants",
+        nargs="+",
+        default=["steady", "filament"],
+        choices=VARIANTS,
+        help="as benchmarks/phys_robustness.py: the wind_* ones change the wind told at --knowledge wind",
+    )
     ap.add_argument("--knowledge", default="openings", choices=["map", "openings", "wind"])
     ap.add_argument("-o", "--out", type=Path, default=Path(out))
     ap.add_argument(
@@ -56,6 +63,8 @@ def checked_options(
         ap.error("tuning reads validation seeds only (the test split starts at 2000)")
     if any(n < 1 for n in args.counts):
         ap.error("--counts must be positive")
+    if args.knowledge != "wind" and any(v.startswith("wind_") for v in args.variants):
+        ap.error("the wind_* variants change only what --knowledge wind is told")
     try:
         return {**base, **parse_params(args.estimator_option, "-E")}
     except InputDataError as exc:
@@ -66,8 +75,9 @@ def validation_readings(
     args: argparse.Namespace, journal: Path, on_case: Callable[[Case], None]
 ) -> Iterator[tuple[Case, dict[str, Any], Observations]]:
     """``(case, key, readings)`` for every estimate ``journal`` lacks, in order: each scenario
-    (made and cached on first use; ``on_case`` is called with it first), variant, count and
-    trial; ``key`` (variant, case, n, trial) starts the estimate's journal line."""
+    (made and cached on first use), variant (``on_case`` is called first with the scenario as
+    the estimator is told it: its wind perturbed in the ``wind_*`` variants), count and trial;
+    ``key`` (variant, case, n, trial) starts the estimate's journal line."""
     from dgse.physics.scenario import random_cases
 
     done = set()
@@ -81,8 +91,8 @@ def validation_readings(
         if not path.exists():
             random_cases(seed, n_sources=1)[0].save(path)
         base = Case.load(path)
-        on_case(base)
         for variant in args.variants:
+            on_case(replace(base, wind=perturbed_wind(base, variant)))
             truth = variant_case(base, variant, args.cache, f"test{seed}")
             for n in args.counts:
                 for trial in range(args.trials):
