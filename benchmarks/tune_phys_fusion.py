@@ -73,7 +73,7 @@ def main() -> None:
     ap = tuning_parser(__doc__, "benchmarks/results/phys_fusion_tuning", [20, 50, 150])
     args = ap.parse_args()
     # the physics alone: the mixtures are formed here
-    options = checked_options(ap, args, {"learned_levels": ()})
+    options = checked_options(ap, args, {"learned_levels": (), "learned_floor": 0.0})
     args.out.mkdir(parents=True, exist_ok=True)
     if args.summary_only:
         write_summary(args.out)

@@ -289,6 +289,13 @@ def test_learned_belief_is_mixed_in_where_the_readings_are_few(case):
     default = get_estimator("dgse-phys", knowledge=k)
     assert default._learned_weight(400) == pytest.approx(LEARNED_FLOOR) and LEARNED_FLOOR > 0
     assert get_estimator("dgse-phys", knowledge=k, **SEARCH_ESTIMATOR)._learned_weight(400) == 0.0
+    # at a floor level outside learned_levels the weight is the floor alone, from the first reading
+    wind = Knowledge.from_case(case, "wind")
+    at_wind = get_estimator("dgse-phys", knowledge=wind, learned_floor_levels=("map", "wind"))
+    assert at_wind._learned_weight(3) == pytest.approx(LEARNED_FLOOR)
+    assert get_estimator("dgse-phys", knowledge=wind, learned_floor_levels=())._learned_weight(3) == 0.0
+    with pytest.raises(InputDataError, match="learned_floor_levels"):
+        get_estimator("dgse-phys", learned_floor_levels=("plan",))
 
 
 def test_predictive_sources_stand_for_the_whole_posterior():

@@ -98,6 +98,7 @@ __all__ = [
     "DEFAULT_SPEEDS",
     "FIELD_ERROR",
     "LEARNED_FLOOR",
+    "LEARNED_FLOOR_LEVELS",
     "MISFIT_TEMPERATURE",
     "MISFIT_THRESHOLD",
     "SEARCH_ESTIMATOR",
@@ -140,6 +141,8 @@ LEARNED_READINGS = 50.0
 #: lowered the CE a little more but put the filament calibration at 150 readings 0.026 above.)
 #: Searches keep no floor (:data:`SEARCH_ESTIMATOR`): they were measured without it.
 LEARNED_FLOOR = 0.05
+#: The levels where that floor holds (``learned_floor_levels``).
+LEARNED_FLOOR_LEVELS: tuple[str, ...] = ("map",)
 #: The utility planner's settings for searches with dgse-phys (``dgse demo``, the search
 #: benchmarks), chosen on validation scenarios (``python benchmarks/phys_search.py --set
 #: validation --rule R``):
@@ -559,10 +562,12 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             network), weight ``max(learned_floor, learned_weight * max(0, 1 - m /
             learned_readings))`` for ``m`` readings: the network where the readings are few,
             the physics after.
-        learned_floor: the network's weight never falls below this (0: the physics alone
-            from ``learned_readings`` on); a floor caps how sure of a wrong spot the mixture
-            can be, at the cost of slower mass stops (:data:`LEARNED_FLOOR`, 0.05 since
-            2026-11-28 d; the searches use 0).
+        learned_floor, learned_floor_levels: at the levels ``learned_floor_levels`` the
+            network's weight never falls below ``learned_floor`` (0: the physics alone from
+            ``learned_readings`` on; at a level of these not in ``learned_levels`` the weight
+            is the floor alone); a floor caps how sure of a wrong spot the mixture can be, at
+            the cost of slower mass stops (:data:`LEARNED_FLOOR`, 0.05 since 2026-11-28 d;
+            the searches use 0).
         hypothesis_readings: beyond this many readings the flow hypotheses' weights are
             tempered, ``T = m / hypothesis_readings`` (None: not tempered).
         wind_likelihood: how the wind readings weigh the flow hypotheses: ``"sensor"``
@@ -644,6 +649,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     learned_readings: float = LEARNED_READINGS
     learned_floor: float = LEARNED_FLOOR
     learned_levels: Sequence[str] = ("map",)
+    learned_floor_levels: Sequence[str] = LEARNED_FLOOR_LEVELS
     hypothesis_readings: float | None = None
     wind_likelihood: str = "sensor"
     refine_speeds: int = 4
@@ -693,6 +699,13 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             raise InputDataError(
                 f"censored_ranking must be one of {CENSORED_RANKINGS}, got {self.censored_ranking!r}"
             )
+        for key in ("learned_levels", "learned_floor_levels"):
+            levels = tuple(str(v) for v in getattr(self, key))
+            bad = [v for v in levels if v not in self.knowledge_levels]
+            if bad:
+                known = list(self.knowledge_levels)
+                raise InputDataError(f"{key}: unknown knowledge levels {bad}; use {known}")
+            setattr(self, key, levels)
         if not (0.0 <= self.learned_weight <= 1.0):
             raise InputDataError(f"learned_weight must be in [0, 1], got {self.learned_weight}")
         if not (0.0 <= self.learned_floor <= self.learned_weight):
@@ -845,10 +858,13 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     # -- the learned source belief ---------------------------------------------------------------
     def _learned_weight(self, m: int) -> float:
         k = self.knowledge
-        if self.learned_weight <= 0 or k is None or k.level not in self.learned_levels:
+        if self.learned_weight <= 0 or k is None:
             return 0.0
-        fading = self.learned_weight * max(0.0, 1.0 - m / self.learned_readings)
-        return float(max(self.learned_floor, fading))
+        fading = 0.0
+        if k.level in self.learned_levels:
+            fading = self.learned_weight * max(0.0, 1.0 - m / self.learned_readings)
+        floor = self.learned_floor if k.level in self.learned_floor_levels else 0.0
+        return float(max(floor, fading))
 
     def _learned_belief(self, occupancy: np.ndarray, resolution: float, obs: Observations) -> Belief:
         """DGSE-S's belief from the same readings (the shipped network, built on first use)."""
