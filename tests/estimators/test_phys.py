@@ -287,15 +287,16 @@ def test_learned_belief_is_mixed_in_where_the_readings_are_few(case):
         get_estimator("dgse-phys", learned_weight=0.5, learned_floor=0.6)
     # by default the network keeps LEARNED_FLOOR at map past learned_readings; searches keep none
     default = get_estimator("dgse-phys", knowledge=k)
-    assert default._learned_weight(400) == pytest.approx(LEARNED_FLOOR) and LEARNED_FLOOR > 0
+    assert LEARNED_FLOOR["map"] > 0 and LEARNED_FLOOR["wind"] > 0
+    assert default._learned_weight(400) == pytest.approx(LEARNED_FLOOR["map"])
     assert get_estimator("dgse-phys", knowledge=k, **SEARCH_ESTIMATOR)._learned_weight(400) == 0.0
-    # at a floor level outside learned_levels the weight is the floor alone, from the first reading
-    wind = Knowledge.from_case(case, "wind")
-    at_wind = get_estimator("dgse-phys", knowledge=wind, learned_floor_levels=("map", "wind"))
-    assert at_wind._learned_weight(3) == pytest.approx(LEARNED_FLOOR)
-    assert get_estimator("dgse-phys", knowledge=wind, learned_floor_levels=())._learned_weight(3) == 0.0
-    with pytest.raises(InputDataError, match="learned_floor_levels"):
-        get_estimator("dgse-phys", learned_floor_levels=("plan",))
+    # at a level outside learned_levels the weight is the level's floor alone, from the first reading
+    default.set_knowledge(Knowledge.from_case(case, "wind"))
+    assert default._learned_weight(3) == pytest.approx(LEARNED_FLOOR["wind"])
+    default.set_knowledge(Knowledge.from_case(case, "openings"))
+    assert default._learned_weight(3) == 0.0 and "openings" not in LEARNED_FLOOR
+    with pytest.raises(InputDataError, match="learned_levels"):
+        get_estimator("dgse-phys", learned_levels=("plan",))
 
 
 def test_predictive_sources_stand_for_the_whole_posterior():

@@ -98,7 +98,6 @@ __all__ = [
     "DEFAULT_SPEEDS",
     "FIELD_ERROR",
     "LEARNED_FLOOR",
-    "LEARNED_FLOOR_LEVELS",
     "MISFIT_TEMPERATURE",
     "MISFIT_THRESHOLD",
     "SEARCH_ESTIMATOR",
@@ -129,20 +128,32 @@ MAP_EFFECTIVE_READINGS = 30.0
 #: chosen on validation scenarios (``python benchmarks/tune_phys_learned.py``).
 LEARNED_WEIGHT = 0.9
 LEARNED_READINGS = 50.0
-#: DGSE-S's least weight there (``learned_floor``): the physics on a proposed flow can be sure
-#: of a wrong spot, and a little of the network bounds how sure.  Chosen on validation
-#: scenarios 900-923 (``python benchmarks/tune_phys_fusion.py --knowledge map --counts 50 150
-#: --trials 1``, 24 estimates a cell, chance calibration error 0.06;
-#: ``benchmarks/results/phys_fusion_tuning/summary.md``) as the largest weight of the grid
-#: whose calibration error is nowhere more than 0.01 above the physics alone's: 0.05.  Against
-#: no floor, mean source CE at 50 readings 6.99 to 6.61 nats (steady) and 7.00 to 6.83
-#: (filament), at 150 6.34 to 6.24 and 6.28 to 6.10; mean SL error 0.00-0.02 m lower;
-#: calibration error 0.067 to 0.047, 0.055 to 0.055, 0.117 to 0.105, 0.131 to 0.134.  (0.1
-#: lowered the CE a little more but put the filament calibration at 150 readings 0.026 above.)
+#: DGSE-S's least weight in the source posterior per knowledge level (``learned_floor=None``;
+#: levels not named: none).  The physics on a proposed or given flow can be sure of a wrong
+#: spot, and a little of the network bounds how sure.  Chosen on validation scenarios 900-923
+#: (``python benchmarks/tune_phys_fusion.py --knowledge L ...``; the physics' and the network's
+#: posteriors recorded per estimate, the mixture scored for a grid of weights) as the largest
+#: weight of the grid whose calibration error is nowhere more than 0.01 above the physics
+#: alone's.
+#:
+#: * ``map`` (``--counts 50 150 --trials 1``, 24 estimates a cell, chance calibration error
+#:   0.06; ``benchmarks/results/phys_fusion_tuning/``): 0.05.  Against no floor, mean source CE
+#:   at 50 readings 6.99 to 6.61 nats (steady) and 7.00 to 6.83 (filament), at 150 6.34 to
+#:   6.24 and 6.28 to 6.10; mean SL error 0.00-0.02 m lower; calibration error 0.067 to 0.047,
+#:   0.055 to 0.055, 0.117 to 0.105, 0.131 to 0.134.  (0.1 lowered the CE a little more but put
+#:   the filament calibration at 150 readings 0.026 above.)
+#: * ``wind`` (``--variants steady filament`` and ``wind_rotated wind_smoothed wind_x2``,
+#:   ``--counts 50 150 --trials 2``, 48 estimates a cell, chance 0.04;
+#:   ``benchmarks/results/phys_fusion_tuning_wind_perturbed/``): 0.02 (0.05 put steady and
+#:   twice-too-fast winds at 150 readings 0.011 above).  Mean CE 0.0-0.4 nats lower in every
+#:   cell but one (steady 50 and 150: +0.01), most with the smoothed wind (6.04 to 5.85, 6.10
+#:   to 5.69) and at 150 filament readings (5.94 to 5.63); SL error unchanged to 0.01 m;
+#:   calibration error lower in 7 of the 10 cells, at most 0.006 higher in the others.
+#: * ``openings``: none.  0.05 brought the filament calibration error at 50 readings from 0.050
+#:   to 0.028 but the steady one from 0.025 to 0.040 (``--counts 20 50 150 --trials 5``).
+#:
 #: Searches keep no floor (:data:`SEARCH_ESTIMATOR`): they were measured without it.
-LEARNED_FLOOR = 0.05
-#: The levels where that floor holds (``learned_floor_levels``).
-LEARNED_FLOOR_LEVELS: tuple[str, ...] = ("map",)
+LEARNED_FLOOR: dict[str, float] = {"map": 0.05, "wind": 0.02}
 #: The utility planner's settings for searches with dgse-phys (``dgse demo``, the search
 #: benchmarks), chosen on validation scenarios (``python benchmarks/phys_search.py --set
 #: validation --rule R``):
@@ -562,12 +573,11 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             network), weight ``max(learned_floor, learned_weight * max(0, 1 - m /
             learned_readings))`` for ``m`` readings: the network where the readings are few,
             the physics after.
-        learned_floor, learned_floor_levels: at the levels ``learned_floor_levels`` the
-            network's weight never falls below ``learned_floor`` (0: the physics alone from
-            ``learned_readings`` on; at a level of these not in ``learned_levels`` the weight
-            is the floor alone); a floor caps how sure of a wrong spot the mixture can be, at
-            the cost of slower mass stops (:data:`LEARNED_FLOOR`, 0.05 since 2026-11-28 d;
-            the searches use 0).
+        learned_floor: the network's weight never falls below this, at any level (0: the
+            physics alone from ``learned_readings`` on, and at the levels not in
+            ``learned_levels``); None: the level's :data:`LEARNED_FLOOR` (0.05 at ``map``,
+            0.02 at ``wind`` since 2026-11-28 d; the searches use 0).  A floor caps how sure of
+            a wrong spot the mixture can be, at the cost of slower mass stops.
         hypothesis_readings: beyond this many readings the flow hypotheses' weights are
             tempered, ``T = m / hypothesis_readings`` (None: not tempered).
         wind_likelihood: how the wind readings weigh the flow hypotheses: ``"sensor"``
@@ -647,9 +657,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     map_proposal_model: str = "default"
     learned_weight: float = LEARNED_WEIGHT
     learned_readings: float = LEARNED_READINGS
-    learned_floor: float = LEARNED_FLOOR
+    learned_floor: float | None = None
     learned_levels: Sequence[str] = ("map",)
-    learned_floor_levels: Sequence[str] = LEARNED_FLOOR_LEVELS
     hypothesis_readings: float | None = None
     wind_likelihood: str = "sensor"
     refine_speeds: int = 4
@@ -699,17 +708,18 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             raise InputDataError(
                 f"censored_ranking must be one of {CENSORED_RANKINGS}, got {self.censored_ranking!r}"
             )
-        for key in ("learned_levels", "learned_floor_levels"):
-            levels = tuple(str(v) for v in getattr(self, key))
-            bad = [v for v in levels if v not in self.knowledge_levels]
-            if bad:
-                known = list(self.knowledge_levels)
-                raise InputDataError(f"{key}: unknown knowledge levels {bad}; use {known}")
-            setattr(self, key, levels)
+        levels = tuple(str(v) for v in self.learned_levels)
+        bad = [v for v in levels if v not in self.knowledge_levels]
+        if bad:
+            known = list(self.knowledge_levels)
+            raise InputDataError(f"learned_levels: unknown knowledge levels {bad}; use {known}")
+        self.learned_levels = levels
         if not (0.0 <= self.learned_weight <= 1.0):
             raise InputDataError(f"learned_weight must be in [0, 1], got {self.learned_weight}")
-        if not (0.0 <= self.learned_floor <= self.learned_weight):
-            raise InputDataError(f"learned_floor must be in [0, learned_weight], got {self.learned_floor}")
+        if self.learned_floor is not None and not (0.0 <= self.learned_floor <= self.learned_weight):
+            raise InputDataError(
+                f"learned_floor must be in [0, learned_weight] or None, got {self.learned_floor}"
+            )
         if not (self.learned_readings > 0 and math.isfinite(self.learned_readings)):
             raise InputDataError(f"learned_readings must be positive, got {self.learned_readings}")
         rs = self.refine_speeds
@@ -863,7 +873,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         fading = 0.0
         if k.level in self.learned_levels:
             fading = self.learned_weight * max(0.0, 1.0 - m / self.learned_readings)
-        floor = self.learned_floor if k.level in self.learned_floor_levels else 0.0
+        floor = LEARNED_FLOOR.get(k.level, 0.0) if self.learned_floor is None else self.learned_floor
         return float(max(floor, fading))
 
     def _learned_belief(self, occupancy: np.ndarray, resolution: float, obs: Observations) -> Belief:
