@@ -299,6 +299,22 @@ def test_learned_belief_is_mixed_in_where_the_readings_are_few(case):
         get_estimator("dgse-phys", learned_levels=("plan",))
 
 
+def test_a_map_the_network_cannot_take_leaves_the_physics_alone(case, monkeypatch):
+    """Where DGSE-S refuses the map (its cell size), dgse-phys answers with the physics alone
+    and says so, instead of failing."""
+    k = Knowledge.from_case(case, "map")
+    obs = draw_observations(case, 10, seed=7)
+    est = get_estimator("dgse-phys", knowledge=k, map_proposals=1)
+
+    def refuse(*args):
+        raise InputDataError("this dgse-s model works on 0.1 m cells or whole multiples of them")
+
+    monkeypatch.setattr(est, "_learned_belief", refuse)
+    b = est.estimate(case.occupancy, case.resolution, obs)
+    assert b.info["learned_weight"] == 0.0 and "0.1 m cells" in b.info["learned_note"]
+    assert np.isclose(b.source_probs.sum(), 1.0)
+
+
 def test_predictive_sources_stand_for_the_whole_posterior():
     """Systematic draws: a thin broad region holding most of the mass gets most of the draws."""
     p = np.zeros(1000)

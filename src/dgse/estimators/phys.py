@@ -572,7 +572,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             ``learned_levels`` the source posterior is mixed with DGSE-S's (the shipped
             network), weight ``max(learned_floor, learned_weight * max(0, 1 - m /
             learned_readings))`` for ``m`` readings: the network where the readings are few,
-            the physics after.
+            the physics after.  On a map whose cells the network cannot take (not a whole
+            multiple of its own) the physics stands alone and ``info["learned_note"]`` says why.
         learned_floor: the network's weight never falls below this, at any level (0: the
             physics alone from ``learned_readings`` on, and at the levels not in
             ``learned_levels``); None: the level's :data:`LEARNED_FLOOR` (0.05 at ``map``,
@@ -1010,10 +1011,15 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         self._refine_speed(hyps, hw, len(obs))
         mesh = hyps[0].flow.mesh
         w_learned = self._learned_weight(len(obs))
+        learned_note = None
         if w_learned > 0:
-            net = self._learned_belief(occ, res, obs)
-            post = (1.0 - w_learned) * post + w_learned * mesh.values(net.source_probs)
-            post /= post.sum()
+            try:
+                net = self._learned_belief(occ, res, obs)
+            except InputDataError as exc:  # a map the network cannot take (its cell size)
+                w_learned, learned_note = 0.0, f"DGSE-S left out: {exc}"
+            else:
+                post = (1.0 - w_learned) * post + w_learned * mesh.values(net.source_probs)
+                post /= post.sum()
         # wind: mixture mean and variance of the hypotheses' winds
         winds = np.stack([s * h.flow.wind for s, h in zip(scales, hyps, strict=True)])  # (H, 2, H, W)
         wind_mean = np.tensordot(hw, winds, axes=1)
@@ -1067,6 +1073,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             "best_hypothesis": hyps[best_h].label,
             "wind_misfit": min(misfits),
             "learned_weight": w_learned,
+            "learned_note": learned_note,
             "temperature": temp,
             "gas_misfit": misfit,
             "misfit_flattening": flatten,
