@@ -27,23 +27,14 @@ from typing import Any
 import numpy as np
 from validation_tuning import checked_options, pooled, scores, tuning_parser, validation_readings
 
-from dgse.estimators.belief import Belief
 from dgse.estimators.knowledge import Knowledge
-from dgse.estimators.phys import flattened, gas_misfit
+from dgse.estimators.phys import flattened
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.calibration import (
     chance_calibration_error,
 )
 
 TAUS = (1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0)
-
-
-def readings_misfit(belief: Belief, cells: np.ndarray, z: np.ndarray) -> float:
-    """:func:`~dgse.estimators.phys.gas_misfit` of the readings on the posterior's most
-    probable source (its heaviest flow), as dgse-phys computes it."""
-    model = belief.info["response_model"]
-    best = int(np.argmax(model.flow.mesh.values(belief.source_probs)))
-    return gas_misfit(model.flow.responses(cells)[:, best] * model.q_map[best], z, model)
 
 
 def rules() -> dict[str, Callable[[float], float]]:
@@ -127,7 +118,7 @@ def main() -> None:
                 **key,
                 "options": options,
                 "temperature": b.info["temperature"],
-                "fit": {"chi2": readings_misfit(b, obs.cells, obs.gas)},
+                "fit": {"chi2": b.info["gas_misfit"]},
                 "tau": {f"{t:g}": scores(flattened(b.source_probs, t), case) for t in TAUS},
                 "seconds": b.info["seconds"],
             }

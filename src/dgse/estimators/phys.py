@@ -145,10 +145,11 @@ LEARNED_READINGS = 50.0
 #: * ``wind`` (``--variants steady filament`` and ``wind_rotated wind_smoothed wind_x2``,
 #:   ``--counts 50 150 --trials 2``, 48 estimates a cell, chance 0.04;
 #:   ``benchmarks/results/phys_fusion_tuning_wind_perturbed/``): 0.02 (0.05 put steady and
-#:   twice-too-fast winds at 150 readings 0.011 above).  Mean CE 0.0-0.4 nats lower in every
-#:   cell but one (steady 50 and 150: +0.01), most with the smoothed wind (6.04 to 5.85, 6.10
-#:   to 5.69) and at 150 filament readings (5.94 to 5.63); SL error unchanged to 0.01 m;
-#:   calibration error lower in 7 of the 10 cells, at most 0.006 higher in the others.
+#:   twice-too-fast winds at 150 readings 0.011 above).  Mean CE 0.04-0.40 nats lower in 5 of
+#:   the 10 cells, most with the smoothed wind (6.04 to 5.85, 6.10 to 5.69), the rotated wind
+#:   and filament readings at 150 (5.22 to 4.86, 5.94 to 5.63), and at most 0.008 higher in the
+#:   others; SL error unchanged to 0.01 m; calibration error lower in 8 of the 10 cells, at
+#:   most 0.006 higher in the other two (steady and twice too fast at 150).
 #: * ``openings``: none.  0.05 brought the filament calibration error at 50 readings from 0.050
 #:   to 0.028 but the steady one from 0.025 to 0.040 (``--counts 20 50 150 --trials 5``).
 #:
