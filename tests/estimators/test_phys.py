@@ -449,3 +449,11 @@ def test_search_planner_at_map_holds_stops_and_declares_the_heaviest_disk():
     for level in ("openings", "wind"):
         planner = get_planner("utility", **search_planner(level))
         assert planner.max_wind_misfit is None and planner.deadline_estimate_radius_m is None
+
+
+@pytest.mark.parametrize("name", ["censored", "censored_tilt"])
+def test_censoring_switches_must_be_booleans(name):
+    """A switch given as text (``-E censored_tilt='"false"'``) would read as true: refused."""
+    with pytest.raises(InputDataError, match=name):
+        PhysicsGuidedEstimator(**{name: "false"})
+    assert getattr(PhysicsGuidedEstimator(**{name: False}), name) is False

@@ -132,7 +132,9 @@ def test_censored_evidence_for_candidates_the_positive_readings_hardly_see(seed:
     """Candidates 1 and 2 respond 20-200 times less than the source at the positive readings
     (their rate estimate lies far above q_max) but strongly at the zeros: the zeros pull
     their rate to near 0, away from the mode a Gauss-Hermite rule around the clipped rate
-    would look at (7-11 nats off there before the fallback scan)."""
+    would look at (7-11 nats off there before the fallback scan).  The rate nodes that
+    follow the zeros bring Gauss-Hermite within a tenth of a nat, and the scan, which
+    doubled a search step when every such candidate took it, is left to the probe."""
     rng = np.random.default_rng(seed)
     m, n = 20, 4
     A = rng.uniform(0, 1, (m, n)) * (rng.uniform(0, 1, (m, n)) < 0.7)
@@ -146,7 +148,28 @@ def test_censored_evidence_for_candidates_the_positive_readings_hardly_see(seed:
         [_censored_brute_force(A[:, s], z, 5.0, 1.0, det["s0"] ** 2, shift=0.5 * m) for s in range(n)]
     )
     d = (logl - brute) - (logl - brute)[np.argmax(brute)]
-    assert np.abs(d).max() < 0.05
+    assert np.abs(d).max() < 0.1
+
+
+@pytest.mark.parametrize("seed", [0, 2])
+def test_censored_evidence_under_a_high_noise_floor(seed: int) -> None:
+    """A noise floor far above the plume (test 2008 of the searches: sigma_env 714 ppm where
+    the robot read 0-300 ppm of gas) reads half zeros and half noise: the positive readings
+    alone put the rate 6-8 of its spreads above where the zeros put it, beyond every node of
+    a rule on their own posterior.  The nodes follow the zeros there (the kernel's tilted
+    rate nodes); before, this case missed by up to 0.4 nats here and 21 nats on test 2008."""
+    rng = np.random.default_rng(seed)
+    m, n = 40, 6
+    A = rng.uniform(50.0, 300.0, (m, n)) * rng.uniform(0.3, 3.0, (1, n))
+    z = np.maximum(0.05 * A[:, 0] + 300.0 * rng.standard_normal(m), 0.0)
+    assert 15 <= (z == 0).sum() <= 25
+    part, det = adjoint_log_evidence(A, z, q_max=5.0, kappas=(0.0,), alpha0=1.0, censored="deferred")
+    logl = part + censored_correction(logl=part, **det["censor"], tail=0.0)
+    brute = np.array(
+        [_censored_brute_force(A[:, s], z, 5.0, 1.0, det["s0"] ** 2, shift=0.5 * m) for s in range(n)]
+    )
+    d = (logl - brute) - (logl - brute)[np.argmax(brute)]
+    assert np.abs(d).max() < 0.01
 
 
 def test_censored_factor_of_a_candidate_no_positive_reading_sees() -> None:

@@ -73,7 +73,30 @@ def test_plug_in_factor_is_the_sum_of_log_phi() -> None:
     np.testing.assert_allclose(plug_in_log_factor(Bt, lam), want, rtol=0.0, atol=7e-10)
 
 
-def _factor(Bt, qhat, aa, beta_n, alpha_n, margin):
+def test_tilted_plug_in_factor_is_the_plug_in_one_where_the_zeros_do_not_move_the_rate() -> None:
+    """Where the positive readings pin the rate (large ``aa``), the zeros' plug-in factor is
+    :func:`plug_in_log_factor`'s; where many zeros see a candidate the positive readings see
+    weakly, the rate moves towards 0 and the factor is far less negative, what the positive
+    readings lose by the move charged against it."""
+    from dgse.localization.censored_kernel import plug_in_log_factor, tilted_plug_in_log_factor
+
+    rng = np.random.default_rng(4)
+    n, c = 40, 12
+    Bt = rng.exponential(1.0, (n, c))
+    qhat = rng.uniform(0.5, 2.0, n)
+    t = np.full(n, 0.0)
+    pinned = np.full(n, 1e8)
+    plain = plug_in_log_factor(Bt, qhat)  # lambda = q sqrt(tau) with tau = 1
+    np.testing.assert_allclose(tilted_plug_in_log_factor(Bt, qhat, pinned, t, 5.0), plain, atol=1e-12)
+    loose = np.full(n, 1.0)
+    tilted = tilted_plug_in_log_factor(Bt, qhat, loose, t, 5.0)
+    assert np.all(tilted > plain + 1.0)
+    # a maximum over q: at least its value at q = 0, at most c log(1/2) (each zero's bound)
+    assert np.all(tilted >= c * np.log(0.5) - 0.5 * qhat**2 - 1e-9)
+    assert np.all(tilted <= c * np.log(0.5) + 1e-9)
+
+
+def _factor(Bt, qhat, aa, beta_n, alpha_n, margin, tilt_min=None):
     """The kernel on its own, with the censored correction's rules and a given scan margin."""
     from dgse.localization import adjoint, censored_kernel
 
@@ -86,24 +109,33 @@ def _factor(Bt, qhat, aa, beta_n, alpha_n, margin):
         Bt, qhat, aa, beta_n, alpha_n, 5.0, np.zeros(n), u, log_wu, xh, wh,
         adjoint._chebyshev_coefficient_matrix(adjoint.CENSORED_CHEBYSHEV_POINTS),
         adjoint.CENSORED_NEWTON_STEPS, adjoint.CENSORED_FLOOR, margin, scanned,
+        censored_kernel.TILT_MIN if tilt_min is None else tilt_min,
     )  # fmt: skip
     return out, scanned
 
 
 def test_scan_agrees_with_gauss_hermite_where_that_is_right_and_takes_over_where_not() -> None:
     """Two candidates the positive readings see well (rate 2 of at most 5, a narrow noise
-    posterior), one they put far above q_max while the zeros see it: Gauss-Hermite and
-    the scan agree on the first two; the default margin scans the third, where the
-    Gauss-Hermite value around the clipped rate is nats too low."""
+    posterior), one they put far above q_max while the zeros see it and push its rate
+    below 0.  With rate nodes that stay where the positive readings put the rate
+    (``tilt_min=inf``, the kernel before 2026-11-28 e), Gauss-Hermite around the clipped
+    rate is 2.8 nats too low on the third and the default margin scans it; with nodes
+    that follow the zeros, Gauss-Hermite is right on all three and nothing is scanned."""
     Bt = np.array([[0.3, 0.1, 0.0], [0.05, 0.2, 0.1], [1.1, 0.6, 0.0]])
     qhat = np.array([2.0, 1.5, 18.0])
     aa = np.array([40.0, 25.0, 0.011])
     beta_n = np.array([4.0, 4.0, 2.1])
-    gh, none = _factor(Bt, qhat, aa, beta_n, 7.5, math.inf)
-    scan, every = _factor(Bt, qhat, aa, beta_n, 7.5, -math.inf)
-    default, which = _factor(Bt, qhat, aa, beta_n, 7.5, 0.5)
+    off = math.inf
+    gh, none = _factor(Bt, qhat, aa, beta_n, 7.5, math.inf, off)
+    scan, every = _factor(Bt, qhat, aa, beta_n, 7.5, -math.inf, off)
+    default, which = _factor(Bt, qhat, aa, beta_n, 7.5, 0.5, off)
     assert not none.any() and every.all()
     np.testing.assert_allclose(gh[:2], scan[:2], atol=0.01)
     assert list(which) == [0, 0, 1]
     assert default[2] == scan[2]
     assert gh[2] < scan[2] - 1.0
+    tilted, tilted_which = _factor(Bt, qhat, aa, beta_n, 7.5, 0.5)
+    tilted_scan, _ = _factor(Bt, qhat, aa, beta_n, 7.5, -math.inf)
+    assert not tilted_which.any()
+    np.testing.assert_allclose(tilted, tilted_scan, atol=0.02)
+    np.testing.assert_allclose(tilted, scan, atol=0.02)

@@ -72,7 +72,12 @@ posterior of ``(q, tau)`` given the positive readings
 around the integrand's mode, composite Gauss-Legendre over ``q``'s
 conditional CDF, the zeros' sum interpolated in ``q sqrt(tau)`` through
 Chebyshev points; within a few hundredths of a nat of brute-force
-integration in the tests).  Candidates whose positive-readings evidence
+integration in the tests).  Where the zeros pull the rate far from the positive
+readings' estimate (a noise floor far above the plume reads half zeros and half
+noise, and the positive readings alone then put the rate many of its spreads too
+high), the rate's nodes follow a normal fitted to the product and carry importance
+weights (``censored_kernel._rate_nodes``): without that, test 2008 of the searches
+missed the true source's factor by 21 nats.  Candidates whose positive-readings evidence
 leaves less than ``CENSORED_TAIL`` of the mass are left at the factor's
 plug-in value, and so are those the zero sensors cannot see (``q sqrt(tau)
 sum_i a_i / (sigma r_i)`` below ``CENSORED_FAINT`` even at the rate prior's
@@ -509,6 +514,7 @@ def _censored_log_factor(
     alpha_n: float,
     q_max: float | None,
     log_mass: np.ndarray,
+    tilt_min: float = censored_kernel.TILT_MIN,
 ) -> np.ndarray:
     """``log E[prod_i Phi(-q B_i sqrt(tau))]`` under the posterior of ``(q, tau)`` from the positive readings.
 
@@ -521,6 +527,8 @@ def _censored_log_factor(
         q_max: the rate prior's upper end (None: unbounded).
         log_mass: ``(n,)`` ``log P(0 <= q <= q_max)`` under the uncensored posterior (the
             Student-t mass of :func:`_evidence`): the normalizer.
+        tilt_min: where the rate's nodes follow the zeros
+            (:data:`~dgse.localization.censored_kernel.TILT_MIN`; ``inf``: never).
 
     Given ``tau``, ``q`` is ``N(qhat, 1 / (tau aa))`` truncated to ``[0, q_max]``; ``tau`` is
     ``Gamma(alpha_n, beta_n)`` weighted by that truncation's mass.  The zeros can move the
@@ -553,6 +561,7 @@ def _censored_log_factor(
         CENSORED_FLOOR,
         CENSORED_SCAN_MARGIN,
         np.zeros(len(qhat), dtype=np.uint8),
+        tilt_min,
     )
 
 
@@ -593,6 +602,7 @@ def censored_correction(
     beta0: float,
     tail: float = CENSORED_TAIL,
     ranking: str | None = None,
+    tilt: bool = True,
 ) -> np.ndarray:
     """``log p(z_censored | z_rest, s)`` per candidate ``s``: what the zero readings add.
 
@@ -601,7 +611,9 @@ def censored_correction(
     noise floor given the positive readings (:func:`_censored_log_factor`) for the candidates
     that hold the posterior mass: candidates are ranked, and the exact factor is computed
     down the ranking until the rest hold less than ``tail`` of the mass computed so far; the
-    rest keep a plug-in value (rate and noise at their point estimates).
+    rest keep a plug-in value (the noise at its point estimate, the rate at the positive
+    readings' estimate or, where the zeros move it, at the maximum of the two factors
+    together: :func:`~dgse.localization.censored_kernel.tilted_plug_in_log_factor`).
 
     ``ranking`` (default :data:`CENSORED_RANKING`): ``"plug-in"`` ranks by that plug-in
     value.  It is an approximation: after few positive readings the noise posterior is
@@ -611,6 +623,10 @@ def censored_correction(
     upper bound (the positive readings' evidence times ``1/2`` per zero the response
     reaches) and so leaves out at most ``tail`` of the mass (why it is not the default:
     :data:`CENSORED_RANKING`).
+
+    ``tilt`` (default True): where the zeros move the rate far from the positive readings'
+    estimate, the rate's nodes and the plug-in value follow them (see the module doc's
+    "Zero readings"); False gives the factor as it was computed before 2026-11-28 e.
 
     Args:
         A: ``(m, N)`` responses; z: ``(m,)`` readings (zeros are the censored ones);
@@ -634,8 +650,15 @@ def censored_correction(
     aa, az, zz = _weighted_sums(Ap, Ap * Ap, zp, r[pos])
     qh = az / aa
     beta_n = beta0 + 0.5 * np.maximum(zz - az * qh, 0.0)
-    lam = np.clip(qh, 0.0, qmax) * np.sqrt(alpha_n / beta_n)
-    out = censored_kernel.plug_in_log_factor(Bt, np.ascontiguousarray(lam))
+    tilt_min = censored_kernel.TILT_MIN if tilt else math.inf
+    out = censored_kernel.tilted_plug_in_log_factor(
+        Bt,
+        np.ascontiguousarray(qh),
+        np.ascontiguousarray(aa),
+        np.log(alpha_n / beta_n),
+        float(qmax),
+        tilt_min,
+    )
     key = logl + out
     # the ranking and the stop: the plug-in value, or an upper bound of the factor (see above)
     ranking = CENSORED_RANKING if ranking is None else ranking
@@ -664,7 +687,9 @@ def censored_correction(
             scale = np.sqrt(beta_n[idx] / (alpha_n * aa[idx]))
         hi = np.full(idx.shape, np.inf) if q_max is None else (q_max - qh[idx]) / scale
         log_mass = log_interval(-qh[idx] / scale, hi, 2.0 * alpha_n)
-        return _censored_log_factor(Bt[idx], qh[idx], aa[idx], beta_n[idx], alpha_n, q_max, log_mass)
+        return _censored_log_factor(
+            Bt[idx], qh[idx], aa[idx], beta_n[idx], alpha_n, q_max, log_mass, tilt_min
+        )
 
     # chunks down the ranking, as many at once as there are worker threads (the compiled
     # kernel releases the GIL), until the rest of the ranking holds a negligible share

@@ -33,6 +33,15 @@ a small rate, away from that mode; a probe of the integrand near the positive re
 noise precision detects it, and :func:`_scan_log_integral` integrates such a candidate
 without a guessed mode (``benchmarks/censored_accuracy.py`` measures both against a
 brute-force integral).
+
+Given ``tau``, the rate's nodes sit at quantiles of the positive readings' normal
+posterior of it.  With a noise floor far above the plume, half the readings are zeros
+and the positive ones noise: their rate lies many spreads above where the zeros put
+it, and the product's mass lies beyond every node.  Where a Newton step from the
+positive readings' rate moves it by more than ``TILT_MIN`` of its spread (or the zeros
+narrow it below that share), the nodes follow a normal fitted to the product and
+carry the ratio of the two densities (:func:`_rate_nodes`), and the Newton steps over
+``log tau`` take the moved rate.
 Pure functions of arrays; compiled on first use and cached on disk, like
 :mod:`dgse.physics.fv`.
 """
@@ -75,6 +84,14 @@ _SCAN_NEWTON = 12
 _SCAN_UNIFORM = 6
 _SCAN_MAX_STEPS = 60
 _SCAN_OUTSIDE_ALPHA = 5.0
+#: The rate's nodes follow the zeros (:func:`_rate_nodes`) where a Newton step from the
+#: positive readings' rate moves it by more than ``TILT_MIN`` of its spreads, or where the
+#: zeros narrow its spread below ``_TILT_NARROW`` of the positive readings' one.
+TILT_MIN = 2.0
+_TILT_NARROW = 0.5
+#: The most Newton steps to that rate's mode, and how close (in its spreads) they get.
+_TILT_NEWTON = 30
+_TILT_TOL = 1e-2
 
 # Acklam's coefficients of the normal quantile (central region and tails)
 _A = np.array(
@@ -297,14 +314,128 @@ def _truncation_mass(lo: float, hi: float) -> tuple[float, float, float, bool]:
 
 
 @_jit
-def _rate_nodes(t: float, qhat: float, aa: float, qmax: float, u: np.ndarray, lam: np.ndarray) -> float:
-    """Fill ``lam`` with ``q_j sqrt(tau)`` at the rate's nodes given ``tau = e^t`` (``q`` is
-    ``N(qhat, 1 / (tau aa))`` truncated to ``[0, qmax]``, node ``j`` at its CDF's ``u[j]``);
-    return the truncation's log mass."""
+def _zeros_slopes(lam: float, b: np.ndarray) -> tuple[float, float, float]:
+    """``G(lambda)`` and its first two derivatives in ``lambda`` (:func:`_log_phi_sum`)."""
+    g0 = 0.0
+    g1 = 0.0
+    g2 = 0.0
+    for i in range(b.size):
+        x = lam * b[i]
+        m = _mills(x)
+        g0 += log_ndtr_table(-x)
+        g1 -= b[i] * m
+        g2 -= b[i] * b[i] * m * (m - x)
+    return g0, g1, g2
+
+
+@_jit
+def _rate_mode(
+    t: float,
+    qhat: float,
+    aa: float,
+    qmax: float,
+    b: np.ndarray,
+    q_start: float,
+    checked: bool,
+    tilt_min: float,
+) -> tuple[float, float]:
+    """Where the zeros move the rate given ``tau = e^t``: ``(mode, sd)`` of a normal fitted
+    (Laplace) to ``log N(q; qhat, 1 / (tau aa)) + G(q sqrt(tau))``, or ``(nan, nan)`` where
+    the zeros move the rate by less than ``tilt_min`` (:data:`TILT_MIN`; ``inf``: never
+    tilt) of its spread and narrow it by less than :data:`_TILT_NARROW` (tested at the
+    positive readings' rate ``qc``; ``checked``: the caller has, and they do).
+
+    The function is concave in ``q`` (``log Phi`` is concave), so Newton's steps from
+    ``q_start`` (nan: ``qc``), halved while they do not climb, reach its maximum over the
+    real line (it may lie below 0: the truncation to ``[0, qmax]`` is the nodes' business,
+    as for the untilted normal).  They stop within :data:`_TILT_TOL` of its spread: the
+    nodes' importance weights make up for the rest.
+    """
+    if b.size == 0 or not (aa > 0.0) or tilt_min == math.inf:
+        return math.nan, math.nan
+    rt = math.exp(0.5 * t)
+    prec = rt * rt * aa
+    if not (prec > 0.0 and math.isfinite(prec)):
+        return math.nan, math.nan
+    qc = min(max(qhat, 0.0), qmax)
+    q = qc
+    g0, g1, g2 = 0.0, 0.0, 0.0
+    if not checked:
+        g0, g1, g2 = _zeros_slopes(q * rt, b)
+        d1 = -prec * (q - qhat) + rt * g1
+        d2 = -prec + rt * rt * g2
+        if not (d2 < 0.0 and math.isfinite(d1)):
+            return math.nan, math.nan
+        if abs(d1) / math.sqrt(-d2) < tilt_min and prec > _TILT_NARROW**2 * -d2:
+            return math.nan, math.nan
+    if math.isfinite(q_start) or checked:
+        q = q_start if math.isfinite(q_start) else qc
+        g0, g1, g2 = _zeros_slopes(q * rt, b)
+    d1 = -prec * (q - qhat) + rt * g1
+    d2 = -prec + rt * rt * g2
+    f = -0.5 * prec * (q - qhat) ** 2 + g0
+    for _ in range(_TILT_NEWTON):
+        if not (d2 < 0.0 and math.isfinite(d1)) or abs(d1) / math.sqrt(-d2) < _TILT_TOL:
+            break
+        step = -d1 / d2
+        moved = False
+        for _half in range(40):
+            qn = q + step
+            g0n, g1n, g2n = _zeros_slopes(qn * rt, b)
+            fn = -0.5 * prec * (qn - qhat) ** 2 + g0n
+            if fn >= f or not math.isfinite(f):
+                moved = True
+                break
+            step *= 0.5
+        if not moved:
+            break
+        q, f = qn, fn
+        d1 = -prec * (q - qhat) + rt * g1n
+        d2 = -prec + rt * rt * g2n
+    if not (d2 < 0.0 and math.isfinite(q)):
+        return math.nan, math.nan
+    return q, 1.0 / math.sqrt(-d2)
+
+
+@_jit
+def _rate_nodes(
+    t: float,
+    qhat: float,
+    aa: float,
+    qmax: float,
+    u: np.ndarray,
+    lam: np.ndarray,
+    b: np.ndarray,
+    rho: np.ndarray,
+    q_start: float,
+    tilt_min: float,
+) -> float:
+    """Fill ``lam`` with ``q_j sqrt(tau)`` at the rate's nodes given ``tau = e^t`` and ``rho``
+    with their log importance weights; return the log mass of the nodes' distribution on
+    ``[0, qmax]``.
+
+    The rate given ``tau`` is ``N(qhat, 1 / (tau aa))`` from the positive readings; the zeros
+    (responses ``b``) multiply it by ``exp(G(q sqrt(tau)))``.  Node ``j`` sits at its
+    distribution's CDF ``u[j]``.  Where the zeros hardly move the rate, that distribution
+    is the positive readings' normal truncated to ``[0, qmax]`` and ``rho = 0``.  Where they
+    move it by more than :data:`TILT_MIN` of its spread (many zeros where the positive
+    readings' rate puts gas: a high noise floor reads half zeros and half noise), the
+    product's mass lies far out in that normal's tail, beyond every node; the nodes then
+    follow a normal fitted to the product (:func:`_rate_mode`, Newton's steps from
+    ``q_start``), and ``rho`` is the ratio of the positive readings' density to it at each
+    node.
+    """
+    mode, msd = _rate_mode(t, qhat, aa, qmax, b, q_start, False, tilt_min)
+    tilted = math.isfinite(mode)
     # 1 / sd = sqrt(tau aa), as a product of roots: aa sits at 1e-300 for a candidate that
     # no positive reading sees, where tau aa would underflow
     rt = math.exp(0.5 * t)
     rs = rt * math.sqrt(aa)
+    prec_log = 2.0 * math.log(rs) if rs > 0.0 else -math.inf
+    q_pos = qhat
+    if tilted:
+        qhat = mode
+        rs = 1.0 / msd
     sd = 1.0 / rs
     lo = -qhat * rs
     hi = (qmax - qhat) * rs
@@ -334,6 +465,12 @@ def _rate_nodes(t: float, qhat: float, aa: float, qmax: float, u: np.ndarray, la
         x = min(max(x, lo), hi)
         q = min(max(qhat + sd * x, 0.0), qmax)
         lam[j] = q * rt
+        rho[j] = 0.0
+        if tilted:
+            # log N(q; q_pos, 1 / (tau aa)) - log N(q; mode, msd^2)
+            z_q = (q - qhat) * rs
+            log_pos = 0.5 * prec_log - 0.5 * math.exp(prec_log) * (q - q_pos) ** 2
+            rho[j] = log_pos + math.log(msd) + 0.5 * z_q * z_q
     return lmass
 
 
@@ -351,12 +488,14 @@ def _log_integrand(
     log_wu: np.ndarray,
     lam: np.ndarray,
     g: np.ndarray,
+    rho: np.ndarray,
+    tilt_min: float,
 ) -> float:
     """The integrand over ``t = log tau`` of one candidate (zeros' responses ``b``), the rate
     integrated at its nodes with the zeros' factor summed directly (no interpolation)."""
-    lmass = _rate_nodes(t, qhat, aa, qmax, u, lam)
+    lmass = _rate_nodes(t, qhat, aa, qmax, u, lam, b, rho, math.nan, tilt_min)
     for j in range(u.size):
-        g[j] = _log_phi_sum(lam[j], b)
+        g[j] = _log_phi_sum(lam[j], b) + rho[j]
     return _log_f(t, lmass, g, log_wu, alpha_n, bn, log_gamma_norm)
 
 
@@ -456,6 +595,35 @@ def plug_in_log_factor(Bt: np.ndarray, lam: np.ndarray) -> np.ndarray:
 
 
 @_jit
+def tilted_plug_in_log_factor(
+    Bt: np.ndarray, qhat: np.ndarray, aa: np.ndarray, t: np.ndarray, qmax: float, tilt_min: float = TILT_MIN
+) -> np.ndarray:
+    """The zeros' plug-in factor with the rate where the zeros move it.
+
+    Per candidate ``s``, at the noise precision ``tau = e^t[s]``: ``G(q sqrt(tau))`` at the
+    positive readings' rate ``qc = clip(qhat, 0, qmax)`` (:func:`plug_in_log_factor`), or,
+    where the zeros move the rate (:func:`_rate_mode`), the maximum over ``q`` in ``[0, qmax]``
+    of ``G(q sqrt(tau)) - tau aa ((q - qhat)^2 - (qc - qhat)^2) / 2``: what the positive
+    readings lose by the move is charged against what the zeros gain.  With a high noise
+    floor (half the readings zeros, the others noise) the untilted value of a candidate the
+    readings see sits hundreds of nats below the integrated factor.
+    """
+    n = Bt.shape[0]
+    out = np.empty(n)
+    for s in range(n):
+        qc = min(max(qhat[s], 0.0), qmax)
+        rt = math.exp(0.5 * t[s])
+        mode, _sd = _rate_mode(t[s], qhat[s], aa[s], qmax, Bt[s], math.nan, False, tilt_min)
+        if not math.isfinite(mode):
+            out[s] = _log_phi_sum(qc * rt, Bt[s])
+            continue
+        q = min(max(mode, 0.0), qmax)
+        prec = rt * rt * aa[s]
+        out[s] = _log_phi_sum(q * rt, Bt[s]) - 0.5 * prec * ((q - qhat[s]) ** 2 - (qc - qhat[s]) ** 2)
+    return out
+
+
+@_jit
 def censored_log_factor(
     Bt: np.ndarray,
     qhat: np.ndarray,
@@ -473,6 +641,7 @@ def censored_log_factor(
     floor: float,
     scan_margin: float,
     scanned: np.ndarray,
+    tilt_min: float = TILT_MIN,
 ) -> np.ndarray:
     """The zeros' log factor per candidate; the arithmetic of ``adjoint._censored_log_factor``.
 
@@ -491,6 +660,8 @@ def censored_log_factor(
             estimate outside ``[0, qmax]`` is scanned at any finite margin while ``alpha_n``
             is small; ``inf``: never);
         scanned: ``(n,)`` set to 1 where it was (written, not read).
+        tilt_min: where the rate's nodes follow the zeros (:func:`_rate_nodes`; ``inf``:
+            never, as before 2026-11-28 e).
     """
     n, c = Bt.shape
     nt, nq, npts = xh.size, u.size, cheb_matrix.shape[0]
@@ -503,6 +674,7 @@ def censored_log_factor(
     # the Gauss-Hermite nodes over log tau, and the probes from t0 (below)
     nk = nt + _PROBES.size
     lam = np.empty((nk, nq))
+    rho = np.empty((nk, nq))
     tks = np.empty(nk)
     lmass = np.empty(nk)
     terms = np.empty(nk)
@@ -515,19 +687,68 @@ def censored_log_factor(
         t0 = math.log(alpha_n / bn)
         t = t0
         d2 = 0.0
-        # Newton steps to the mode of alpha_n t - beta_n e^t + sum_i log Phi(-qc B_i e^(t/2)),
-        # then the curvature there (Laplace width)
+        # Newton steps to the mode of alpha_n t - beta_n e^t + sum_i log Phi(-q B_i e^(t/2)),
+        # then the curvature there (Laplace width).  The rate q is the positive readings'
+        # qc, or where the zeros move it (:func:`_rate_mode`) the moved one, whose cost to
+        # the positive readings, tau aa (q - qhat)^2 / 2, then enters too
+        q_mode = math.nan
+        q_t = qc
+        tilted = False
         for it in range(newton_steps + 1):
             e = math.exp(0.5 * t)
+            pen = 0.0
+            tilted = False
+            # the derivatives in t at qc, and the zeros' slopes in the rate there (the tilt
+            # test of _rate_mode), from one pass
             s1 = 0.0
             s2 = 0.0
+            g1 = 0.0
+            g2 = 0.0
             for i in range(c):
-                x = qc * Bt[s, i] * e
+                b = Bt[s, i]
+                x = qc * b * e
                 lm = _mills(x)
                 s1 += lm * x
                 s2 += (lm * (lm - x) * x + lm) * x
-            d1 = alpha_n - bn * e * e - 0.5 * s1
-            d2 = -bn * e * e - 0.25 * s2
+                g1 -= b * lm
+                g2 -= b * b * lm * (lm - x)
+            prec = e * e * aa[s]
+            dq1 = -prec * (qc - qhat[s]) + e * g1
+            dq2 = -prec + e * e * g2
+            if (
+                c > 0
+                and prec > 0.0
+                and dq2 < 0.0
+                and tilt_min < math.inf
+                and (abs(dq1) / math.sqrt(-dq2) >= tilt_min or prec <= _TILT_NARROW**2 * -dq2)
+            ):
+                mode, _sd = _rate_mode(t, qhat[s], aa[s], qmax, Bt[s], q_mode, True, tilt_min)
+                if math.isfinite(mode):
+                    tilted = True
+                    q_mode = mode
+                    q_t = min(max(mode, 0.0), qmax)
+                    pen = 0.5 * prec * ((q_t - qhat[s]) ** 2 - (qc - qhat[s]) ** 2)
+                    s1 = 0.0
+                    s2 = 0.0
+                    g1 = 0.0
+                    g2 = 0.0
+                    for i in range(c):
+                        b = Bt[s, i]
+                        x = q_t * b * e
+                        lm = _mills(x)
+                        s1 += lm * x
+                        s2 += (lm * (lm - x) * x + lm) * x
+                        g1 -= b * lm
+                        g2 -= b * b * lm * (lm - x)
+            d1 = alpha_n - bn * e * e - pen - 0.5 * s1
+            d2 = -bn * e * e - pen - 0.25 * s2
+            if tilted and 0.0 < q_t < qmax:
+                # the rate follows t (it sits at its conditional mode): the curvature of the
+                # profile over t is the partial one less f_tq^2 / f_qq
+                f_qq = -prec + e * e * g2
+                f_tq = 0.5 * e * (q_t * e * g2 - g1)
+                if f_qq < 0.0:
+                    d2 -= f_tq * f_tq / f_qq
             if it == newton_steps:
                 break
             step = min(max(d1 / min(d2, -1e-6), -3.0), 3.0)
@@ -542,7 +763,7 @@ def censored_log_factor(
         for k in range(nk):
             tk = t + math.sqrt(2.0) * width * xh[k] if k < nt else t0 + _PROBES[k - nt]
             tks[k] = tk
-            lmass[k] = _rate_nodes(tk, qhat[s], aa[s], qmax, u, lam[k])
+            lmass[k] = _rate_nodes(tk, qhat[s], aa[s], qmax, u, lam[k], Bt[s], rho[k], q_mode, tilt_min)
             for j in range(nq):
                 if k < nt and lam[k, j] > lam_max:
                     lam_max = lam[k, j]
@@ -567,6 +788,7 @@ def censored_log_factor(
                     for p in range(npts - 1, 0, -1):
                         b1, b2 = coef[p] + y2 * b1 - b2, b1
                     g[j] = coef[0] + 0.5 * y2 * b1 - b2
+                g[j] += rho[k, j]
             log_f = _log_f(tks[k], lmass[k], g, log_wu, alpha_n, bn, log_gamma_norm)
             if k >= nt:
                 terms[k] = log_f
@@ -596,10 +818,29 @@ def censored_log_factor(
                 f_best = lf
                 t_best = tks[k]
         probe += 0.5 * math.log(2.0 * math.pi / alpha_n)
-        outside = alpha_n <= _SCAN_OUTSIDE_ALPHA and (qhat[s] > qmax or qhat[s] < 0.0)
-        if scan_margin < math.inf and math.isfinite(probe) and (outside or not (probe <= val + scan_margin)):
+        # so is one whose rate the zeros move (tilted) while the positive readings are few:
+        # the integrand over log tau is then skewed and four nodes miss by tenths of a nat
+        # (with more readings by hundredths where the zeros push the rate below 0; scanning
+        # those, most of the candidates downwind of clean air, doubled a search step)
+        outside = alpha_n <= _SCAN_OUTSIDE_ALPHA and (qhat[s] > qmax or qhat[s] < 0.0 or tilted)
+        missed = not (probe <= val + scan_margin)
+        if scan_margin < math.inf and math.isfinite(probe) and (outside or missed):
             scanned[s] = 1
-            args = (Bt[s], qhat[s], aa[s], bn, alpha_n, log_gamma_norm, qmax, u, log_wu, lam[0], g)
+            args = (
+                Bt[s],
+                qhat[s],
+                aa[s],
+                bn,
+                alpha_n,
+                log_gamma_norm,
+                qmax,
+                u,
+                log_wu,
+                lam[0],
+                g,
+                rho[0],
+                tilt_min,
+            )
             val = _scan_log_integral(t_best, min(t, t0) - _SCAN_REACH, max(t, t0) + _SCAN_REACH, args)
         val -= log_mass[s]
         out[s] = min(max(val, floor), 0.0) if math.isfinite(val) else floor
