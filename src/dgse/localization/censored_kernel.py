@@ -314,18 +314,29 @@ def _truncation_mass(lo: float, hi: float) -> tuple[float, float, float, bool]:
 
 
 @_jit
-def _zeros_slopes(lam: float, b: np.ndarray) -> tuple[float, float, float]:
-    """``G(lambda)`` and its first two derivatives in ``lambda`` (:func:`_log_phi_sum`)."""
-    g0 = 0.0
+def _tau_sums(lam: float, b: np.ndarray) -> tuple[float, float, float, float]:
+    """At ``lambda = q sqrt(tau)``: ``(s1, s2)``, the sums the derivatives of ``G`` in ``log tau``
+    are made of, and ``(G', G'')`` in ``lambda`` (:func:`_zeros_slopes` without ``G``), from
+    one Mills ratio per zero."""
+    s1 = 0.0
+    s2 = 0.0
     g1 = 0.0
     g2 = 0.0
     for i in range(b.size):
         x = lam * b[i]
-        m = _mills(x)
-        g0 += log_ndtr_table(-x)
-        g1 -= b[i] * m
-        g2 -= b[i] * b[i] * m * (m - x)
-    return g0, g1, g2
+        lm = _mills(x)
+        s1 += lm * x
+        s2 += (lm * (lm - x) * x + lm) * x
+        g1 -= b[i] * lm
+        g2 -= b[i] * b[i] * lm * (lm - x)
+    return s1, s2, g1, g2
+
+
+@_jit
+def _zeros_slopes(lam: float, b: np.ndarray) -> tuple[float, float, float]:
+    """``G(lambda)`` and its first two derivatives in ``lambda`` (:func:`_log_phi_sum`)."""
+    _s1, _s2, g1, g2 = _tau_sums(lam, b)
+    return _log_phi_sum(lam, b), g1, g2
 
 
 @_jit
@@ -700,18 +711,7 @@ def censored_log_factor(
             tilted = False
             # the derivatives in t at qc, and the zeros' slopes in the rate there (the tilt
             # test of _rate_mode), from one pass
-            s1 = 0.0
-            s2 = 0.0
-            g1 = 0.0
-            g2 = 0.0
-            for i in range(c):
-                b = Bt[s, i]
-                x = qc * b * e
-                lm = _mills(x)
-                s1 += lm * x
-                s2 += (lm * (lm - x) * x + lm) * x
-                g1 -= b * lm
-                g2 -= b * b * lm * (lm - x)
+            s1, s2, g1, g2 = _tau_sums(qc * e, Bt[s])
             prec = e * e * aa[s]
             dq1 = -prec * (qc - qhat[s]) + e * g1
             dq2 = -prec + e * e * g2
@@ -728,18 +728,7 @@ def censored_log_factor(
                     q_mode = mode
                     q_t = min(max(mode, 0.0), qmax)
                     pen = 0.5 * prec * ((q_t - qhat[s]) ** 2 - (qc - qhat[s]) ** 2)
-                    s1 = 0.0
-                    s2 = 0.0
-                    g1 = 0.0
-                    g2 = 0.0
-                    for i in range(c):
-                        b = Bt[s, i]
-                        x = q_t * b * e
-                        lm = _mills(x)
-                        s1 += lm * x
-                        s2 += (lm * (lm - x) * x + lm) * x
-                        g1 -= b * lm
-                        g2 -= b * b * lm * (lm - x)
+                    s1, s2, g1, g2 = _tau_sums(q_t * e, Bt[s])
             d1 = alpha_n - bn * e * e - pen - 0.5 * s1
             d2 = -bn * e * e - pen - 0.25 * s2
             if tilted and 0.0 < q_t < qmax:
