@@ -314,16 +314,17 @@ def _truncation_mass(lo: float, hi: float) -> tuple[float, float, float, bool]:
 
 
 @_jit
-def _tau_sums(lam: float, b: np.ndarray) -> tuple[float, float, float, float]:
-    """At ``lambda = q sqrt(tau)``: ``(s1, s2)``, the sums the derivatives of ``G`` in ``log tau``
-    are made of, and ``(G', G'')`` in ``lambda`` (:func:`_zeros_slopes` without ``G``), from
-    one Mills ratio per zero."""
+def _tau_sums(q: float, e: float, b: np.ndarray) -> tuple[float, float, float, float]:
+    """At ``lambda = q e`` (``e = sqrt(tau)``): ``(s1, s2)``, the sums the derivatives of ``G`` in
+    ``log tau`` are made of, and ``(G', G'')`` in ``lambda`` (:func:`_zeros_slopes` without
+    ``G``), from one Mills ratio per zero (``x = q b_i e`` in that order, as the kernel
+    always rounded it)."""
     s1 = 0.0
     s2 = 0.0
     g1 = 0.0
     g2 = 0.0
     for i in range(b.size):
-        x = lam * b[i]
+        x = q * b[i] * e
         lm = _mills(x)
         s1 += lm * x
         s2 += (lm * (lm - x) * x + lm) * x
@@ -335,7 +336,7 @@ def _tau_sums(lam: float, b: np.ndarray) -> tuple[float, float, float, float]:
 @_jit
 def _zeros_slopes(lam: float, b: np.ndarray) -> tuple[float, float, float]:
     """``G(lambda)`` and its first two derivatives in ``lambda`` (:func:`_log_phi_sum`)."""
-    _s1, _s2, g1, g2 = _tau_sums(lam, b)
+    _s1, _s2, g1, g2 = _tau_sums(lam, 1.0, b)
     return _log_phi_sum(lam, b), g1, g2
 
 
@@ -711,7 +712,7 @@ def censored_log_factor(
             tilted = False
             # the derivatives in t at qc, and the zeros' slopes in the rate there (the tilt
             # test of _rate_mode), from one pass
-            s1, s2, g1, g2 = _tau_sums(qc * e, Bt[s])
+            s1, s2, g1, g2 = _tau_sums(qc, e, Bt[s])
             prec = e * e * aa[s]
             dq1 = -prec * (qc - qhat[s]) + e * g1
             dq2 = -prec + e * e * g2
@@ -728,7 +729,7 @@ def censored_log_factor(
                     q_mode = mode
                     q_t = min(max(mode, 0.0), qmax)
                     pen = 0.5 * prec * ((q_t - qhat[s]) ** 2 - (qc - qhat[s]) ** 2)
-                    s1, s2, g1, g2 = _tau_sums(q_t * e, Bt[s])
+                    s1, s2, g1, g2 = _tau_sums(q_t, e, Bt[s])
             d1 = alpha_n - bn * e * e - pen - 0.5 * s1
             d2 = -bn * e * e - pen - 0.25 * s2
             if tilted and 0.0 < q_t < qmax:
