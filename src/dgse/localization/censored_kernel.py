@@ -373,13 +373,15 @@ def _rate_mode(
     q = qc
     g0, g1, g2 = 0.0, 0.0, 0.0
     if not checked:
-        g0, g1, g2 = _zeros_slopes(q * rt, b)
+        # the test needs the slopes only; G itself only where the rate moves
+        _s1, _s2, g1, g2 = _tau_sums(q * rt, 1.0, b)
         d1 = -prec * (q - qhat) + rt * g1
         d2 = -prec + rt * rt * g2
         if not (d2 < 0.0 and math.isfinite(d1)):
             return math.nan, math.nan
         if abs(d1) / math.sqrt(-d2) < tilt_min and prec > _TILT_NARROW**2 * -d2:
             return math.nan, math.nan
+        g0 = _log_phi_sum(q * rt, b)
     if math.isfinite(q_start) or checked:
         q = q_start if math.isfinite(q_start) else qc
         g0, g1, g2 = _zeros_slopes(q * rt, b)
