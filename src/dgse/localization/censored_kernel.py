@@ -39,7 +39,7 @@ posterior of it.  With a noise floor far above the plume, half the readings are 
 and the positive ones noise: their rate lies many spreads above where the zeros put
 it, and the product's mass lies beyond every node.  Where a Newton step from the
 positive readings' rate moves it by more than ``TILT_MIN`` of its spread (or the zeros
-narrow it below that share), the nodes follow a normal fitted to the product and
+narrow it below half, ``_TILT_NARROW``), the nodes follow a normal fitted to the product and
 carry the ratio of the two densities (:func:`_rate_nodes`), and the Newton steps over
 ``log tau`` take the moved rate.
 Pure functions of arrays; compiled on first use and cached on disk, like
@@ -341,6 +341,18 @@ def _zeros_slopes(lam: float, b: np.ndarray) -> tuple[float, float, float]:
 
 
 @_jit
+def _moves_rate(d1: float, d2: float, prec: float, tilt_min: float) -> bool:
+    """Whether the zeros move the rate enough for its nodes to follow them: ``d1``, ``d2`` the
+    first two derivatives in ``q`` of the rate's log density times the zeros' factor at the
+    positive readings' rate, ``prec`` that rate's precision from the positive readings.  A
+    Newton step of at least ``tilt_min`` spreads, or a spread narrowed below
+    :data:`_TILT_NARROW` of the positive readings' one."""
+    if not (d2 < 0.0 and math.isfinite(d1)) or tilt_min == math.inf:
+        return False
+    return abs(d1) / math.sqrt(-d2) >= tilt_min or prec <= _TILT_NARROW**2 * -d2
+
+
+@_jit
 def _rate_mode(
     t: float,
     qhat: float,
@@ -375,11 +387,7 @@ def _rate_mode(
     if not checked:
         # the test needs the slopes only; G itself only where the rate moves
         _s1, _s2, g1, g2 = _tau_sums(q * rt, 1.0, b)
-        d1 = -prec * (q - qhat) + rt * g1
-        d2 = -prec + rt * rt * g2
-        if not (d2 < 0.0 and math.isfinite(d1)):
-            return math.nan, math.nan
-        if abs(d1) / math.sqrt(-d2) < tilt_min and prec > _TILT_NARROW**2 * -d2:
+        if not _moves_rate(-prec * (q - qhat) + rt * g1, -prec + rt * rt * g2, prec, tilt_min):
             return math.nan, math.nan
         g0 = _log_phi_sum(q * rt, b)
     if math.isfinite(q_start) or checked:
@@ -718,13 +726,7 @@ def censored_log_factor(
             prec = e * e * aa[s]
             dq1 = -prec * (qc - qhat[s]) + e * g1
             dq2 = -prec + e * e * g2
-            if (
-                c > 0
-                and prec > 0.0
-                and dq2 < 0.0
-                and tilt_min < math.inf
-                and (abs(dq1) / math.sqrt(-dq2) >= tilt_min or prec <= _TILT_NARROW**2 * -dq2)
-            ):
+            if c > 0 and prec > 0.0 and _moves_rate(dq1, dq2, prec, tilt_min):
                 mode, _sd = _rate_mode(t, qhat[s], aa[s], qmax, Bt[s], q_mode, True, tilt_min)
                 if math.isfinite(mode):
                     tilted = True
