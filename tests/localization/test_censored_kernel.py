@@ -62,6 +62,24 @@ def test_mills_ratio_by_series_near_zero_and_by_the_table_beyond() -> None:
     np.testing.assert_allclose(ours[~near], ref[~near], rtol=1e-10)
 
 
+def test_zeros_slopes_in_one_pass_are_the_separate_passes_to_the_bit() -> None:
+    """``_zeros_slopes`` fuses ``G`` and its slopes into one pass (the tilted rate's Newton steps);
+    a search's numbers must not move by it, so it must give the same bits as the two passes."""
+    from dgse.localization.censored_kernel import _log_phi_sum, _tau_sums, _zeros_slopes
+
+    rng = np.random.default_rng(5)
+    b = rng.exponential(1.0, 40) * (rng.random(40) < 0.7)
+    b[:3] = [1e-6, 3e-4, 0.0]  # zeros in the Mills ratio's series range
+    for lam in (0.0, 1e-5, 0.3, 2.0, 40.0):
+        g0, g1, g2 = _zeros_slopes(lam, b)
+        _s1, _s2, h1, h2 = _tau_sums(lam, 1.0, b)
+        assert (g0, g1, g2) == (_log_phi_sum(lam, b), h1, h2)
+        # and the slopes are those of G: central differences
+        d = 1e-5 * max(lam, 1.0)
+        fd1 = (_log_phi_sum(lam + d, b) - _log_phi_sum(lam - d, b)) / (2 * d)
+        assert g1 == pytest.approx(fd1, rel=1e-4, abs=1e-6)
+
+
 def test_plug_in_factor_is_the_sum_of_log_phi() -> None:
     from dgse.localization.censored_kernel import plug_in_log_factor
 

@@ -335,9 +335,23 @@ def _tau_sums(q: float, e: float, b: np.ndarray) -> tuple[float, float, float, f
 
 @_jit
 def _zeros_slopes(lam: float, b: np.ndarray) -> tuple[float, float, float]:
-    """``G(lambda)`` and its first two derivatives in ``lambda`` (:func:`_log_phi_sum`)."""
-    _s1, _s2, g1, g2 = _tau_sums(lam, 1.0, b)
-    return _log_phi_sum(lam, b), g1, g2
+    """``G(lambda)`` and its first two derivatives in ``lambda`` (:func:`_log_phi_sum`), in one
+    pass: the Mills ratio reuses each zero's ``log Phi``, the same numbers, summed in the same
+    order, as :func:`_log_phi_sum` and :func:`_tau_sums` give apart."""
+    g0 = 0.0
+    g1 = 0.0
+    g2 = 0.0
+    for i in range(b.size):
+        x = lam * b[i] * 1.0
+        lp = log_ndtr_table(-lam * b[i])
+        g0 += lp
+        if abs(x) < _SMALL:
+            lm = _mills(x)
+        else:
+            lm = math.exp(-0.5 * x * x - lp) / _SQRT_2PI
+        g1 -= b[i] * lm
+        g2 -= b[i] * b[i] * lm * (lm - x)
+    return g0, g1, g2
 
 
 @_jit
@@ -389,7 +403,8 @@ def _rate_mode(
         _s1, _s2, g1, g2 = _tau_sums(q * rt, 1.0, b)
         if not _moves_rate(-prec * (q - qhat) + rt * g1, -prec + rt * rt * g2, prec, tilt_min):
             return math.nan, math.nan
-        g0 = _log_phi_sum(q * rt, b)
+        if not math.isfinite(q_start):
+            g0 = _log_phi_sum(q * rt, b)
     if math.isfinite(q_start) or checked:
         q = q_start if math.isfinite(q_start) else qc
         g0, g1, g2 = _zeros_slopes(q * rt, b)
