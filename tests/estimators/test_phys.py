@@ -8,6 +8,7 @@ import pytest
 from dgse.errors import InputDataError
 from dgse.estimators.knowledge import Knowledge
 from dgse.estimators.phys import (
+    CENSORED_TILT,
     LEARNED_FLOOR,
     SEARCH_ESTIMATOR,
     FlowHypothesis,
@@ -457,3 +458,17 @@ def test_censoring_switches_must_be_booleans(name):
     with pytest.raises(InputDataError, match=name):
         PhysicsGuidedEstimator(**{name: "false"})
     assert getattr(PhysicsGuidedEstimator(**{name: False}), name) is False
+
+
+def test_censored_tilt_follows_the_knowledge_level_unless_given(case):
+    """``censored_tilt=None`` takes the level's :data:`CENSORED_TILT` (off at ``map``, where every
+    measured search ran without it); a value given wins at every level."""
+    assert CENSORED_TILT == {"map": False}
+    for level, want in (("map", False), ("openings", True), ("wind", True)):
+        k = Knowledge.from_case(case, level)
+        for given, got in ((None, want), (True, True), (False, False)):
+            est = PhysicsGuidedEstimator(censored_tilt=given)
+            est.set_knowledge(k)
+            assert est._censored_tilt() is got
+    assert PhysicsGuidedEstimator()._censored_tilt() is True
+    assert PhysicsGuidedEstimator(censored_tilt=None).censored_tilt is None
