@@ -195,12 +195,15 @@ def _acklam(p: float, y: float) -> float:
 
 
 @_jit
-def _mills(x: float) -> float:
-    """``phi(x) / Phi(-x)``; by series near 0 (``x`` below ``_SMALL``: error below 1e-16)."""
+def _mills(x: float, log_phi: float = math.nan) -> float:
+    """``phi(x) / Phi(-x)``; by series near 0 (``x`` below ``_SMALL``: error below 1e-16).
+    ``log_phi``: ``log Phi(-x)`` where the caller has it already (nan: from the table)."""
     if abs(x) < _SMALL:
         x2 = x * x
         return _PHI0 * (1.0 - 0.5 * x2 * (1.0 - 0.25 * x2)) / (0.5 - _PHI0 * x * (1.0 - x2 / 6.0))
-    return math.exp(-0.5 * x * x - log_ndtr_table(-x)) / _SQRT_2PI
+    if math.isnan(log_phi):
+        log_phi = log_ndtr_table(-x)
+    return math.exp(-0.5 * x * x - log_phi) / _SQRT_2PI
 
 
 @_jit
@@ -342,13 +345,10 @@ def _zeros_slopes(lam: float, b: np.ndarray) -> tuple[float, float, float]:
     g1 = 0.0
     g2 = 0.0
     for i in range(b.size):
-        x = lam * b[i] * 1.0
-        lp = log_ndtr_table(-lam * b[i])
+        x = lam * b[i]
+        lp = log_ndtr_table(-x)
         g0 += lp
-        if abs(x) < _SMALL:
-            lm = _mills(x)
-        else:
-            lm = math.exp(-0.5 * x * x - lp) / _SQRT_2PI
+        lm = _mills(x, lp)
         g1 -= b[i] * lm
         g2 -= b[i] * b[i] * lm * (lm - x)
     return g0, g1, g2
