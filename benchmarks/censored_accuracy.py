@@ -31,7 +31,7 @@ import numpy as np
 from phys_search import cases_dir, record_calls
 from scipy import special
 
-from dgse.estimators.phys import SEARCH_ESTIMATOR
+from dgse.estimators.phys import search_estimator
 from dgse.localization import adjoint, censored_kernel
 
 WAYS = {"gauss-hermite": math.inf, "default": adjoint.CENSORED_SCAN_MARGIN, "scan": -math.inf}
@@ -76,7 +76,7 @@ def main() -> None:
         help="episodes with the searches' estimator options (SEARCH_ESTIMATOR), not dgse-phys's defaults",
     )
     args = ap.parse_args()
-    options = dict(SEARCH_ESTIMATOR) if args.search_estimator else {}
+    options = search_estimator("openings") if args.search_estimator else {}
     d = cases_dir(args.out / "phys_search", "test", args.cases)
     report = []
     rng = np.random.default_rng(0)

@@ -40,7 +40,7 @@ Stop rules (``--rule``):
   (``SEARCH_PLANNER_AT_LEVEL``, since 2026-11-27 g): run it with ``-P max_wind_misfit=0.7 -P
   deadline_estimate_radius_m=1.0`` (files tagged ``fit0.7-disk1``).
 
-``dgse-phys`` runs with :data:`dgse.estimators.phys.SEARCH_ESTIMATOR` (the options ``dgse demo``
+``dgse-phys`` runs with :func:`dgse.estimators.phys.search_estimator` (the options ``dgse demo``
 uses: ``noise_weights="mixture"`` since 2026-11-27; the files recorded before ran the plug-in
 weights, ``-E 'noise_weights="plug-in"'``); ``-E`` overrides it, and ``-P`` a planner option
 of the rule (``-P min_observations=60``: no entropy or mass stop before 60 readings).
@@ -60,7 +60,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from dgse.estimators.phys import SEARCH_ESTIMATOR, SEARCH_PLANNER
+from dgse.estimators.phys import SEARCH_PLANNER, search_estimator
 from dgse.search.campaign import json_safe, run_trials
 
 SETS = {
@@ -413,7 +413,7 @@ def main() -> None:
         cases = cases_dir(args.out, args.set, args.cases)
     stem = f"{set_name}_{args.method}_{args.knowledge}_{args.rule}" + (f"_{args.tag}" if args.tag else "")
     # dgse-phys searches as dgse demo runs them, unless -E says otherwise
-    est_opts = dict(SEARCH_ESTIMATOR) if args.method == "dgse-phys" else {}
+    est_opts = search_estimator(args.knowledge) if args.method == "dgse-phys" else {}
     for item in args.estimator_option:
         key, sep, value = item.partition("=")
         if not sep:

@@ -2,7 +2,7 @@
 
 Runs one search episode per scenario (the first test scenarios of
 ``benchmarks/phys_search.py``, knowledge ``openings`` or ``--knowledge map``, the planner and estimator
-settings of a search, ``SEARCH_PLANNER`` and ``SEARCH_ESTIMATOR``) and writes the
+settings of a search, ``search_planner`` and ``search_estimator``) and writes the
 computation seconds of every step: the first (which solves the flows) and the median and
 90th percentile of the rest, per episode and (the median) pooled over the episodes.
 Run it on an otherwise idle machine; the number of cores it had is recorded::
@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 from phys_search import cases_dir
 
-from dgse.estimators.phys import SEARCH_ESTIMATOR, search_planner
+from dgse.estimators.phys import search_estimator, search_planner
 from dgse.search.campaign import run_trials
 
 
@@ -40,7 +40,7 @@ def main() -> None:
             "utility",
             trials=1,
             planner_options={"min_observations": 5, **search_planner(args.knowledge)},
-            estimator_options=SEARCH_ESTIMATOR,
+            estimator_options=search_estimator(args.knowledge),
             knowledge=args.knowledge,
             steps=True,
         )
@@ -61,7 +61,7 @@ def main() -> None:
     out = {
         "cores": os.cpu_count(),
         "load_average_at_end": os.getloadavg(),
-        "estimator_options": SEARCH_ESTIMATOR,
+        "estimator_options": search_estimator(args.knowledge),
         "knowledge": args.knowledge,
         "episodes": rows,
         # every step after each episode's first, pooled over the episodes

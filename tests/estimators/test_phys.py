@@ -9,7 +9,9 @@ from dgse.errors import InputDataError
 from dgse.estimators.knowledge import Knowledge
 from dgse.estimators.phys import (
     CENSORED_TILT,
+    DEFAULT_EFFECTIVE_READINGS,
     LEARNED_FLOOR,
+    MAP_TEMPERING,
     SEARCH_ESTIMATOR,
     FlowHypothesis,
     PhysicsGuidedEstimator,
@@ -19,6 +21,7 @@ from dgse.estimators.phys import (
     predictive_sources,
     profile_wind_log_likelihood,
     relative_wind_misfit,
+    search_estimator,
     search_planner,
     wind_log_likelihood,
 )
@@ -450,6 +453,31 @@ def test_search_planner_at_map_holds_stops_and_declares_the_heaviest_disk():
     for level in ("openings", "wind"):
         planner = get_planner("utility", **search_planner(level))
         assert planner.max_wind_misfit is None and planner.deadline_estimate_radius_m is None
+
+
+def test_gas_evidence_tempering_follows_the_level_and_searches_keep_theirs(case):
+    """The gas evidence's temperature takes the level's law unless given: ``m / 100`` at
+    ``openings``, ``sqrt(m / 18)`` at ``map`` (:data:`MAP_TEMPERING`), so that 50 readings
+    count as 30 as before and more count more; a ``map`` search keeps ``m / 30``, as its
+    results were measured, and searches at other levels add nothing."""
+    map_k = Knowledge.from_case(case, "map")
+    at_map = get_estimator("dgse-phys", knowledge=map_k)
+    m_eff, growth = MAP_TEMPERING
+    assert at_map._temperature(150) == pytest.approx((150 / m_eff) ** (1 - growth))
+    assert at_map._temperature(50) == pytest.approx(50 / 30)  # the calibration's 50 readings
+    assert at_map._counted_readings(300) > at_map._counted_readings(150) > 30
+    assert at_map._temperature(10) == 1.0 and at_map._counted_readings(10) == 10
+    searching = get_estimator("dgse-phys", knowledge=map_k, **search_estimator("map"))
+    assert searching._temperature(150) == pytest.approx(5.0)
+    assert searching._counted_readings(300) == pytest.approx(30.0)
+    at_openings = get_estimator("dgse-phys", knowledge=Knowledge.from_case(case, "openings"))
+    assert at_openings._temperature(150) == pytest.approx(150 / DEFAULT_EFFECTIVE_READINGS)
+    assert search_estimator("openings") == SEARCH_ESTIMATOR == search_estimator("wind")
+    off = get_estimator("dgse-phys", knowledge=map_k, effective_readings=float("inf"))
+    assert off._temperature(300) == 1.0 and off._temperature(0) == 1.0
+    for bad in (-0.1, 1.0):
+        with pytest.raises(InputDataError, match="effective_growth"):
+            get_estimator("dgse-phys", effective_growth=bad)
 
 
 @pytest.mark.parametrize("name", ["censored", "censored_tilt"])

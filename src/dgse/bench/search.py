@@ -23,7 +23,9 @@ Methods (estimator + planner, registry names):
   the mode, a deadline stop, revisit damping; at ``map`` also
   :data:`~dgse.estimators.phys.SEARCH_PLANNER_AT_LEVEL`: stops held while no flow explains the
   wind, a deadline stop declaring the heaviest 1 m disk) and the estimator options
-  chosen with them (:data:`dgse.estimators.phys.SEARCH_ESTIMATOR`);
+  chosen with them (:data:`dgse.estimators.phys.SEARCH_ESTIMATOR`, at ``map`` also
+  :data:`~dgse.estimators.phys.SEARCH_ESTIMATOR_AT_LEVEL`: the gas evidence tempered as those
+  searches were measured);
 * **Dual-mode** (``dualmode`` + ``dualmode``): particle filter and the
   local/global information planner;
 * **GrGSL** (``grgsl`` + ``infotaxis``): GrGSL's posterior, Infotaxis moves
@@ -75,7 +77,12 @@ import numpy as np
 
 from dgse.bench.core import BenchContext
 from dgse.bench.plots import plt
-from dgse.estimators.phys import SEARCH_ESTIMATOR, SEARCH_PLANNER, SEARCH_PLANNER_AT_LEVEL
+from dgse.estimators.phys import (
+    SEARCH_ESTIMATOR,
+    SEARCH_ESTIMATOR_AT_LEVEL,
+    SEARCH_PLANNER,
+    SEARCH_PLANNER_AT_LEVEL,
+)
 from dgse.search.metrics import format_mean_std
 from dgse.sensing.sensors import MIN_SENSORS
 
@@ -108,10 +115,16 @@ class Method:
     color: str = "black"
     #: what the planner adds at a knowledge level (``SEARCH_PLANNER_AT_LEVEL`` for dgse-phys)
     level_planner_options: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    #: what the estimator adds at a knowledge level (``SEARCH_ESTIMATOR_AT_LEVEL`` for dgse-phys)
+    level_estimator_options: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
     def planner_options_at(self, level: str) -> dict[str, Any]:
         """The planner's options in a run at knowledge ``level``."""
         return {**self.planner_options, **self.level_planner_options.get(level, {})}
+
+    def estimator_options_at(self, level: str) -> dict[str, Any]:
+        """The estimator's options in a run at knowledge ``level``."""
+        return {**self.estimator_options, **self.level_estimator_options.get(level, {})}
 
 
 #: The compared methods, in table order.
@@ -134,6 +147,7 @@ METHODS: tuple[Method, ...] = (
         {"min_observations": MIN_SENSORS, **SEARCH_PLANNER},
         "#000080",
         SEARCH_PLANNER_AT_LEVEL,
+        SEARCH_ESTIMATOR_AT_LEVEL,
     ),
     Method("dualmode", "Dual-mode", "dualmode", "dualmode", color="#8c564b"),
     Method("grgsl", "GrGSL", "grgsl", "infotaxis", color="#2ca02c"),
@@ -244,7 +258,9 @@ def _run_method(
     from dgse.search.metrics import aggregate
 
     est_kw = estimator_options(
-        method.estimator, seed=ctx.seed, options={**method.estimator_options, **extra_options}
+        method.estimator,
+        seed=ctx.seed,
+        options={**method.estimator_options_at(ctx.knowledge), **extra_options},
     )
     base = {
         "method": method.key,
@@ -770,9 +786,12 @@ def _report_process(
 
 
 def _level_extras(level: str) -> str:
-    """The report's words for what ``SEARCH_PLANNER_AT_LEVEL`` adds at ``level`` ('' for nothing)."""
-    extra = SEARCH_PLANNER_AT_LEVEL.get(level, {})
+    """The report's words for what ``SEARCH_PLANNER_AT_LEVEL`` and ``SEARCH_ESTIMATOR_AT_LEVEL``
+    add at ``level`` ('' for nothing)."""
+    extra = {**SEARCH_ESTIMATOR_AT_LEVEL.get(level, {}), **SEARCH_PLANNER_AT_LEVEL.get(level, {})}
     words = []
+    if "effective_readings" in extra:
+        words.append(f"the gas evidence counts at most {extra['effective_readings']:g} readings")
     if "max_wind_misfit" in extra:
         share = f"{extra['max_wind_misfit']:.0%}"
         words.append(f"no stop while the best flow leaves over {share} of the wind unexplained")
@@ -799,7 +818,8 @@ def _rerun_first(ctx: BenchContext, first: tuple[Path, Any], plan: Plan) -> tupl
     m = METHODS[0]
     path, case = first
     est = get_estimator(
-        m.estimator, **estimator_options(m.estimator, seed=ctx.seed, options=m.estimator_options)
+        m.estimator,
+        **estimator_options(m.estimator, seed=ctx.seed, options=m.estimator_options_at(ctx.knowledge)),
     )
     result = run_episode(
         case,

@@ -123,9 +123,9 @@ def demo_cmd(
         kwargs.update(dtype="auto", channels_last=True)
     search_settings = eta is None and method == "dgse-phys"  # the estimator and stop chosen for search
     if search_settings:
-        from dgse.estimators.phys import SEARCH_ESTIMATOR, search_planner
+        from dgse.estimators.phys import search_estimator, search_planner
 
-        kwargs.update(SEARCH_ESTIMATOR)
+        kwargs.update(search_estimator(level))
     estimator = get_estimator(method, **kwargs)
     require_level(estimator, method, level)
     if search_settings:

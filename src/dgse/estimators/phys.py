@@ -102,6 +102,7 @@ __all__ = [
     "MISFIT_TEMPERATURE",
     "MISFIT_THRESHOLD",
     "SEARCH_ESTIMATOR",
+    "SEARCH_ESTIMATOR_AT_LEVEL",
     "SEARCH_PLANNER",
     "SEARCH_PLANNER_AT_LEVEL",
     "FlowHypothesis",
@@ -114,6 +115,7 @@ __all__ = [
     "mix_posteriors",
     "predictive_sources",
     "relative_wind_misfit",
+    "search_estimator",
     "search_planner",
 ]
 
@@ -122,9 +124,33 @@ DEFAULT_SPEEDS = (0.35, 0.6, 1.0, 1.7, 2.9, 5.0)
 #: Readings beyond which the gas evidence is tempered (``T = m / 100``): chosen on generated
 #: validation scenarios, ``python benchmarks/tune_phys_temperature.py``.
 DEFAULT_EFFECTIVE_READINGS = 100.0
-#: The same at knowledge ``map``, where the flows of proposed openings err more: chosen on
-#: validation scenarios, ``python benchmarks/tune_phys_map.py``.
-MAP_EFFECTIVE_READINGS = 30.0
+#: The same at knowledge ``map``, ``(effective_readings, effective_growth)``: there the gas
+#: evidence is tempered by ``T = max(1, sqrt(m / 18))``, so that ``m`` readings count as
+#: ``sqrt(18 m)`` (30 at 50 readings, 52 at 150, 73 at 300).  Until 2026-11-28 g it was
+#: ``T = m / 30`` (``benchmarks/tune_phys_map.py``, chosen when the posterior at ``map`` was
+#: sure of wrong spots: CE 9.8 nats at 150 readings); with the changes since, that had become
+#: too unsure at 150 and 300 readings (the truth's mean credible level 0.38 and 0.25).  Chosen
+#: on validation 900-923 (``python benchmarks/tune_phys_calibration.py --seeds 900-923 --counts
+#: 150 300 --trials 2 --variants steady --knowledge map -E effective_readings=E [-E
+#: effective_growth=0.5]``, and ``--counts 50 150 --variants filament``, ``--counts 50
+#: --variants steady``; ``benchmarks/results/phys_map_tempering_validation/``; 48 estimates a
+#: cell, chance calibration error 0.043).  Mean SL error (m) / calibration error / CE (nats),
+#: steady readings, at 150 and at 300:
+#:
+#: * ``m / 30`` (``benchmarks/results/phys_tilt_map_validation/notilt/``): 1.06 / 0.11 / 6.33
+#:   and 0.90 / 0.23 / 5.64;
+#: * ``m / 60``: 1.00 / 0.08 / 6.33 and 0.72 / 0.13 / 5.54;
+#: * ``m / 100``: 0.96 / 0.11 / 6.37 and 0.65 / 0.11 / 5.62;
+#: * ``m / 200``: 0.93 / 0.15 / 6.44 and 0.61 / 0.11 / 5.85;
+#: * ``sqrt(m / 18)``: 1.01 / 0.07 / 6.32 and 0.68 / 0.13 / 5.55.
+#:
+#: Any ``m / E`` with ``E >= 50`` leaves 50 readings untempered, and there that was sure too
+#: soon: calibration error 0.14 against 0.04 with steady readings and 0.11 against 0.03 with
+#: filament readings, at the same error (1.13 against 1.13 m, 1.27 against 1.29 m).  The
+#: square-root law keeps 50 readings' temperature (5/3) and lets more readings count more.
+#: Filament readings at 150: ``m / 30`` 1.12 / 0.13 / 6.33, ``m / 100`` 1.06 / 0.09 / 6.37,
+#: ``sqrt(m / 18)`` 1.10 / 0.08 / 6.26.  Searches keep ``m / 30`` (:data:`SEARCH_ESTIMATOR_AT_LEVEL`).
+MAP_TEMPERING = (18.0, 0.5)
 #: DGSE-S's weight in the source posterior at ``map``: ``0.9 (1 - m / 50)`` for ``m`` readings,
 #: chosen on validation scenarios (``python benchmarks/tune_phys_learned.py``).
 LEARNED_WEIGHT = 0.9
@@ -257,6 +283,17 @@ def search_planner(level: str) -> dict[str, float]:
 #: (:data:`NOISE_WEIGHTS_CHOICE`); the searches name it all the same.  They keep DGSE-S's weight
 #: at ``map`` fading to 0 by 50 readings (``learned_floor=0``, :data:`LEARNED_FLOOR`): measured so.
 SEARCH_ESTIMATOR: dict[str, Any] = {"noise_weights": "mixture", "learned_floor": 0.0}
+#: What a search at a knowledge level adds to ``SEARCH_ESTIMATOR`` (:func:`search_estimator`):
+#: at ``map`` the gas evidence counts at most 30 readings (``effective_readings=30``), as every
+#: ``map`` search was measured (before 2026-11-28 g the level's default; now :data:`MAP_TEMPERING`).
+SEARCH_ESTIMATOR_AT_LEVEL: dict[str, dict[str, Any]] = {"map": {"effective_readings": 30.0}}
+
+
+def search_estimator(level: str) -> dict[str, Any]:
+    """dgse-phys's options in a search at knowledge ``level``: ``SEARCH_ESTIMATOR`` and
+    ``SEARCH_ESTIMATOR_AT_LEVEL[level]``."""
+    return {**SEARCH_ESTIMATOR, **SEARCH_ESTIMATOR_AT_LEVEL.get(level, {})}
+
 
 #: Why ``noise_weights`` defaults to ``"mixture"`` for estimates from given readings too:
 #: on validation scenarios 900-923 (Table I noise; ``python benchmarks/phys_robustness.py
@@ -618,9 +655,13 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         temperature: the gas evidence is divided by it (a power posterior: ``T > 1``
             absorbs model error by counting the readings as ``m / T`` independent ones).
         effective_readings: beyond this many readings the evidence is tempered further,
-            ``T = max(temperature, m / effective_readings)``: readings of one plume are
-            not independent once the model's own error dominates the noise.  None: the
-            level's default (100; 30 at ``map``); ``inf``: off.
+            ``T = max(temperature, (m / effective_readings) ** (1 - effective_growth))``:
+            readings of one plume are not independent once the model's own error dominates
+            the noise.  None: the level's default, both numbers (:data:`DEFAULT_EFFECTIVE_READINGS`
+            with growth 0; at ``map`` :data:`MAP_TEMPERING`); ``inf``: off.
+        effective_growth: with ``effective_readings`` given, how the counted readings grow
+            beyond it, ``m ** effective_growth``: 0 (default) keeps them at
+            ``effective_readings``, 0.5 lets them grow as the square root; ``[0, 1)``.
         censored: read zero readings as censored (the sensor clips negatives; see
             :func:`~dgse.localization.adjoint.censored_correction`); False: as exact zeros.
         censored_ranking: how that correction picks the candidates it integrates:
@@ -676,6 +717,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     min_weight: float = 1e-4
     temperature: float = 1.0
     effective_readings: float | None = None
+    effective_growth: float = 0.0
     censored: bool = True
     censored_ranking: str = CENSORED_RANKING
     censored_tilt: bool | None = None
@@ -731,6 +773,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             raise InputDataError(f"misfit_threshold must be a positive number or None, got {mt}")
         if not (self.misfit_temperature >= 1.0 and math.isfinite(self.misfit_temperature)):
             raise InputDataError(f"misfit_temperature must be >= 1, got {self.misfit_temperature}")
+        if not (0.0 <= self.effective_growth < 1.0):
+            raise InputDataError(f"effective_growth must be in [0, 1), got {self.effective_growth}")
         if self.effective_readings is not None and not (self.effective_readings > 0):
             raise InputDataError(
                 f"effective_readings must be positive (inf: off) or None, got {self.effective_readings}"
@@ -913,6 +957,24 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             return self.censored_tilt
         return True if self.knowledge is None else CENSORED_TILT.get(self.knowledge.level, True)
 
+    def _tempering(self) -> tuple[float, float]:
+        """``(effective_readings, effective_growth)``, or where the first is None the knowledge
+        level's pair."""
+        if self.effective_readings is not None:
+            return self.effective_readings, self.effective_growth
+        level = None if self.knowledge is None else self.knowledge.level
+        return MAP_TEMPERING if level == "map" else (DEFAULT_EFFECTIVE_READINGS, 0.0)
+
+    def _counted_readings(self, m: int) -> float:
+        """How many independent readings ``m`` readings count as: ``m`` up to
+        ``effective_readings``, then ``effective_readings ** (1 - g) * m ** g``."""
+        m_eff, growth = self._tempering()
+        return m / max(1.0, (m / m_eff) ** (1.0 - growth))
+
+    def _temperature(self, m: int) -> float:
+        """The gas evidence's temperature with ``m`` readings: ``max(temperature, m / counted)``."""
+        return max(self.temperature, m / self._counted_readings(m)) if m > 0 else self.temperature
+
     def _learned_belief(self, occupancy: np.ndarray, resolution: float, obs: Observations) -> Belief:
         """DGSE-S's belief from the same readings (the shipped network, built on first use)."""
         return self._network("default").estimate(occupancy, resolution, obs)
@@ -1006,18 +1068,15 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         wind_ll: list[float] = []
         scales: list[float] = []
         misfits: list[float] = []
-        temp = self.temperature
-        m_eff = self.effective_readings
-        if m_eff is None:
-            m_eff = MAP_EFFECTIVE_READINGS if self.knowledge.level == "map" else DEFAULT_EFFECTIVE_READINGS
-        temp = max(temp, len(obs) / m_eff)
+        counted = self._counted_readings(len(obs))
+        temp = self._temperature(len(obs))
         for h in hyps:
             u = h.flow.wind[:, cells[:, 0], cells[:, 1]].T
             scale = fitted_wind_scale(u, obs.wind) if free_scale else 1.0
             scales.append(scale)
             misfits.append(relative_wind_misfit(scale * u, obs.wind))
             if self.wind_likelihood == "profile":
-                lw = profile_wind_log_likelihood(scale * u, obs.wind, m_eff)
+                lw = profile_wind_log_likelihood(scale * u, obs.wind, counted)
             else:
                 lw = wind_log_likelihood(scale * u, obs.wind, self.wind_noise_levels, self.wind_noise_floor)
             wind_ll.append(lw)
