@@ -4,7 +4,7 @@
 with the same seed on the same cases saw the same readings, estimate by estimate.  This prints,
 per count, the first result's mean / median SL error and CE and, against each other result,
 the ratio of the mean SL errors and the paired difference (mean +- standard error, m) over the
-estimates both have::
+estimates both have (``--by-case``: and each case's means)::
 
     python benchmarks/paired_evaluations.py NEW.json OLD.json ORACLE.json
 
@@ -35,7 +35,9 @@ def records(path: Path) -> dict[Key, dict]:
     return {(r["case"], int(r["n_obs"]), int(r["trial"])): r for r in rows}
 
 
-def compare(first: dict[Key, dict], others: list[tuple[str, dict[Key, dict]]]) -> list[str]:
+def compare(
+    first: dict[Key, dict], others: list[tuple[str, dict[Key, dict]]], by_case: bool = False
+) -> list[str]:
     lines = []
     for n in sorted({k[1] for k in first}):
         keys = [k for k in first if k[1] == n]
@@ -58,6 +60,10 @@ def compare(first: dict[Key, dict], others: list[tuple[str, dict[Key, dict]]]) -
                 f"  against {name}: ratio {a.mean() / b.mean():.2f} ({a.mean():.3f} / {b.mean():.3f} m), "
                 f"difference {d.mean():+.3f} +- {se:.3f} m on {len(both)}"
             )
+            if by_case:
+                for case in sorted({k[0] for k in both}):
+                    mine = [i for i, k in enumerate(both) if k[0] == case]
+                    lines.append(f"    {case}: {a[mine].mean():.2f} against {b[mine].mean():.2f} m")
     return lines
 
 
@@ -65,9 +71,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("first", type=Path)
     ap.add_argument("others", type=Path, nargs="+")
+    ap.add_argument("--by-case", action="store_true", help="each case's mean SL errors too")
     args = ap.parse_args()
     others = [(str(p), records(p)) for p in args.others]
-    print("\n".join(compare(records(args.first), others)))
+    print("\n".join(compare(records(args.first), others, args.by_case)))
 
 
 if __name__ == "__main__":
