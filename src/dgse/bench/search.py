@@ -23,9 +23,9 @@ Methods (estimator + planner, registry names):
   the mode, a deadline stop, revisit damping; at ``map`` also
   :data:`~dgse.estimators.phys.SEARCH_PLANNER_AT_LEVEL`: stops held while no flow explains the
   wind, a deadline stop declaring the heaviest 1 m disk) and the estimator options
-  chosen with them (:data:`dgse.estimators.phys.SEARCH_ESTIMATOR`, at ``map`` and
-  ``openings`` also :data:`~dgse.estimators.phys.SEARCH_ESTIMATOR_AT_LEVEL`: the gas evidence
-  tempered as those searches were measured);
+  chosen with them (:data:`dgse.estimators.phys.SEARCH_ESTIMATOR`, at ``map`` also
+  :data:`~dgse.estimators.phys.SEARCH_ESTIMATOR_AT_LEVEL`: the gas evidence tempered as those
+  searches were measured);
 * **Dual-mode** (``dualmode`` + ``dualmode``): particle filter and the
   local/global information planner;
 * **GrGSL** (``grgsl`` + ``infotaxis``): GrGSL's posterior, Infotaxis moves

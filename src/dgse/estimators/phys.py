@@ -121,24 +121,9 @@ __all__ = [
 
 #: Candidate inlet speeds at knowledge ``openings``, m/s (log-spaced over the training range).
 DEFAULT_SPEEDS = (0.35, 0.6, 1.0, 1.7, 2.9, 5.0)
-#: Readings beyond which the gas evidence is tempered (``T = m / 100``) at levels without
-#: their own law (``wind``): chosen on generated validation scenarios, ``python
-#: benchmarks/tune_phys_temperature.py``.
+#: Readings beyond which the gas evidence is tempered (``T = m / 100``): chosen on generated
+#: validation scenarios, ``python benchmarks/tune_phys_temperature.py``.
 DEFAULT_EFFECTIVE_READINGS = 100.0
-#: The same at knowledge ``openings``, ``(effective_readings, effective_growth)``: ``T = m /
-#: 300`` since 2026-11-28 g (``m / 100`` before, which searches at ``openings`` keep:
-#: :data:`SEARCH_ESTIMATOR_AT_LEVEL`).  With the changes since ``m / 100`` was chosen the
-#: posterior had become too flat at 300 readings: on validation 900-923 (``python
-#: benchmarks/tune_phys_calibration.py --seeds 900-923 --counts 150 300 --trials 2 --variants
-#: steady --knowledge openings -E effective_readings=E``,
-#: ``benchmarks/results/phys_openings_tempering_validation/``, 48 estimates a cell, chance
-#: calibration error 0.043) the truth's mean credible level was 0.41 and 0.22 at 150 and 300
-#: readings.  Mean SL error (m) / calibration error / CE (nats) at 150 and at 300: ``m / 100``
-#: 0.62 / 0.09 / 4.25 and 0.42 / 0.26 / 3.57; ``m / 300`` 0.58 / 0.03 / 4.23 and 0.32 / 0.07 /
-#: 2.99 (credible levels 0.50 and 0.43).  Up to 100 readings both are untempered.  Only
-#: ``m / 300`` was tried against it (the session's time); ``wind`` keeps ``m / 100``, not
-#: measured.
-OPENINGS_TEMPERING = (300.0, 0.0)
 #: The same at knowledge ``map``, ``(effective_readings, effective_growth)``: there the gas
 #: evidence is tempered by ``T = max(1, sqrt(m / 18))``, so that ``m`` readings count as
 #: ``sqrt(18 m)`` (30 at 50 readings, 52 at 150, 73 at 300).  Until 2026-11-28 g it was
@@ -299,13 +284,9 @@ def search_planner(level: str) -> dict[str, float]:
 #: at ``map`` fading to 0 by 50 readings (``learned_floor=0``, :data:`LEARNED_FLOOR`): measured so.
 SEARCH_ESTIMATOR: dict[str, Any] = {"noise_weights": "mixture", "learned_floor": 0.0}
 #: What a search at a knowledge level adds to ``SEARCH_ESTIMATOR`` (:func:`search_estimator`):
-#: the gas evidence counts at most 30 readings at ``map`` and 100 at ``openings``
-#: (``effective_readings``), as every search there was measured (before 2026-11-28 g the
-#: levels' defaults; now :data:`MAP_TEMPERING` and :data:`OPENINGS_TEMPERING`).
-SEARCH_ESTIMATOR_AT_LEVEL: dict[str, dict[str, Any]] = {
-    "map": {"effective_readings": 30.0},
-    "openings": {"effective_readings": 100.0},
-}
+#: at ``map`` the gas evidence counts at most 30 readings (``effective_readings=30``), as every
+#: ``map`` search was measured (before 2026-11-28 g the level's default; now :data:`MAP_TEMPERING`).
+SEARCH_ESTIMATOR_AT_LEVEL: dict[str, dict[str, Any]] = {"map": {"effective_readings": 30.0}}
 
 
 def search_estimator(level: str) -> dict[str, Any]:
@@ -676,9 +657,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         effective_readings: beyond this many readings the evidence is tempered further,
             ``T = max(temperature, (m / effective_readings) ** (1 - effective_growth))``:
             readings of one plume are not independent once the model's own error dominates
-            the noise.  None: the level's default, both numbers (:data:`MAP_TEMPERING`,
-            :data:`OPENINGS_TEMPERING`, else :data:`DEFAULT_EFFECTIVE_READINGS` with growth 0);
-            ``inf``: off.
+            the noise.  None: the level's default, both numbers (:data:`DEFAULT_EFFECTIVE_READINGS`
+            with growth 0; at ``map`` :data:`MAP_TEMPERING`); ``inf``: off.
         effective_growth: with ``effective_readings`` given, how the counted readings grow
             beyond it, ``m ** effective_growth``: 0 (default) keeps them at
             ``effective_readings``, 0.5 lets them grow as the square root; ``[0, 1)``.
@@ -983,9 +963,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         if self.effective_readings is not None:
             return self.effective_readings, self.effective_growth
         level = None if self.knowledge is None else self.knowledge.level
-        if level == "map":
-            return MAP_TEMPERING
-        return OPENINGS_TEMPERING if level == "openings" else (DEFAULT_EFFECTIVE_READINGS, 0.0)
+        return MAP_TEMPERING if level == "map" else (DEFAULT_EFFECTIVE_READINGS, 0.0)
 
     def _counted_readings(self, m: int) -> float:
         """How many independent readings ``m`` readings count as: ``m`` up to
