@@ -120,8 +120,12 @@ def scores(p: np.ndarray, case: Case) -> dict[str, float]:
 
 def pooled(got: list[dict[str, float]]) -> tuple[dict[str, float], str]:
     """The calibration error, mean SL error and mean CE of estimates' :func:`scores`, as a
-    record and as the summaries' ``"cal / sl / ce"`` text."""
-    ce = calibration_error(coverage_curve([g["credible_level"] for g in got]))
+    record (with the truth's mean credible level: 0.5 when calibrated, below when too flat)
+    and as the summaries' ``"cal / sl / ce"`` text."""
+    levels = [g["credible_level"] for g in got]
+    ce = calibration_error(coverage_curve(levels))
     sl = float(np.mean([g["sl_m"] for g in got]))
     xe = float(np.mean([g["ce"] for g in got]))
-    return {"calibration_error": ce, "sl_mean_m": sl, "ce_mean": xe}, f"{ce:.3f} / {sl:.2f} / {xe:.2f}"
+    mean_level = float(np.mean(levels))
+    record = {"calibration_error": ce, "sl_mean_m": sl, "ce_mean": xe, "mean_credible_level": mean_level}
+    return record, f"{ce:.3f} / {sl:.2f} / {xe:.2f}"

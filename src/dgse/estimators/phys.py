@@ -965,15 +965,20 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         level = None if self.knowledge is None else self.knowledge.level
         return MAP_TEMPERING if level == "map" else (DEFAULT_EFFECTIVE_READINGS, 0.0)
 
+    def _readings_factor(self, m: int) -> float:
+        """``max(1, (m / effective_readings) ** (1 - effective_growth))``: by how much ``m``
+        readings are tempered for not being independent."""
+        m_eff, growth = self._tempering()
+        return max(1.0, (m / m_eff) ** (1.0 - growth))
+
     def _counted_readings(self, m: int) -> float:
         """How many independent readings ``m`` readings count as: ``m`` up to
         ``effective_readings``, then ``effective_readings ** (1 - g) * m ** g``."""
-        m_eff, growth = self._tempering()
-        return m / max(1.0, (m / m_eff) ** (1.0 - growth))
+        return m / self._readings_factor(m)
 
     def _temperature(self, m: int) -> float:
-        """The gas evidence's temperature with ``m`` readings: ``max(temperature, m / counted)``."""
-        return max(self.temperature, m / self._counted_readings(m)) if m > 0 else self.temperature
+        """The gas evidence's temperature with ``m`` readings."""
+        return max(self.temperature, self._readings_factor(m))
 
     def _learned_belief(self, occupancy: np.ndarray, resolution: float, obs: Observations) -> Belief:
         """DGSE-S's belief from the same readings (the shipped network, built on first use)."""
