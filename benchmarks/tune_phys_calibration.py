@@ -35,17 +35,26 @@ from dgse.evaluation.calibration import (
 )
 
 TAUS = (1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0)
+#: Thresholds of the wind-misfit rules (:func:`rules`).
+WIND_MISFITS = (0.4, 0.5, 0.6, 0.7)
 
 
-def rules() -> dict[str, Callable[[float], float]]:
-    """The flattening rules the summary compares: ``tau`` from the estimate's misfit."""
-    out: dict[str, Callable[[float], float]] = {
-        "none": lambda chi2: 1.0,
-        "every estimate, tau 1.25": lambda chi2: 1.25,
+def rules() -> dict[str, Callable[[dict[str, float]], float]]:
+    """The flattening rules the summary compares: ``tau`` from the estimate's ``fit`` record
+    (``chi2``: the gas readings' misfit; ``wind``: the best flow's relative wind misfit, in
+    the journals written since 2026-11-28 h)."""
+    out: dict[str, Callable[[dict[str, float]], float]] = {
+        "none": lambda fit: 1.0,
+        "every estimate, tau 1.25": lambda fit: 1.25,
     }
     for c in (1.5, 2.0, 3.0):
         for t in (1.5, 2.0, 3.0):
-            out[f"misfit > {c:g}: tau {t:g}"] = lambda chi2, c=c, t=t: t if chi2 > c else 1.0
+            out[f"misfit > {c:g}: tau {t:g}"] = lambda fit, c=c, t=t: t if fit["chi2"] > c else 1.0
+    for c in WIND_MISFITS:
+        for t in (1.5, 2.0, 3.0):
+            out[f"wind misfit > {c:g}: tau {t:g}"] = (
+                lambda fit, c=c, t=t: t if fit.get("wind", 0.0) > c else 1.0
+            )
     return out
 
 
@@ -72,6 +81,9 @@ def write_summary(out: Path) -> None:
             texts.append(text)
         chi2 = float(np.median([r["fit"]["chi2"] for r in rr]))
         cell["chi2_median"] = chi2
+        winds = [r["fit"]["wind"] for r in rr if "wind" in r["fit"]]
+        if winds:
+            cell["wind_misfit_quartiles"] = [float(q) for q in np.percentile(winds, [25, 50, 75])]
         cell["chance_calibration_error"] = chance_calibration_error(len(rr))
         summary["cells"].append(cell)
         lines.append(f"| {variant} | {n} | {len(rr)} | " + " | ".join(texts) + f" | {chi2:.2f} |")
@@ -88,7 +100,7 @@ def write_summary(out: Path) -> None:
     for name, rule in rules().items():
         texts, cells = [], {}
         for (variant, n), rr in sorted(groups.items()):
-            got = [r["tau"][f"{grid[np.argmin(abs(grid - rule(r['fit']['chi2'])))]:g}"] for r in rr]
+            got = [r["tau"][f"{grid[np.argmin(abs(grid - rule(r['fit'])))]:g}"] for r in rr]
             cells[f"{variant} {n}"], text = pooled(got)
             texts.append(text)
         summary["rules"][name] = cells
@@ -118,7 +130,7 @@ def main() -> None:
                 **key,
                 "options": options,
                 "temperature": b.info["temperature"],
-                "fit": {"chi2": b.info["gas_misfit"]},
+                "fit": {"chi2": b.info["gas_misfit"], "wind": b.info["wind_misfit"]},
                 "tau": {f"{t:g}": scores(flattened(b.source_probs, t), case) for t in TAUS},
                 "seconds": b.info["seconds"],
             }
