@@ -28,7 +28,7 @@ import numpy as np
 from validation_tuning import checked_options, pooled, scores, tuning_parser, validation_readings
 
 from dgse.estimators.knowledge import Knowledge
-from dgse.estimators.phys import flattened
+from dgse.estimators.phys import flattened, neighbour_correlation, standardized_residuals
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.calibration import (
     chance_calibration_error,
@@ -37,6 +37,23 @@ from dgse.evaluation.calibration import (
 TAUS = (1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0)
 #: Thresholds of the wind-misfit rules (:func:`rules`).
 WIND_MISFITS = (0.4, 0.5, 0.6, 0.7)
+#: Radii (m) of the gas residuals' neighbour correlation recorded per estimate.
+CORRELATION_RADII = (0.5, 1.0, 2.0)
+#: Thresholds of the neighbour-correlation rules (radius 1 m; :func:`rules`).
+CORRELATIONS = (0.2, 0.3, 0.4, 0.5)
+
+
+def residual_statistics(belief: Any, observations: Any, resolution: float) -> dict[str, float]:
+    """The neighbour correlation (:func:`~dgse.estimators.phys.neighbour_correlation`) of the
+    gas readings' standardized residuals about the belief's most probable source, per radius
+    of :data:`CORRELATION_RADII` (``"corr1"``: 1 m)."""
+    model = belief.info["response_model"]
+    i, j = np.unravel_index(int(np.argmax(belief.source_probs)), belief.source_probs.shape)
+    cells = observations.cells
+    mean = model.mean_readings(cells)[:, i, j]
+    r = standardized_residuals(mean, observations.gas, model)
+    xy = (cells[:, ::-1] + 0.5) * resolution
+    return {f"corr{d:g}": neighbour_correlation(xy, r, d) for d in CORRELATION_RADII}
 
 
 def rules() -> dict[str, Callable[[dict[str, float]], float]]:
@@ -50,10 +67,15 @@ def rules() -> dict[str, Callable[[dict[str, float]], float]]:
     for c in (1.5, 2.0, 3.0):
         for t in (1.5, 2.0, 3.0):
             out[f"misfit > {c:g}: tau {t:g}"] = lambda fit, c=c, t=t: t if fit["chi2"] > c else 1.0
+    for c in CORRELATIONS:
+        for t in (1.5, 2.0, 3.0):
+            out[f"correlation > {c:g}: tau {t:g}"] = lambda fit, c=c, t=t: (
+                t if fit.get("corr1", 0.0) > c else 1.0
+            )
     for c in WIND_MISFITS:
         for t in (1.5, 2.0, 3.0):
-            out[f"wind misfit > {c:g}: tau {t:g}"] = (
-                lambda fit, c=c, t=t: t if fit.get("wind", 0.0) > c else 1.0
+            out[f"wind misfit > {c:g}: tau {t:g}"] = lambda fit, c=c, t=t: (
+                t if fit.get("wind", 0.0) > c else 1.0
             )
     return out
 
@@ -81,9 +103,10 @@ def write_summary(out: Path) -> None:
             texts.append(text)
         chi2 = float(np.median([r["fit"]["chi2"] for r in rr]))
         cell["chi2_median"] = chi2
-        winds = [r["fit"]["wind"] for r in rr if "wind" in r["fit"]]
-        if winds:
-            cell["wind_misfit_quartiles"] = [float(q) for q in np.percentile(winds, [25, 50, 75])]
+        for key, name in (("wind", "wind_misfit"), ("corr1", "correlation_1m")):
+            got = [r["fit"][key] for r in rr if key in r["fit"]]
+            if got:
+                cell[f"{name}_quartiles"] = [float(q) for q in np.percentile(got, [25, 50, 75])]
         cell["chance_calibration_error"] = chance_calibration_error(len(rr))
         summary["cells"].append(cell)
         lines.append(f"| {variant} | {n} | {len(rr)} | " + " | ".join(texts) + f" | {chi2:.2f} |")
@@ -130,7 +153,11 @@ def main() -> None:
                 **key,
                 "options": options,
                 "temperature": b.info["temperature"],
-                "fit": {"chi2": b.info["gas_misfit"], "wind": b.info["wind_misfit"]},
+                "fit": {
+                    "chi2": b.info["gas_misfit"],
+                    "wind": b.info["wind_misfit"],
+                    **residual_statistics(b, obs, case.resolution),
+                },
                 "tau": {f"{t:g}": scores(flattened(b.source_probs, t), case) for t in TAUS},
                 "seconds": b.info["seconds"],
             }

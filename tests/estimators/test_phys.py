@@ -18,11 +18,13 @@ from dgse.estimators.phys import (
     flattened,
     gas_misfit,
     mix_posteriors,
+    neighbour_correlation,
     predictive_sources,
     profile_wind_log_likelihood,
     relative_wind_misfit,
     search_estimator,
     search_planner,
+    standardized_residuals,
     wind_log_likelihood,
 )
 from dgse.estimators.registry import get_estimator
@@ -125,6 +127,24 @@ def test_noise_weight_mixture_averages_the_two_posteriors(case):
         get_estimator("dgse-phys", noise_weights="both")
 
 
+def test_neighbour_correlation_tells_shared_model_error_from_noise():
+    """Independent residuals correlate about 0 between neighbours, a smooth shared error
+    near 1, an alternating one below 0; no neighbour pair, or all-zero residuals, give 0."""
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(0, 10, size=(400, 2))
+    assert abs(neighbour_correlation(xy, rng.normal(size=400), 1.0)) < 0.1
+    smooth = np.sin(xy[:, 0] / 3.0) + np.cos(xy[:, 1] / 4.0)
+    assert neighbour_correlation(xy, smooth + 0.1 * rng.normal(size=400), 1.0) > 0.8
+    line = np.stack([np.arange(10.0), np.zeros(10)], axis=1)
+    assert neighbour_correlation(line, (-1.0) ** np.arange(10), 1.0) == pytest.approx(-1.0)
+    assert neighbour_correlation(line, np.ones(10), 0.5) == 0.0  # nobody within 0.5
+    assert neighbour_correlation(line, np.zeros(10), 1.0) == 0.0
+    # readings taken twice at one place are not neighbours of each other
+    assert neighbour_correlation(np.zeros((2, 2)), np.array([1.0, -1.0]), 1.0) == 0.0
+    with pytest.raises(InputDataError, match="positions"):
+        neighbour_correlation(line, np.ones(9), 1.0)
+
+
 def test_misfit_and_flattening_kernels():
     """The misfit is the mean squared standardized residual; flattening keeps the mode and the
     zeros and spreads the rest."""
@@ -134,6 +154,7 @@ def test_misfit_and_flattening_kernels():
     assert gas_misfit(mu, mu, model) == 0.0
     assert gas_misfit(mu, mu + sig, model) == pytest.approx(1.0)
     assert gas_misfit(mu, mu - 3 * sig, model) == pytest.approx(9.0)
+    assert np.allclose(standardized_residuals(mu, mu + 2 * sig, model), 2.0)
     p = np.array([0.0, 0.1, 0.7, 0.2])
     assert np.allclose(flattened(p, 1.0), p)
     q = flattened(p, 2.0)

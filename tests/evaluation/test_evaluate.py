@@ -370,6 +370,8 @@ def test_register_and_params():
     names = {c.name for c in app.registered_commands}
     assert names == {"estimate", "evaluate", "export-onnx"}
     assert parse_params(["K=3", "name=abc", "w=[1, 2]"]) == {"K": 3, "name": "abc", "w": [1, 2]}
+    # the docs' "inf: off" must be typeable; nan stays a string, which the options' checks refuse
+    assert parse_params(["e=inf", "f=-INF", "g=nan"]) == {"e": math.inf, "f": -math.inf, "g": "nan"}
     with pytest.raises(InputDataError):
         parse_params(["novalue"])
 

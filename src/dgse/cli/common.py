@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import json
+import math
 import os
 import re
 import shlex
@@ -183,7 +184,8 @@ def path_text(path: Path | str) -> str:
 
 
 def parse_params(items: Sequence[str] | None, flag: str = "--param") -> dict[str, Any]:
-    """``["K=3", "name=x"]`` -> ``{"K": 3, "name": "x"}`` (values JSON-decoded when they parse).
+    """``["K=3", "name=x"]`` -> ``{"K": 3, "name": "x"}`` (values JSON-decoded when they parse;
+    ``inf`` and ``-inf`` are the floats, as options such as ``effective_readings=inf`` take them).
 
     The one reading of ``-p/--param`` (estimator) and ``-P/--planner-option`` options in every command.
 
@@ -196,6 +198,10 @@ def parse_params(items: Sequence[str] | None, flag: str = "--param") -> dict[str
         key = key.strip()
         if not sep or not key.isidentifier():
             raise InputDataError(f"{flag} needs KEY=VALUE with KEY a Python name, got {item!r}")
+        infinite = raw.strip().lower()
+        if infinite in ("inf", "+inf", "-inf"):
+            out[key] = -math.inf if infinite.startswith("-") else math.inf
+            continue
         try:
             out[key] = json.loads(raw)
         except json.JSONDecodeError:

@@ -113,10 +113,12 @@ __all__ = [
     "gas_misfit",
     "make_dgse_phys",
     "mix_posteriors",
+    "neighbour_correlation",
     "predictive_sources",
     "relative_wind_misfit",
     "search_estimator",
     "search_planner",
+    "standardized_residuals",
 ]
 
 #: Candidate inlet speeds at knowledge ``openings``, m/s (log-spaced over the training range).
@@ -563,14 +565,42 @@ def field_error_variance(
     return a * a * speed2 + b * b, (c * L) ** 2 + d * d
 
 
-def gas_misfit(mean: np.ndarray, readings: np.ndarray, model: AdjointResponseModel) -> float:
-    """Mean squared standardized residual of gas ``readings`` (ppm) about their predicted
-    ``mean`` under ``model``'s noise (``model.reading_sigma``): about 1 where the physics
-    and the noise model explain the readings, more where they do not."""
+def standardized_residuals(mean: np.ndarray, readings: np.ndarray, model: AdjointResponseModel) -> np.ndarray:
+    """Gas ``readings`` (ppm) minus their predicted ``mean``, over ``model``'s noise
+    (``model.reading_sigma``)."""
     mu = np.asarray(mean, dtype=np.float64)
     sig = np.maximum(model.reading_sigma(mu), 1e-12)
-    r = (np.asarray(readings, dtype=np.float64) - mu) / sig
-    return float(np.mean(r**2))
+    return (np.asarray(readings, dtype=np.float64) - mu) / sig
+
+
+def gas_misfit(mean: np.ndarray, readings: np.ndarray, model: AdjointResponseModel) -> float:
+    """Mean squared standardized residual of gas ``readings`` (ppm) about their predicted
+    ``mean`` under ``model``'s noise (:func:`standardized_residuals`): about 1 where the
+    physics and the noise model explain the readings, more where they do not."""
+    return float(np.mean(standardized_residuals(mean, readings, model) ** 2))
+
+
+def neighbour_correlation(xy: np.ndarray, residuals: np.ndarray, radius: float) -> float:
+    """How alike the residuals of readings at most ``radius`` apart are: ``mean(r_i r_j)`` over
+    such pairs ``i < j`` (at different places) over ``mean(r^2)``.
+
+    About 0 where the residuals are independent noise, toward 1 where a model error shared
+    by neighbouring places makes them (a plume the physics puts in the wrong place), below
+    0 where neighbours disagree.  ``xy``: ``(m, 2)`` positions, ``radius`` in their unit.
+    0 when no such pair exists or every residual is 0.
+    """
+    p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    r = np.asarray(residuals, dtype=np.float64).reshape(-1)
+    if p.shape[0] != r.size:
+        raise InputDataError(f"{p.shape[0]} positions for {r.size} residuals")
+    scale = float(np.mean(r * r))
+    if r.size < 2 or not scale > 0:
+        return 0.0
+    d2 = ((p[:, None, :] - p[None, :, :]) ** 2).sum(axis=-1)
+    i, j = np.nonzero(np.triu((d2 <= radius * radius) & (d2 > 0), k=1))
+    if i.size == 0:
+        return 0.0
+    return float(np.mean(r[i] * r[j]) / scale)
 
 
 def flattened(probs: np.ndarray, tau: float) -> np.ndarray:
