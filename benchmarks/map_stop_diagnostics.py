@@ -12,7 +12,9 @@ stop's error:
   mixture's most probable cell (1: every weighty flow puts the source there);
 - ``wind_misfit`` (the best flow's, as the ``max_wind_misfit`` hold reads it), ``gas_misfit``;
 - ``network_mass_1m``: the mass DGSE-S's own source belief (from the same readings) puts
-  within 1 m of the mixture's most probable cell, and ``network_mode_m``: how far its mode is.
+  within 1 m of the mixture's most probable cell, and ``network_mode_m``: how far its mode is;
+  ``network_error_m``: how far DGSE-S's posterior mean is from the source (for the record: a
+  rule cannot see it).
 
 A rule is only ever chosen on validation episodes (``--set validation*``); the test split's
 stops are for reporting.  A statistic that would have vetoed the wrong stops here can only be
@@ -91,6 +93,7 @@ def stop_row(case: Case, row: dict[str, Any], network: Any) -> dict[str, Any]:
         "gas_misfit": belief.info["gas_misfit"],
         "network_mass_1m": disk_mass(np.asarray(net.source_probs), case.resolution, mode, RADIUS_M),
         "network_mode_m": math.dist(net_mode, mode),
+        "network_error_m": math.dist(net.source_estimate(), (sx, sy)),
     }
 
 
