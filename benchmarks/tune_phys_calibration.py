@@ -58,8 +58,9 @@ def residual_statistics(belief: Any, observations: Any, resolution: float) -> di
 
 def rules() -> dict[str, Callable[[dict[str, float]], float]]:
     """The flattening rules the summary compares: ``tau`` from the estimate's ``fit`` record
-    (``chi2``: the gas readings' misfit; ``wind``: the best flow's relative wind misfit, in
-    the journals written since 2026-11-28 h)."""
+    (``chi2``: the gas readings' misfit; ``wind``: the best flow's relative wind misfit;
+    ``corr1``: :func:`residual_statistics`; the last two only in journals written since
+    2026-11-28 h, and a journal without them scores their rules as no flattening)."""
     out: dict[str, Callable[[dict[str, float]], float]] = {
         "none": lambda fit: 1.0,
         "every estimate, tau 1.25": lambda fit: 1.25,
