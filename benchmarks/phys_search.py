@@ -60,7 +60,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from dgse.estimators.phys import SEARCH_PLANNER, search_estimator
+from dgse.estimators.phys import SEARCH_PLANNER, SEARCH_PLANNER_AT_LEVEL, search_estimator
 from dgse.search.campaign import json_safe, run_trials
 
 SETS = {
@@ -396,6 +396,8 @@ def main() -> None:
     )
     ap.add_argument("--fill-option", default=None, choices=sorted(FILL_OPTIONS))
     args = ap.parse_args()
+    if args.cases is not None and args.cases < 1:
+        ap.error(f"--cases must be at least 1, got {args.cases}")
     if args.merge:
         if len(args.merge) < 2:
             ap.error("--merge takes OUT and at least one RESULT")
@@ -425,6 +427,14 @@ def main() -> None:
         if not sep:
             ap.error(f"-P takes KEY=JSON, got {item!r}")
         planner_opts[key] = json.loads(value)
+    missing = {
+        k: v
+        for k, v in SEARCH_PLANNER_AT_LEVEL.get(args.knowledge, {}).items()
+        if args.method == "dgse-phys" and k not in planner_opts
+    }
+    if missing:  # kept out of the defaults: the recorded runs' commands must mean what they meant
+        opts = " ".join(f"-P {k}={json.dumps(v)}" for k, v in missing.items())
+        print(f"note: dgse demo's search at {args.knowledge} also sets {opts}; this run does not", flush=True)
     result = run_trials(
         cases,
         args.method,
