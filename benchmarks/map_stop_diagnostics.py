@@ -22,7 +22,7 @@ judged by searching again with the hold: an episode held at one stop goes on, an
 later, right or wrong::
 
     python benchmarks/map_stop_diagnostics.py \\
-        benchmarks/results/phys_search/validation3_dgse-phys_map_*-gas1m_s1-steps.journal.jsonl \\
+        benchmarks/results/phys_search/validation3_*_map_*-gas1m_fit0.7-disk1-s1-steps.journal.jsonl \\
         -o benchmarks/results/phys_search/map_stop_diagnostics_validation3_s1.json
 """
 
@@ -39,7 +39,9 @@ from phys_search import journal_episodes, map_estimator_at_end, step_observation
 
 from dgse.estimators.phys import search_estimator
 from dgse.estimators.registry import get_estimator
+from dgse.search.planners import mass_within
 from dgse.world.case import Case
+from dgse.world.grid import Grid
 
 #: A stop within this distance of the source means something (the issue's goal).
 SUCCESS_M = 2.0
@@ -47,14 +49,6 @@ SUCCESS_M = 2.0
 RADIUS_M = 1.0
 #: Hypotheses at least this heavy are counted as weighty.
 WEIGHTY = 0.01
-
-
-def disk_mass(probs: np.ndarray, resolution: float, centre_xy: tuple[float, float], radius: float) -> float:
-    """The mass of a source belief ``probs`` ``(H, W)`` within ``radius`` m of ``centre_xy``."""
-    H, W = probs.shape
-    ii, jj = np.mgrid[:H, :W]
-    d2 = ((jj + 0.5) * resolution - centre_xy[0]) ** 2 + ((ii + 0.5) * resolution - centre_xy[1]) ** 2
-    return float(probs[d2 <= radius * radius].sum())
 
 
 def stop_row(case: Case, row: dict[str, Any], network: Any) -> dict[str, Any]:
@@ -69,8 +63,9 @@ def stop_row(case: Case, row: dict[str, Any], network: Any) -> dict[str, Any]:
             f"{row['case']}: rebuilt mean {math.hypot(mx - sx, my - sy):.3f} m off, "
             f"the search's {row['error_m']:.3f} m"
         )
+    grid = Grid(belief.shape, case.resolution)
     i, j = belief.most_likely_cell()
-    mode = ((j + 0.5) * case.resolution, (i + 0.5) * case.resolution)
+    mode = grid.center_of(i, j)
     hyps = belief.info["hypotheses"]
     weights = np.array([h["weight"] for h in hyps])
     agree = sum(
@@ -79,8 +74,7 @@ def stop_row(case: Case, row: dict[str, Any], network: Any) -> dict[str, Any]:
         if h["source_mode_xy"] is not None and math.dist(h["source_mode_xy"], mode) <= RADIUS_M
     )
     net = network.estimate(case.occupancy, case.resolution, obs)
-    ni, nj = net.most_likely_cell()
-    net_mode = ((nj + 0.5) * case.resolution, (ni + 0.5) * case.resolution)
+    net_mode = grid.center_of(*net.most_likely_cell())
     return {
         "error_m": row["error_m"],
         "within_2m": row["error_m"] <= SUCCESS_M,
@@ -91,7 +85,7 @@ def stop_row(case: Case, row: dict[str, Any], network: Any) -> dict[str, Any]:
         "agreement": float(agree),
         "wind_misfit": belief.info["wind_misfit"],
         "gas_misfit": belief.info["gas_misfit"],
-        "network_mass_1m": disk_mass(np.asarray(net.source_probs), case.resolution, mode, RADIUS_M),
+        "network_mass_1m": float(mass_within(net.source_probs, case.resolution, RADIUS_M)[i, j]),
         "network_mode_m": math.dist(net_mode, mode),
         "network_error_m": math.dist(net.source_estimate(), (sx, sy)),
     }

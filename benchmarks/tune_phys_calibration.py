@@ -33,6 +33,7 @@ from dgse.estimators.registry import get_estimator
 from dgse.evaluation.calibration import (
     chance_calibration_error,
 )
+from dgse.world.grid import Grid
 
 TAUS = (1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0)
 #: Thresholds of the wind-misfit rules (:func:`rules`).
@@ -52,7 +53,7 @@ def residual_statistics(belief: Any, observations: Any, resolution: float) -> di
     cells = observations.cells
     mean = model.mean_readings(cells)[:, i, j]
     r = standardized_residuals(mean, observations.gas, model)
-    xy = (cells[:, ::-1] + 0.5) * resolution
+    xy = Grid(belief.source_probs.shape, resolution).centers_of(cells)
     return {f"corr{d:g}": neighbour_correlation(xy, r, d) for d in CORRELATION_RADII}
 
 
