@@ -324,6 +324,35 @@ def test_learned_belief_is_mixed_in_where_the_readings_are_few(case):
         get_estimator("dgse-phys", learned_levels=("plan",))
 
 
+def test_learned_opinion_is_the_networks_own_belief_computed_when_asked(case, monkeypatch):
+    """learned_opinion: every belief carries DGSE-S's source belief from the same readings, as a
+    function that runs the network on its first call only, whatever the network's weight."""
+    obs = draw_observations(case, 60, seed=3)
+    k = Knowledge.from_case(case, "map")
+    net = get_estimator("dgse-s", seed=0, dtype="auto", channels_last=True)
+    expected = net.estimate(case.occupancy, case.resolution, obs).source_probs
+    est = get_estimator("dgse-phys", knowledge=k, learned_opinion=True, **SEARCH_ESTIMATOR)
+    assert est._learned_weight(len(obs)) == 0.0  # the network is not in the posterior here
+    calls = []
+    real = est._learned_belief
+
+    def counted(*args):
+        calls.append(1)
+        return real(*args)
+
+    monkeypatch.setattr(est, "_learned_belief", counted)
+    b = est.estimate(case.occupancy, case.resolution, obs)
+    assert not calls  # not run until asked
+    opinion = b.info["learned_source_probs"]
+    assert np.allclose(opinion(), expected, atol=1e-7) and len(calls) == 1
+    assert opinion() is opinion() and len(calls) == 1
+    assert "learned_source_probs" not in get_estimator("dgse-phys", knowledge=k).estimate(
+        case.occupancy, case.resolution, obs
+    ).info
+    with pytest.raises(InputDataError, match="learned_opinion"):
+        get_estimator("dgse-phys", learned_opinion="yes")
+
+
 def test_a_map_the_network_cannot_take_leaves_the_physics_alone(case, monkeypatch):
     """Where DGSE-S refuses the map (its cell size), dgse-phys answers with the physics alone
     and says so, instead of failing."""

@@ -235,6 +235,50 @@ def test_a_stop_waits_for_a_flow_that_explains_the_wind():
             UtilityPlanner(max_wind_misfit=bad)
 
 
+def test_a_stop_waits_for_the_network_to_see_a_source_near_the_mode():
+    """min_learned_mass: a sharp posterior whose second opinion puts little near its mode holds
+    the stop; the opinion may come as an array or as a function asked only when needed."""
+    belief, g = _peaked_room()
+    h = _history(g, [(0, 0), (5, 5)])
+    h.step = 2
+    planner = UtilityPlanner(mass_radius_m=1.0, min_learned_mass=0.05)
+    assert planner.should_stop(belief, h)  # states no opinion: not held
+    elsewhere = np.zeros((10, 10))
+    elsewhere[0, 9] = 0.98  # the network's source is 4.5 m from the mode
+    elsewhere[5, 7] = 0.02  # and 1 m away, 0.02 of it
+    belief.info["learned_source_probs"] = elsewhere
+    assert not planner.should_stop(belief, h)
+    assert planner.stop_held(h) and stop_held(planner, h)
+    assert UtilityPlanner(mass_radius_m=1.0).should_stop(belief, h)  # the option off
+    assert UtilityPlanner(mass_radius_m=1.0, min_learned_mass=0.02).should_stop(belief, h)
+    # a smaller disk leaves the 0.02 out; unnormalized opinions are normalized
+    assert not UtilityPlanner(mass_radius_m=0.5, min_learned_mass=0.01).should_stop(belief, h)
+    belief.info["learned_source_probs"] = 50.0 * elsewhere
+    assert UtilityPlanner(mass_radius_m=1.0, min_learned_mass=0.02).should_stop(belief, h)
+    # a function is asked only once the stop test passes
+    asked = []
+
+    def opinion():
+        asked.append(1)
+        return belief.source_probs
+
+    belief.info["learned_source_probs"] = opinion
+    flat = _belief(belief.occupancy, np.ones((10, 10)), res=0.5)
+    flat.info["learned_source_probs"] = opinion
+    assert not planner.should_stop(flat, h) and not asked
+    assert planner.should_stop(belief, h) and asked == [1] and not planner.stop_held(h)
+    # an opinion of another shape is refused; the deadline still ends a held search
+    belief.info["learned_source_probs"] = np.ones((3, 3))
+    with pytest.raises(InputDataError, match="learned_source_probs"):
+        planner.should_stop(belief, h)
+    belief.info["learned_source_probs"] = elsewhere
+    h.time_limit_s, h.time_s = 100.0, 95.0
+    assert UtilityPlanner(min_learned_mass=0.5, deadline_margin_s=10.0).should_stop(belief, h)
+    for bad in (0.0, -0.1, 1.5, math.nan):
+        with pytest.raises(InputDataError, match="min_learned_mass"):
+            UtilityPlanner(min_learned_mass=bad)
+
+
 def test_a_deadline_stop_can_declare_the_disk_with_the_most_mass():
     """deadline_estimate_radius_m: a split posterior's mean lies between its parts; the disk doesn't."""
     occ = np.zeros((20, 20), np.uint8)

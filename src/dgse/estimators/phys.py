@@ -58,7 +58,7 @@ from __future__ import annotations
 import functools
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar, Literal
@@ -664,6 +664,12 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             ``learned_levels``); None: the level's :data:`LEARNED_FLOOR` (0.05 at ``map``,
             0.02 at ``wind`` since 2026-11-28 d; the searches use 0).  A floor caps how sure of
             a wrong spot the mixture can be, at the cost of slower mass stops.
+        learned_opinion: attach to every belief ``info["learned_source_probs"]``, a function
+            of no arguments that returns DGSE-S's own source belief from the same readings
+            (``(H, W)``), whatever the network's weight in the posterior: a second opinion the
+            search's ``min_learned_mass`` hold reads.  The network runs when it is first
+            called (the hold asks only when a stop would fire), at most once per belief; on a
+            map the network cannot take, it raises :class:`~dgse.errors.InputDataError`.
         hypothesis_readings: beyond this many readings the flow hypotheses' weights are
             tempered, ``T = m / hypothesis_readings`` (None: not tempered).
         wind_likelihood: how the wind readings weigh the flow hypotheses: ``"sensor"``
@@ -758,6 +764,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     learned_readings: float = LEARNED_READINGS
     learned_floor: float | None = None
     learned_levels: Sequence[str] = ("map",)
+    learned_opinion: bool = False
     hypothesis_readings: float | None = None
     wind_likelihood: str = "sensor"
     refine_speeds: int = 4
@@ -794,7 +801,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             raise InputDataError(f"wind_noise_floor must be positive, got {self.wind_noise_floor}")
         if not (self.temperature >= 1.0 and math.isfinite(self.temperature)):
             raise InputDataError(f"temperature must be >= 1, got {self.temperature}")
-        for name in ("censored", "censored_tilt"):
+        for name in ("censored", "censored_tilt", "learned_opinion"):
             value = getattr(self, name)
             if not (isinstance(value, bool) or (name == "censored_tilt" and value is None)):
                 raise InputDataError(f"{name} must be true or false, got {value!r}")
@@ -1014,6 +1021,19 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         """DGSE-S's belief from the same readings (the shipped network, built on first use)."""
         return self._network("default").estimate(occupancy, resolution, obs)
 
+    def _learned_opinion(
+        self, occupancy: np.ndarray, resolution: float, obs: Observations, net: Belief | None
+    ) -> Callable[[], np.ndarray]:
+        """``info["learned_source_probs"]``: DGSE-S's source belief from ``obs``, computed on the
+        first call (``net``: already computed)."""
+
+        @functools.cache
+        def probs() -> np.ndarray:
+            b = net if net is not None else self._learned_belief(occupancy, resolution, obs)
+            return np.asarray(b.source_probs, dtype=np.float64)
+
+        return probs
+
     def _proposal_wind(self, occupancy: np.ndarray, resolution: float, obs: Observations) -> np.ndarray:
         """DGSE-S's mean wind from ``obs`` with ``map_proposal_model``'s weights (built on first use)."""
         net = self._network(self.map_proposal_model)
@@ -1143,7 +1163,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         self._refine_speed(hyps, hw, len(obs))
         mesh = hyps[0].flow.mesh
         w_learned = self._learned_weight(len(obs))
-        learned_note = None
+        learned_note, net = None, None
         if w_learned > 0:
             try:
                 net = self._learned_belief(occ, res, obs)
@@ -1214,6 +1234,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             "timings": {"preprocessing": t_flow},
             "conc_space": "ppm",
         }
+        if self.learned_opinion:
+            info["learned_source_probs"] = self._learned_opinion(occ, res, obs, net)
         info["seconds"] = time.perf_counter() - t0
         return Belief(
             occupancy=occ,

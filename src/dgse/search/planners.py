@@ -86,6 +86,7 @@ __all__ = [
     "UtilityPlanner",
     "declared_source",
     "get_planner",
+    "mass_around",
     "mass_near_mode",
     "mass_within",
     "planner_names",
@@ -174,10 +175,15 @@ def _radius_or_none(name: str, value: float | None) -> float | None:
 def mass_near_mode(belief: Belief, radius_m: float) -> float:
     """Source posterior mass within ``radius_m`` of the posterior's mode (cell centres)."""
     p = belief.source_probs
-    i, j = np.unravel_index(int(np.argmax(p)), p.shape)
+    return mass_around(p, belief.resolution, np.unravel_index(int(np.argmax(p)), p.shape), radius_m)
+
+
+def mass_around(probs: np.ndarray, resolution: float, cell: tuple[int, int], radius_m: float) -> float:
+    """The share of ``probs``'s mass within ``radius_m`` of cell ``cell``'s centre."""
+    p = np.asarray(probs, dtype=np.float64)
     H, W = p.shape
     ii, jj = np.ogrid[0:H, 0:W]
-    near = np.hypot(ii - i, jj - j) * belief.resolution <= radius_m + 1e-9
+    near = np.hypot(ii - cell[0], jj - cell[1]) * resolution <= radius_m + 1e-9
     return float(p[near].sum() / max(float(p.sum()), 1e-300))
 
 
@@ -255,6 +261,15 @@ class UtilityPlanner:
             not held).  A posterior drawn on a flow that does not explain the wind can be
             sharp and wrong; the search goes on (the deadline still ends it) until the
             estimator finds a flow that does.
+        min_learned_mass: None (no such test) or a share in (0, 1]: the stop is also held while
+            a second opinion on the source, ``belief.info["learned_source_probs"]`` (an
+            ``(H, W)`` array, or a function of no arguments that returns one: DGSE-S's own source
+            belief from the same readings, which ``dgse-phys`` attaches with
+            ``learned_opinion=True``, asked only when the stop test passes), puts less than
+            this within ``mass_radius_m`` (1 m without it) of the posterior's mode; a belief
+            that states none is not held.  A physics posterior drawn on a wrong flow can be
+            sure of a spot the network, which does not share that flow's error, sees no source
+            near.
         deadline_estimate_radius_m: None (the belief's posterior mean, the paper's ``s_hat``)
             or a radius, m: at a deadline stop the search declares the centre of the free cell
             whose disk of this radius holds the most posterior mass
@@ -283,6 +298,7 @@ class UtilityPlanner:
     revisit_radius_m: float | None = None
     stop_readings: int = 1
     max_wind_misfit: float | None = None
+    min_learned_mass: float | None = None
     deadline_estimate_radius_m: float | None = None
     deadline_estimate: Literal["disk", "local"] = "disk"
     name: str = field(default="utility", init=False)
@@ -341,6 +357,13 @@ class UtilityPlanner:
                     f"max_wind_misfit must be a number > 0 or None, got {self.max_wind_misfit!r}"
                 )
             self.max_wind_misfit = mm
+        if self.min_learned_mass is not None:
+            ml = float(self.min_learned_mass)
+            if not (0.0 < ml <= 1.0):
+                raise InputDataError(
+                    f"min_learned_mass must lie in (0, 1] or be None, got {self.min_learned_mass!r}"
+                )
+            self.min_learned_mass = ml
         if self.deadline_margin_s is not None:
             m = float(self.deadline_margin_s)
             if not (math.isfinite(m) and m >= 0):
@@ -367,10 +390,12 @@ class UtilityPlanner:
         if not self._passes_in_a_row(belief, history):
             return False
         if history is None or (
-            self._unconfirmed_mode(belief, history) is None and not self._wind_unexplained(belief)
+            self._unconfirmed_mode(belief, history) is None
+            and not self._wind_unexplained(belief)
+            and not self._learned_disagrees(belief)
         ):
             return True
-        self._held_step = int(history.step)  # passed, held for confirmation or a better flow
+        self._held_step = int(history.step)  # passed, held for confirmation, a flow or the network
         return False
 
     def _wind_unexplained(self, belief: Belief) -> bool:
@@ -379,6 +404,21 @@ class UtilityPlanner:
         if self.max_wind_misfit is None or not isinstance(v, int | float):
             return False
         return not (float(v) <= self.max_wind_misfit)
+
+    def _learned_disagrees(self, belief: Belief) -> bool:
+        """The belief's second opinion (``info["learned_source_probs"]``) puts less than
+        ``min_learned_mass`` near the posterior's mode (False when either is unset)."""
+        probs = belief.info.get("learned_source_probs")
+        if self.min_learned_mass is None or probs is None:
+            return False
+        probs = np.asarray(probs() if callable(probs) else probs, dtype=np.float64)
+        if probs.shape != belief.shape:
+            raise InputDataError(
+                f"info['learned_source_probs'] has shape {probs.shape}, the belief {belief.shape}"
+            )
+        radius = 1.0 if self.mass_radius_m is None else self.mass_radius_m
+        near = mass_around(probs, belief.resolution, belief.most_likely_cell(), radius)
+        return not (near >= self.min_learned_mass)
 
     def _passes_in_a_row(self, belief: Belief, history: SearchHistory | None) -> bool:
         """The stop test has passed at the last ``stop_readings`` readings, the posterior's mode
@@ -436,8 +476,9 @@ class UtilityPlanner:
 
     def stop_held(self, history: SearchHistory | None) -> bool:
         """True when :meth:`should_stop`, asked at this step, passed its stop test but held the
-        stop for the mode's confirmation (``confirm_radius_m``) or a flow that explains the wind
-        (``max_wind_misfit``): where the search would have stopped without them."""
+        stop for the mode's confirmation (``confirm_radius_m``), a flow that explains the wind
+        (``max_wind_misfit``) or the network's agreement (``min_learned_mass``): where the search
+        would have stopped without them."""
         return history is not None and self._held_step == int(history.step)
 
     def utility(
