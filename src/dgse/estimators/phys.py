@@ -260,6 +260,19 @@ SEARCH_PLANNER: dict[str, float] = {
 #:   put 13 of them within 2 m at a mean error of 1.90 m, the mean within the heaviest 1 m
 #:   disk also 13 at 2.19 m, that disk's centre 15 at 2.23 m, the mode 10.  (Seed 0 alone had
 #:   favoured the disk's mean, 9 of 10 against 7.)  ``wind`` is not measured.
+#:
+#: Not adopted at ``map`` (2026-11-29; validation 924-963, trial seeds 0 and 1, every step
+#: journaled: ``validation3_*-gas1m_fit0.7-disk1-s{0,1}-steps``, 18 mass stops, 3 of them more
+#: than 2 m off; ``python benchmarks/map_stop_diagnostics.py``):
+#:
+#: * a stop held while DGSE-S's own source belief puts little near the mode
+#:   (``min_learned_mass`` with ``learned_opinion=True``): within 1 m of the mode it put 0.015,
+#:   0.096 and 0.50 at the wrong stops, 0.004-0.94 at the right ones (953: 0.004, 0.21 m off),
+#:   so no threshold holds a wrong stop without holding a right one;
+#: * ``max_wind_misfit=0.6`` (the wrong stops' misfits 0.51, 0.62, 0.70; the right ones at most
+#:   0.56): re-run on the three wrong episodes (``--tag fit0.6-disk1-sS-steps``), 934 was held 3
+#:   times and stopped 3.11 m off (was 2.73 m), 960 held to its deadline 5.51 m off, 924 as before
+#:   (7.56 m): no find more, and a held wrong flow keeps its wrong mode.
 SEARCH_PLANNER_AT_LEVEL: dict[str, dict[str, float]] = {
     "map": {"max_wind_misfit": 0.7, "deadline_estimate_radius_m": 1.0},
 }
