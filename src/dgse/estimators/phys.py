@@ -272,7 +272,9 @@ SEARCH_PLANNER: dict[str, float] = {
 #: * ``max_wind_misfit=0.6`` (the wrong stops' misfits 0.51, 0.62, 0.70; the right ones at most
 #:   0.56): re-run on the three wrong episodes (``--tag fit0.6-disk1-sS-steps``), 934 was held 3
 #:   times and stopped 3.11 m off (was 2.73 m), 960 held to its deadline 5.51 m off, 924 as before
-#:   (7.56 m): no find more, and a held wrong flow keeps its wrong mode.
+#:   (7.56 m): no find more, and a held wrong flow keeps its wrong mode.  On validation 908-923
+#:   (seed 0, ``--set validation2``) two right stops had misfits 0.64 and 0.70, and DGSE-S put
+#:   0.029 near the wrong stop's mode (908, 5.51 m off) and 0.004 near a right one's (910).
 SEARCH_PLANNER_AT_LEVEL: dict[str, dict[str, float]] = {
     "map": {"max_wind_misfit": 0.7, "deadline_estimate_radius_m": 1.0},
 }
