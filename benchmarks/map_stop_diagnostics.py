@@ -12,7 +12,8 @@ stop's error:
   mixture's most probable cell (1: every weighty flow puts the source there);
 - ``wind_misfit`` (the best flow's, as the ``max_wind_misfit`` hold reads it), ``gas_misfit``;
 - ``network_mass_1m``: the mass DGSE-S's own source belief (from the same readings) puts
-  within 1 m of the mixture's most probable cell, ``network_peak_mass_1m``: the most it puts
+  within 1 m of the mixture's most probable cell (what the planner's ``min_learned_mass`` hold
+  reads), ``network_peak_mass_1m``: the most it puts
   within 1 m of any free cell, and ``network_mode_m``: how far its mode is;
   ``network_error_m``: how far DGSE-S's posterior mean is from the source (for the record: a
   rule cannot see it).
@@ -40,7 +41,7 @@ from phys_search import journal_episodes, map_estimator_at_end, step_observation
 
 from dgse.estimators.phys import search_estimator
 from dgse.estimators.registry import get_estimator
-from dgse.search.planners import mass_within
+from dgse.search.planners import mass_around, mass_within
 from dgse.world.case import Case
 from dgse.world.grid import Grid
 
@@ -87,7 +88,7 @@ def stop_row(case: Case, row: dict[str, Any], network: Any) -> dict[str, Any]:
         "agreement": float(agree),
         "wind_misfit": belief.info["wind_misfit"],
         "gas_misfit": belief.info["gas_misfit"],
-        "network_mass_1m": float(net_disks[i, j]),
+        "network_mass_1m": mass_around(net.source_probs, case.resolution, (i, j), RADIUS_M),
         "network_peak_mass_1m": float(net_disks[case.occupancy == 0].max()),
         "network_mode_m": math.dist(net_mode, mode),
         "network_error_m": math.dist(net.source_estimate(), (sx, sy)),

@@ -174,8 +174,7 @@ def _radius_or_none(name: str, value: float | None) -> float | None:
 
 def mass_near_mode(belief: Belief, radius_m: float) -> float:
     """Source posterior mass within ``radius_m`` of the posterior's mode (cell centres)."""
-    p = belief.source_probs
-    return mass_around(p, belief.resolution, np.unravel_index(int(np.argmax(p)), p.shape), radius_m)
+    return mass_around(belief.source_probs, belief.resolution, belief.most_likely_cell(), radius_m)
 
 
 def mass_around(probs: np.ndarray, resolution: float, cell: tuple[int, int], radius_m: float) -> float:
@@ -416,9 +415,13 @@ class UtilityPlanner:
             raise InputDataError(
                 f"info['learned_source_probs'] has shape {probs.shape}, the belief {belief.shape}"
             )
-        radius = 1.0 if self.mass_radius_m is None else self.mass_radius_m
-        near = mass_around(probs, belief.resolution, belief.most_likely_cell(), radius)
+        near = mass_around(probs, belief.resolution, belief.most_likely_cell(), self._mode_radius_m)
         return not (near >= self.min_learned_mass)
+
+    @property
+    def _mode_radius_m(self) -> float:
+        """The radius (m) that counts as "near the mode": ``mass_radius_m``, 1 m without it."""
+        return 1.0 if self.mass_radius_m is None else self.mass_radius_m
 
     def _passes_in_a_row(self, belief: Belief, history: SearchHistory | None) -> bool:
         """The stop test has passed at the last ``stop_readings`` readings, the posterior's mode
@@ -433,10 +436,10 @@ class UtilityPlanner:
             self._streak = []
             return False
         i, j = belief.most_likely_cell()
-        radius = 1.0 if self.mass_radius_m is None else self.mass_radius_m
         if self._streak:
             _, i0, j0 = self._streak[0]
-            if math.hypot(i - i0, j - j0) * belief.resolution > radius or self._streak[-1][0] != step - 1:
+            moved = math.hypot(i - i0, j - j0) * belief.resolution > self._mode_radius_m
+            if moved or self._streak[-1][0] != step - 1:
                 self._streak = []
         self._streak.append((step, i, j))
         return len(self._streak) >= self.stop_readings
