@@ -22,6 +22,7 @@ scale comes from the readings' mean, see ``adjoint_log_evidence``) and counted.
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
 import math
 import time
@@ -37,10 +38,16 @@ from dgse.localization import adjoint, censored_kernel
 WAYS = {"gauss-hermite": math.inf, "default": adjoint.CENSORED_SCAN_MARGIN, "scan": -math.inf}
 
 
+#: The kernel's parameter names, to replace recorded arguments by name.
+_PARAMS = list(inspect.signature(censored_kernel.censored_log_factor.py_func).parameters)
+
+
 def _replay(call: list, margin: float) -> tuple[np.ndarray, np.ndarray, float]:
     scanned = np.zeros(call[1].size, dtype=np.uint8)
+    args = dict(zip(_PARAMS, call, strict=False))
+    args.update(scan_margin=margin, scanned=scanned)
     t = time.perf_counter()
-    out = censored_kernel.censored_log_factor(*call[:-2], margin, scanned)
+    out = censored_kernel.censored_log_factor(*(args[k] for k in _PARAMS if k in args))
     return out, scanned, time.perf_counter() - t
 
 
@@ -85,6 +92,9 @@ def main() -> None:
         kept = [list(a) for a, _ in calls]
         # no positive reading yet: beta_n at the prior's floor
         proper = [c for c in kept if c[3].min() > 1e-12]
+        if not proper:  # no zero reading after a positive one in this episode
+            print(json.dumps({"case": path.stem, "calls": 0}), flush=True)
+            continue
         vals, secs, shares = {}, {}, {}
         for way, margin in WAYS.items():
             outs = [_replay(c, margin) for c in proper]

@@ -80,6 +80,68 @@ def test_zeros_slopes_in_one_pass_are_the_separate_passes_to_the_bit() -> None:
         assert g1 == pytest.approx(fd1, rel=1e-4, abs=1e-6)
 
 
+def test_log_phi_series_stands_for_a_faint_zero_within_2e_12_nats() -> None:
+    """The Taylor series of ``log Phi(-x)`` that the faint zeros' power sums feed, against SciPy
+    on the faint range ``|x| <= _SERIES_X``; its first two derivatives against ``-m`` and
+    ``-m (m - x)`` (``m``: the Mills ratio)."""
+    from dgse.localization.censored_kernel import _SERIES, _SERIES_X, _series_slopes
+
+    x = np.linspace(-_SERIES_X, _SERIES_X, 801)  # lambda < 0 in the tilted rate's Newton steps
+    poly = np.polynomial.Polynomial(_SERIES)
+    assert np.abs(poly(x) - special.log_ndtr(-x)).max() < 2e-12
+    m = np.exp(-0.5 * x * x - special.log_ndtr(-x)) / math.sqrt(2.0 * math.pi)
+    np.testing.assert_allclose(poly.deriv(1)(x), -m, rtol=1e-9)
+    np.testing.assert_allclose(poly.deriv(2)(x), -m * (m - x), rtol=1e-8)
+    # one zero b at lambda = 1: the power sums are b^k, G' = b f'(b) and G'' = b^2 f''(b)
+    for v in (0.0, 0.05, _SERIES_X):
+        want = (poly(v), v * poly.deriv(1)(v), v * v * poly.deriv(2)(v))
+        assert _series_slopes(1.0, v ** np.arange(_SERIES.size)) == pytest.approx(want, rel=1e-13, abs=1e-15)
+
+
+def test_split_zeros_give_the_sums_of_every_zero() -> None:
+    """A candidate's zeros split into those it reaches and the faint ones (power sums): ``G``, its
+    slopes and the Newton sums over ``log tau`` equal the sums over every zero, to the series'
+    1e-12 nats a zero within the cap and to rounding above it (every zero summed)."""
+    from dgse.localization.censored_kernel import (
+        _SERIES_ORDER,
+        _SERIES_X,
+        _g_split,
+        _log_phi_sum,
+        _slopes_split,
+        _split_zeros,
+        _tau_split,
+        _tau_sums,
+        _zeros_slopes,
+    )
+
+    rng = np.random.default_rng(8)
+    b = np.concatenate([rng.exponential(1.0, 30), rng.exponential(1e-3, 60), np.zeros(20), [1e-7, 0.05]])
+    rng.shuffle(b)
+    cap = 20.0
+    row = np.empty(b.size)
+    mom = np.empty(_SERIES_ORDER + 1)
+    nb = _split_zeros(b, cap, row, mom)
+    faint = b <= _SERIES_X / cap
+    assert nb == (~faint).sum() and 0 < nb < b.size
+    # the reached zeros first, in their order; the faint ones' power sums
+    np.testing.assert_array_equal(row[:nb], b[~faint])
+    np.testing.assert_array_equal(np.sort(row), np.sort(b))
+    np.testing.assert_allclose(mom, [(b[faint] ** k).sum() for k in range(_SERIES_ORDER + 1)], rtol=1e-13)
+    for lam in (0.0, 1e-4, 0.7, cap, 2.0 * cap, -0.5):
+        tol = 1e-12 * faint.sum() + 1e-12 * abs(_log_phi_sum(lam, b))
+        assert _g_split(lam, row, nb, mom, cap) == pytest.approx(_log_phi_sum(lam, b), abs=tol)
+        got = _slopes_split(lam, row, nb, mom, cap)
+        np.testing.assert_allclose(got, _zeros_slopes(lam, b), rtol=1e-9, atol=tol)
+        for e in (0.5, 1.0):
+            np.testing.assert_allclose(
+                _tau_split(lam / e, e, row, nb, mom, cap), _tau_sums(lam / e, e, b), rtol=1e-9, atol=tol
+            )
+    # an unbounded cap: only the exact zeros are faint, log(1/2) each at any lambda
+    nb = _split_zeros(b, math.inf, row, mom)
+    assert nb == (b > 0).sum() and mom[0] == (b == 0).sum() and mom[1] == 0.0
+    assert _g_split(1e3, row, nb, mom, math.inf) == pytest.approx(_log_phi_sum(1e3, b), rel=1e-13)
+
+
 def test_plug_in_factor_is_the_sum_of_log_phi() -> None:
     from dgse.localization.censored_kernel import plug_in_log_factor
 
