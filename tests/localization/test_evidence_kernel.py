@@ -39,3 +39,33 @@ def test_evidence_with_own_weights_matches_the_weights_it_reports(mode):
     want = _evidence(A, A * A, z, r, 5.0, 1.0, det["s0"] ** 2)[0]
     np.testing.assert_allclose(logl, want, rtol=1e-10, atol=1e-9)
     assert int(np.argmax(logl)) == 7
+
+
+def test_sums_of_several_kappas_in_one_pass_are_each_kappas_to_the_bit():
+    from dgse.localization.evidence_kernel import candidate_sums_many
+
+    rng = np.random.default_rng(5)
+    A = rng.random((31, 44)) ** 3
+    own = A * rng.random(44) * 5.0
+    z = rng.random(31) * 10.0
+    cs = np.array([0.3, 40.0, 1e60, 0.0])
+    many = candidate_sums_many(A, own, z, cs)
+    for j, c in enumerate(cs):
+        for all_rows, one in zip(many, candidate_sums(A, own, z, c), strict=True):
+            np.testing.assert_array_equal(all_rows[j], one)
+
+
+def test_plug_in_evidence_averages_each_kappas_evidence():
+    """With the plug-in weights, the sums of every kappa come from one matrix product each; the
+    evidence is still the mean over kappas of each one's own evidence."""
+    rng = np.random.default_rng(6)
+    m, n = 18, 50
+    A = rng.random((m, n)) ** 2
+    z = np.maximum(A[:, 11] * 3.0 + rng.normal(0.0, 0.1, m), 0.0) + 0.01
+    kappas = (0.0, 0.5, 8.0)
+    logl, det = adjoint_log_evidence(A, z, kappas=kappas, noise_weights="plug-in", censored=False)
+    beta0 = det["s0"] ** 2
+    each = [_evidence(A, A * A, z, 1.0 + k * det["chat"] / det["cbar"], 5.0, 1.0, beta0)[0] for k in kappas]
+    top = np.max(each, axis=0)
+    want = top + np.log(np.mean(np.exp(np.array(each) - top), axis=0))
+    np.testing.assert_allclose(logl, want, rtol=1e-10, atol=1e-9)

@@ -843,19 +843,29 @@ def adjoint_log_evidence(
             return 1.0 + (k / cbar) * own
         return 1.0 + k * chat / cbar
 
-    # a candidate's own weights: the sums in one compiled pass per kappa, no (m, N) temporaries
-    own_rows = None
-    if own is not None:
-        own_rows = (np.ascontiguousarray(Ap), np.ascontiguousarray(own[pos] if cen.any() else own))
+    # the weighted sums of every kappa > 0 from one pass over the responses: a candidate's own
+    # weights in one compiled pass (no (m, N) temporaries), the plug-in weights as one matrix
+    # product per sum
+    heavy = [k for k in ks if k != 0.0]
+    if not heavy:
+        many: tuple[np.ndarray, ...] = ()
+    elif own is not None:
+        own_p = np.ascontiguousarray(own[pos] if cen.any() else own)
+        many = evidence_kernel.candidate_sums_many(
+            np.ascontiguousarray(Ap), own_p, zp, np.array([k / cbar for k in heavy])
+        )
+    else:
+        r_all = np.stack([weights(k)[pos] for k in heavy])  # (K, m)
+        w_all = 1.0 / r_all**2
+        many = (np.maximum(w_all @ Ap2, 1e-300), (w_all * zp) @ Ap, w_all @ zp**2, np.log(r_all).sum(axis=1))
     for k in ks:
         # kappa = 0 is the homoscedastic pass above
         if k == 0.0:
             ll, qh = logl0, qhat0
-        elif own_rows is not None:
-            sums = evidence_kernel.candidate_sums(*own_rows, zp, k / cbar)
-            ll, qh = _evidence_from_sums(sums, zp.size, q_max, alpha0, beta0)[:2]
         else:
-            ll, qh = _evidence(Ap, Ap2, zp, weights(k)[pos], q_max, alpha0, beta0)[:2]
+            j = heavy.index(k)
+            sums = (many[0][j], many[1][j], many[2][j], many[3][j])
+            ll, qh = _evidence_from_sums(sums, zp.size, q_max, alpha0, beta0)[:2]
         logls.append(ll)
         qhats.append(qh)
         top = ll.max()

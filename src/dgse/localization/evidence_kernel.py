@@ -28,6 +28,54 @@ _PRODUCT_CAP = 1e250
 
 
 @_jit
+def candidate_sums_many(
+    A: np.ndarray, own: np.ndarray, z: np.ndarray, cs: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`candidate_sums` for several ``c`` (``kappa / cbar``) in one pass over the rows: each
+    ``(K, N)``, row ``j`` that of ``cs[j]``, with the same arithmetic (and bits) as one ``c`` at a
+    time.  The rows of ``A`` and ``own`` are read once instead of once per ``kappa``."""
+    m, n = A.shape
+    nk = cs.size
+    aa = np.zeros((n, nk))
+    az = np.zeros((n, nk))
+    zz = np.zeros((n, nk))
+    log_r = np.zeros((n, nk))
+    prod = np.ones((n, nk))
+    bound = np.ones(nk)  # the largest each kappa's running products can be
+    for i in range(m):
+        zi = z[i]
+        z2 = zi * zi
+        a_row = A[i]
+        o_row = own[i]
+        top = 0.0
+        for s in range(n):
+            top = max(top, o_row[s])
+        for j in range(nk):
+            r_max = 1.0 + cs[j] * top
+            if bound[j] * r_max > _PRODUCT_CAP:
+                _flush(prod[:, j], log_r[:, j])
+                bound[j] = 1.0
+            bound[j] *= r_max
+        for s in range(n):
+            a = a_row[s]
+            o = o_row[s]
+            for j in range(nk):
+                r = 1.0 + cs[j] * o
+                w = 1.0 / (r * r)
+                wa = w * a
+                aa[s, j] += wa * a
+                az[s, j] += wa * zi
+                zz[s, j] += w * z2
+                prod[s, j] *= r
+    for j in range(nk):
+        _flush(prod[:, j], log_r[:, j])
+    for s in range(n):
+        for j in range(nk):
+            aa[s, j] = max(aa[s, j], 1e-300)
+    return aa.T.copy(), az.T.copy(), zz.T.copy(), log_r.T.copy()
+
+
+@_jit
 def candidate_sums(
     A: np.ndarray, own: np.ndarray, z: np.ndarray, c: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -40,39 +88,8 @@ def candidate_sums(
 
     ``aa`` is kept at least ``1e-300``, as :func:`dgse.localization.adjoint._weighted_sums` does.
     """
-    m, n = A.shape
-    aa = np.zeros(n)
-    az = np.zeros(n)
-    zz = np.zeros(n)
-    log_r = np.zeros(n)
-    prod = np.ones(n)
-    bound = 1.0  # the largest the running products can be
-    for i in range(m):
-        zi = z[i]
-        z2 = zi * zi
-        a_row = A[i]
-        o_row = own[i]
-        top = 0.0
-        for s in range(n):
-            top = max(top, o_row[s])
-        r_max = 1.0 + c * top
-        if bound * r_max > _PRODUCT_CAP:
-            _flush(prod, log_r)
-            bound = 1.0
-        for s in range(n):
-            r = 1.0 + c * o_row[s]
-            w = 1.0 / (r * r)
-            a = a_row[s]
-            wa = w * a
-            aa[s] += wa * a
-            az[s] += wa * zi
-            zz[s] += w * z2
-            prod[s] *= r
-        bound *= r_max
-    _flush(prod, log_r)
-    for s in range(n):
-        aa[s] = max(aa[s], 1e-300)
-    return aa, az, zz, log_r
+    aa, az, zz, log_r = candidate_sums_many(A, own, z, np.array([c]))
+    return aa[0], az[0], zz[0], log_r[0]
 
 
 @_jit
