@@ -346,9 +346,10 @@ def test_learned_opinion_is_the_networks_own_belief_computed_when_asked(case, mo
     opinion = b.info["learned_source_probs"]
     assert np.allclose(opinion(), expected, atol=1e-7) and len(calls) == 1
     assert opinion() is opinion() and len(calls) == 1
-    assert "learned_source_probs" not in get_estimator("dgse-phys", knowledge=k).estimate(
-        case.occupancy, case.resolution, obs
-    ).info
+    assert (
+        "learned_source_probs"
+        not in get_estimator("dgse-phys", knowledge=k).estimate(case.occupancy, case.resolution, obs).info
+    )
     with pytest.raises(InputDataError, match="learned_opinion"):
         get_estimator("dgse-phys", learned_opinion="yes")
 
@@ -550,3 +551,49 @@ def test_censored_tilt_follows_the_knowledge_level_unless_given(case):
             assert est._censored_tilt() is got
     assert PhysicsGuidedEstimator()._censored_tilt() is True
     assert PhysicsGuidedEstimator(censored_tilt=None).censored_tilt is None
+
+
+def test_a_weak_hypothesis_is_corrected_for_the_zeros_to_the_mixtures_precision(monkeypatch):
+    """The zeros' correction of a hypothesis with a small share of the weight may leave out more
+    of its own mass (``CENSORED_TAIL / share``): it integrates fewer candidates, and the mixture
+    posterior stays where the full correction puts it."""
+    from dgse.estimators import phys
+    from dgse.localization import adjoint
+
+    rng = np.random.default_rng(12)
+    m, n = 40, 3000
+    z_true = rng.exponential(1.0, m) * (rng.random(m) < 0.6)
+    # every candidate explains the readings roughly (a broad posterior), the zeros tell them apart
+    flows = []
+    for k in range(2):
+        A = (z_true / 2.0)[:, None] * rng.uniform(0.3, 1.7, (m, n))
+        A[z_true == 0] = rng.exponential(0.02 * (k + 1), ((z_true == 0).sum(), n))
+        A[:, 17] = z_true / 2.0  # the source: rate 2
+        flows.append(A)
+    z = np.maximum(z_true + rng.normal(0.0, 0.05, m), 0.0)
+    z[z < 0.1] = 0.0
+    z = np.where(z > 0, z + rng.normal(0.0, 0.3, m).clip(0.0), z)
+    assert 5 < (z == 0).sum() < m
+    evs = [adjoint_log_evidence(A, z, censored="deferred") for A in flows]
+    log_ev = [e[0] for e in evs]
+    details = [e[1] for e in evs]
+    log_prior = [0.0, -6.0]  # the second hypothesis: about e^-6 of the weight
+
+    counted: list[int] = []
+    factor = adjoint._censored_log_factor
+
+    def count(Bt, *args, **kwargs):
+        counted.append(len(Bt))
+        return factor(Bt, *args, **kwargs)
+
+    monkeypatch.setattr(adjoint, "_censored_log_factor", count)
+    runs = {}
+    for cap in (phys.CENSORED_TAIL, phys.CENSORED_TAIL_MAX):  # the tail of every hypothesis, the default
+        monkeypatch.setattr(phys, "CENSORED_TAIL_MAX", cap)
+        counted.clear()
+        out = phys._censor(list(log_ev), log_prior, details, 1.0)
+        runs[cap] = (phys.mix_posteriors(out, log_prior)[0], sum(counted))
+    (full, n_full), (cut, n_cut) = runs[phys.CENSORED_TAIL], runs[0.5]
+    assert n_cut < n_full
+    assert 0.5 * np.abs(full - cut).sum() < 1e-3
+    assert int(np.argmax(cut)) == 17

@@ -72,6 +72,7 @@ from dgse.localization import check_inputs, log_moments_from_ppm
 from dgse.localization.adjoint import (
     CENSORED_RANKING,
     CENSORED_RANKINGS,
+    CENSORED_TAIL,
     DEFAULT_KAPPAS,
     NOISE_WEIGHTS,
     AdjointResponseModel,
@@ -456,6 +457,8 @@ MIXED_NOISE_WEIGHTS = ("plug-in", "candidate")
 #: A hypothesis whose evidence bound falls this many nats below the best one's evidence is
 #: not corrected for the zero readings (its weight is below ``exp(-HOPELESS)`` either way).
 HOPELESS_NATS = 10.0
+#: The most of its own mass the zeros' correction of a weak hypothesis may leave out (:func:`_censor`).
+CENSORED_TAIL_MAX = 0.5
 
 
 def _censor(
@@ -465,12 +468,17 @@ def _censor(
     temp: float,
     ranking: str | None = None,
     tilt: bool = True,
+    hypothesis_temperature: float = 1.0,
 ) -> list[np.ndarray]:
     """Add the zero readings' factor to each hypothesis's evidence, skipping hopeless ones.
 
     The factor is at most ``(1/2)`` per zero, so ``evidence + ceiling`` bounds a hypothesis
     from above; hypotheses are corrected best bound first, and one whose bound lies
-    ``HOPELESS_NATS`` below the best corrected hypothesis is left at its bound.
+    ``HOPELESS_NATS`` below the best corrected hypothesis is left at its bound.  The others
+    are corrected to the mixture's precision: a hypothesis whose weight is at most ``w`` of
+    the best one's (its bound against the best corrected total, over the hypotheses'
+    temperature) leaves out at most ``CENSORED_TAIL / w`` of its own mass (at most
+    :data:`CENSORED_TAIL_MAX`), which is ``CENSORED_TAIL`` of the mixture's.
     """
     out = list(log_ev)
     pending = [i for i, d in enumerate(details) if "censor" in d]
@@ -487,8 +495,10 @@ def _censor(
         if bounds[i] < best - HOPELESS_NATS:
             out[i] = log_ev[i] + ceiling
             continue
+        share = math.exp(min((bounds[i] - best) / hypothesis_temperature, 0.0))
+        tail = min(CENSORED_TAIL / share, CENSORED_TAIL_MAX)
         out[i] = log_ev[i] + censored_correction(
-            logl=log_ev[i], ranking=ranking, tilt=tilt, **details[i]["censor"]
+            logl=log_ev[i], ranking=ranking, tilt=tilt, tail=tail, **details[i]["censor"]
         )
         best = max(best, total(i, out[i]))
     return out
@@ -1109,7 +1119,13 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             log_ev.append(logl)
             details.append((A, det))
         zeros = _censor(
-            log_ev, log_prior, [d for _, d in details], temp, self.censored_ranking, self._censored_tilt()
+            log_ev,
+            log_prior,
+            [d for _, d in details],
+            temp,
+            self.censored_ranking,
+            self._censored_tilt(),
+            hypothesis_temperature=t_h,
         )
         log_ev = [x / temp for x in zeros]
         post, hw = mix_posteriors(log_ev, log_prior, t_h)
