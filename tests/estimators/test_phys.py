@@ -127,6 +127,30 @@ def test_noise_weight_mixture_averages_the_two_posteriors(case):
         get_estimator("dgse-phys", noise_weights="both")
 
 
+def test_noise_weight_modes_share_the_zeros_factors_without_changing_the_belief(case, monkeypatch):
+    """Where both modes' most probable kappa gives the same noise weights, the second reuses the
+    zeros' factors the first integrated: the belief is the one computed with no sharing."""
+    from dgse.estimators import phys
+
+    k = Knowledge.from_case(case, "openings")
+    obs = draw_observations(case, 40, seed=6)
+    assert (obs.gas <= 0).any()
+    opts = {"knowledge": k, "speeds": (0.6, 1.2), "refine_speeds": 0, "kappas": (0.0,)}
+    shared = get_estimator("dgse-phys", **opts).estimate(case.occupancy, case.resolution, obs)
+    asked: list[bool] = []
+    same = phys._same_noise_weights
+
+    def never(modes):
+        asked.append(same(modes))
+        return False
+
+    monkeypatch.setattr(phys, "_same_noise_weights", never)
+    alone = get_estimator("dgse-phys", **opts).estimate(case.occupancy, case.resolution, obs)
+    assert asked == [True]  # kappa = 0 only: weights 1 in both modes
+    np.testing.assert_array_equal(shared.source_probs, alone.source_probs)
+    np.testing.assert_array_equal(shared.log_conc_mean, alone.log_conc_mean)
+
+
 def test_neighbour_correlation_tells_shared_model_error_from_noise():
     """Independent residuals correlate about 0 between neighbours, a smooth shared error
     near 1, an alternating one below 0; no neighbour pair, or all-zero residuals, give 0."""

@@ -468,3 +468,35 @@ def test_the_bound_ranking_never_drops_mass_the_plug_in_value_hides() -> None:
     assert 0.5 * np.abs(posterior(plug_in) - posterior(full)).sum() > 0.01
     with pytest.raises(ValueError, match="unknown ranking"):
         censored_correction(logl=part, **det["censor"], ranking="best")
+
+
+def test_censored_correction_reuses_a_memo_without_changing_a_number(monkeypatch) -> None:
+    """Calls that share ``memo`` (same responses, readings and noise weights; another ``logl``)
+    integrate each candidate once, and give what a call without it gives."""
+    from dgse.localization import adjoint
+
+    rng = np.random.default_rng(21)
+    m, n = 30, 900
+    A = rng.exponential(1.0, (m, n)) ** 2 * (rng.random((m, n)) < 0.6)
+    z = np.maximum(2.0 * A[:, 3] + rng.normal(0.0, 0.3, m), 0.0)
+    assert (z == 0).sum() >= 3
+    logl, det = adjoint_log_evidence(A, z, censored="deferred")
+    kwargs = det["censor"]
+    other = logl + rng.normal(0.0, 2.0, n)  # another mode's positive-readings evidence
+    seen: list[int] = []
+    factor = adjoint._censored_log_factor
+
+    def count(Bt, *args, **kw):
+        seen.append(len(Bt))
+        return factor(Bt, *args, **kw)
+
+    monkeypatch.setattr(adjoint, "_censored_log_factor", count)
+    fresh = [censored_correction(logl=x, **kwargs) for x in (logl, other)]
+    n_fresh = sum(seen)
+    seen.clear()
+    memo: dict = {}
+    shared = [censored_correction(logl=x, memo=memo, **kwargs) for x in (logl, other)]
+    for a, b in zip(fresh, shared, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert sum(seen) < n_fresh
+    assert np.isfinite(memo["exact"]).sum() == sum(seen)  # each integrated once

@@ -469,6 +469,7 @@ def _censor(
     ranking: str | None = None,
     tilt: bool = True,
     hypothesis_temperature: float = 1.0,
+    memos: dict[int, list[tuple[np.ndarray, dict[str, Any]]]] | None = None,
 ) -> list[np.ndarray]:
     """Add the zero readings' factor to each hypothesis's evidence, skipping hopeless ones.
 
@@ -479,6 +480,10 @@ def _censor(
     the best one's (its bound against the best corrected total, over the hypotheses'
     temperature) leaves out at most ``CENSORED_TAIL / w`` of its own mass (at most
     :data:`CENSORED_TAIL_MAX`), which is ``CENSORED_TAIL`` of the mixture's.
+
+    ``memos``: per hypothesis, the noise weights and the correction's memo of earlier calls
+    (another noise-weight mode's, :func:`~dgse.localization.adjoint.censored_correction`):
+    where this call's weights are the same, the factors computed there are reused.
     """
     out = list(log_ev)
     pending = [i for i, d in enumerate(details) if "censor" in d]
@@ -497,11 +502,41 @@ def _censor(
             continue
         share = math.exp(min((bounds[i] - best) / hypothesis_temperature, 0.0))
         tail = min(CENSORED_TAIL / share, CENSORED_TAIL_MAX)
+        memo = _memo_for(memos, i, details[i]["censor"]["r"])
         out[i] = log_ev[i] + censored_correction(
-            logl=log_ev[i], ranking=ranking, tilt=tilt, tail=tail, **details[i]["censor"]
+            logl=log_ev[i], ranking=ranking, tilt=tilt, tail=tail, memo=memo, **details[i]["censor"]
         )
         best = max(best, total(i, out[i]))
     return out
+
+
+def _memo_for(
+    memos: dict[int, list[tuple[np.ndarray, dict[str, Any]]]] | None, i: int, r: np.ndarray
+) -> dict[str, Any] | None:
+    """The zeros' correction memo of hypothesis ``i`` for noise weights ``r`` (a new one where no
+    earlier call had the same weights; None without ``memos``)."""
+    if memos is None:
+        return None
+    known = memos.setdefault(i, [])
+    for r_seen, memo in known:
+        if r_seen.shape == r.shape and np.array_equal(r_seen, r):
+            return memo
+    known.append((r, {}))
+    return known[-1][1]
+
+
+def _same_noise_weights(modes: Sequence[Sequence[tuple[Any, dict[str, Any]]]]) -> bool:
+    """Whether several noise-weight modes' evidence (``(rows, details)`` per hypothesis) leaves the
+    zeros' factor of every hypothesis the same noise weights (and so the same factors)."""
+    if len(modes) < 2:
+        return False
+    for per_mode in zip(*modes, strict=True):
+        rs = [d["censor"]["r"] for _A, d in per_mode if "censor" in d]
+        if 0 < len(rs) < len(per_mode):
+            return False
+        if any(r.shape != rs[0].shape or not np.array_equal(r, rs[0]) for r in rs[1:]):
+            return False
+    return True
 
 
 def wind_log_likelihood(
@@ -1074,23 +1109,19 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             )
         return self._networks[model]
 
-    def _gas_posterior(
+    def _gas_evidence(
         self,
         hyps: list[FlowHypothesis],
         rows: dict[int, np.ndarray],
-        log_prior: list[float],
-        cells: np.ndarray,
         z: np.ndarray,
         s0_floor: float,
-        temp: float,
-        t_h: float,
         noise_weights: str,
-    ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], list[tuple[Any, dict[str, Any]]]]:
-        """The source posterior and hypothesis weights from the gas readings with one noise-weight
-        mode: ``(post, weights, tempered log evidence per hypothesis, (rows, details) per hypothesis)``.
-        ``rows``: the readings' response rows of the live hypotheses (by index); the others
-        (ruled out by the wind) get no gas evidence.  Reads no state that another mode's
-        call, run beside it, writes."""
+    ) -> tuple[list[np.ndarray], list[tuple[Any, dict[str, Any]]]]:
+        """The positive readings' log evidence per hypothesis with one noise-weight mode, the
+        zeros' factor deferred: ``(log evidence, (rows, details))`` per hypothesis.  ``rows``:
+        the readings' response rows of the live hypotheses (by index); the others (ruled out by
+        the wind) get no gas evidence.  Reads no state that another mode's call, run beside
+        it, writes."""
 
         def evidence(k: int) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
             A = rows[k]
@@ -1118,6 +1149,21 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             A, logl, det = got[k]
             log_ev.append(logl)
             details.append((A, det))
+        return log_ev, details
+
+    def _gas_posterior(
+        self,
+        log_ev: list[np.ndarray],
+        details: list[tuple[Any, dict[str, Any]]],
+        log_prior: list[float],
+        temp: float,
+        t_h: float,
+        memos: dict[int, list[tuple[np.ndarray, dict[str, Any]]]] | None,
+    ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], list[tuple[Any, dict[str, Any]]]]:
+        """The source posterior and hypothesis weights from one noise-weight mode's evidence
+        (:meth:`_gas_evidence`) and the zeros' factor: ``(post, weights, tempered log evidence
+        per hypothesis, (rows, details) per hypothesis)``.  ``memos``: the zeros' factors
+        computed for another mode, reused where the noise weights agree (:func:`_censor`)."""
         zeros = _censor(
             log_ev,
             log_prior,
@@ -1126,6 +1172,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             self.censored_ranking,
             self._censored_tilt(),
             hypothesis_temperature=t_h,
+            memos=memos,
         )
         log_ev = [x / temp for x in zeros]
         post, hw = mix_posteriors(log_ev, log_prior, t_h)
@@ -1176,16 +1223,24 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         t_h = 1.0 if self.hypothesis_readings is None else max(1.0, len(obs) / self.hypothesis_readings)
         modes = MIXED_NOISE_WEIGHTS if self.noise_weights == "mixture" else (self.noise_weights,)
         # the live flows' response rows, one flow per thread (each flow keeps its own cache),
-        # then the modes side by side (they share the rows and write nothing the other reads)
+        # then the modes' evidence side by side (they share the rows and write nothing the other
+        # reads), then their zeros' factors: where the modes' most probable kappa gives every
+        # flow the same noise weights (often kappa = 0, weights 1), one mode after the other,
+        # the second reusing the factors the first integrated; otherwise side by side
         rows = dict(zip(live, map_threads(lambda k: hyps[k].flow.responses(cells), live), strict=True))
-        runs = side_by_side(
-            [
-                functools.partial(
-                    self._gas_posterior, hyps, rows, log_prior, cells, z, s0_floor, temp, t_h, mode
-                )
-                for mode in modes
-            ]
+        evidence = side_by_side(
+            [functools.partial(self._gas_evidence, hyps, rows, z, s0_floor, mode) for mode in modes]
         )
+        if _same_noise_weights([det for _ev, det in evidence]):
+            memos: dict[int, list[tuple[np.ndarray, dict[str, Any]]]] = {}
+            runs = [self._gas_posterior(ev, det, log_prior, temp, t_h, memos) for ev, det in evidence]
+        else:
+            runs = side_by_side(
+                [
+                    functools.partial(self._gas_posterior, ev, det, log_prior, temp, t_h, None)
+                    for ev, det in evidence
+                ]
+            )
         # the mixture: an equal-weight average of the modes' posteriors (a mass stop needs both);
         # the predictive fields and the response model come from the first mode's evidence
         post = np.mean([r[0] for r in runs], axis=0)

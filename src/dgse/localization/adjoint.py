@@ -591,6 +591,52 @@ def _chebyshev_coefficient_matrix(k: int) -> np.ndarray:
     return M
 
 
+def _censored_setup(
+    A: np.ndarray,
+    z: np.ndarray,
+    r: np.ndarray,
+    q_max: float | None,
+    alpha0: float,
+    beta0: float,
+    tilt: bool,
+) -> dict[str, Any]:
+    """What :func:`censored_correction` computes from its inputs alone (not from ``logl``): the
+    zeros' responses over their noise weights a row per candidate (``Bt``), the positive
+    readings' rate estimate, sums and noise posterior, the plug-in factor of every candidate
+    (``plug``) and the candidates the zeros hardly see (``faint``, None without a rate bound)."""
+    cen = z <= 0.0
+    pos = ~cen
+    Ap = A[pos]
+    zp = z[pos]
+    alpha_n = alpha0 + 0.5 * (int(pos.sum()) - 1)
+    # the zeros' responses over their noise weights, a row per candidate
+    rc = r[cen] if r.ndim == 2 else r[cen][:, None]
+    Bt = np.ascontiguousarray((A[cen] / rc).T)
+    qmax = np.inf if q_max is None else q_max
+    # a plug-in pass over every candidate (rate and noise at their estimates) orders the
+    # candidates and stands in for the exact factor where the mass is negligible
+    aa, az, zz = _weighted_sums(Ap, Ap * Ap, zp, r[pos])
+    qh = az / aa
+    beta_n = beta0 + 0.5 * np.maximum(zz - az * qh, 0.0)
+    tilt_min = censored_kernel.TILT_MIN if tilt else math.inf
+    plug = censored_kernel.tilted_plug_in_log_factor(
+        Bt,
+        np.ascontiguousarray(qh),
+        np.ascontiguousarray(aa),
+        np.log(alpha_n / beta_n),
+        float(qmax),
+        tilt_min,
+    )
+    faint = None
+    if math.isfinite(qmax):
+        tau_hi = special.gammainccinv(alpha_n, 1e-12) / beta_n
+        faint = qmax * np.sqrt(tau_hi) * np.maximum(Bt, 0.0).sum(axis=1) < CENSORED_FAINT
+    return {
+        "Bt": Bt, "qh": qh, "aa": aa, "beta_n": beta_n, "alpha_n": alpha_n, "tilt_min": tilt_min,
+        "plug": plug, "faint": faint,
+    }  # fmt: skip
+
+
 def censored_correction(
     A: np.ndarray,
     z: np.ndarray,
@@ -603,6 +649,7 @@ def censored_correction(
     tail: float = CENSORED_TAIL,
     ranking: str | None = None,
     tilt: bool = True,
+    memo: dict[str, Any] | None = None,
 ) -> np.ndarray:
     """``log p(z_censored | z_rest, s)`` per candidate ``s``: what the zero readings add.
 
@@ -628,37 +675,30 @@ def censored_correction(
     estimate, the rate's nodes and the plug-in value follow them (see the module doc's
     "Zero readings"); False gives the factor as it was computed before 2026-11-28 e.
 
+    ``memo``: a dict shared by calls with the same ``A``, ``z``, ``r``, ``q_max``, ``alpha0``,
+    ``beta0`` and ``tilt`` (the caller's promise; ``logl``, ``tail`` and ``ranking`` may
+    differ): the plug-in pass and every candidate's integrated factor are computed once and
+    reused (the same numbers as computed afresh).  The two noise-weight modes of
+    :class:`~dgse.estimators.phys.PhysicsGuidedEstimator` share them where their most probable
+    ``kappa`` gives the same weights.
+
     Args:
         A: ``(m, N)`` responses; z: ``(m,)`` readings (zeros are the censored ones);
         r: ``(m,)`` noise weights, or ``(m, N)``: each candidate's own; logl: ``(N,)`` the
         positive readings' log evidence.
     """
     cen = z <= 0.0
-    out = np.zeros(logl.shape)
     if not cen.any():
-        return out
-    pos = ~cen
-    Ap = A[pos]
-    zp = z[pos]
-    alpha_n = alpha0 + 0.5 * (int(pos.sum()) - 1)
-    # the zeros' responses over their noise weights, a row per candidate
-    rc = r[cen] if r.ndim == 2 else r[cen][:, None]
-    Bt = np.ascontiguousarray((A[cen] / rc).T)
-    qmax = np.inf if q_max is None else q_max
-    # a plug-in pass over every candidate (rate and noise at their estimates) orders the
-    # candidates and stands in for the exact factor where the mass is negligible
-    aa, az, zz = _weighted_sums(Ap, Ap * Ap, zp, r[pos])
-    qh = az / aa
-    beta_n = beta0 + 0.5 * np.maximum(zz - az * qh, 0.0)
-    tilt_min = censored_kernel.TILT_MIN if tilt else math.inf
-    out = censored_kernel.tilted_plug_in_log_factor(
-        Bt,
-        np.ascontiguousarray(qh),
-        np.ascontiguousarray(aa),
-        np.log(alpha_n / beta_n),
-        float(qmax),
-        tilt_min,
-    )
+        return np.zeros(logl.shape)
+    if memo is None:
+        memo = {}
+    if "plug" not in memo:
+        memo.update(_censored_setup(A, z, r, q_max, alpha0, beta0, tilt))
+        memo["exact"] = np.full(logl.shape, np.nan)
+    Bt, qh, aa, beta_n, alpha_n = memo["Bt"], memo["qh"], memo["aa"], memo["beta_n"], memo["alpha_n"]
+    tilt_min = memo["tilt_min"]
+    exact = memo["exact"]
+    out = memo["plug"].copy()
     key = logl + out
     # the ranking and the stop: the plug-in value, or an upper bound of the factor (see above)
     ranking = CENSORED_RANKING if ranking is None else ranking
@@ -675,9 +715,8 @@ def censored_correction(
     # order, and the plug-in value is within that many nats of the integrated one
     top = float(rank_key[order[0]])
     got = 0.0
-    if math.isfinite(qmax):
-        tau_hi = special.gammainccinv(alpha_n, 1e-12) / beta_n
-        faint = qmax * np.sqrt(tau_hi) * np.maximum(Bt, 0.0).sum(axis=1) < CENSORED_FAINT
+    if memo["faint"] is not None:
+        faint = memo["faint"]
         got = float(np.exp(key[faint] - top).sum())
         order = order[~faint[order]]
     rest = np.cumsum(np.exp(rank_key[order] - top)[::-1])[::-1]  # ranked mass from position k on
@@ -692,17 +731,21 @@ def censored_correction(
         )
 
     # chunks down the ranking, as many at once as there are worker threads (the compiled
-    # kernel releases the GIL), until the rest of the ranking holds a negligible share
+    # kernel releases the GIL), until the rest of the ranking holds a negligible share;
+    # candidates a call with the same memo integrated already are not integrated again
     done = 0
     chunk = CENSORED_CHUNK
     while done < order.size:
         idxs = [
             order[k : k + chunk] for k in range(done, min(done + chunk * threads.WORKERS, order.size), chunk)
         ]
-        fs = threads.map_threads(factor, idxs)
-        for idx, f in zip(idxs, fs, strict=True):
-            out[idx] = f
-            got += float(np.exp(logl[idx] + f - top).sum())
+        todo = [idx[np.isnan(exact[idx])] for idx in idxs]
+        todo = [idx for idx in todo if idx.size]
+        for idx, f in zip(todo, threads.map_threads(factor, todo), strict=True):
+            exact[idx] = f
+        for idx in idxs:
+            out[idx] = exact[idx]
+            got += float(np.exp(logl[idx] + exact[idx] - top).sum())
             done += idx.size
         if done < order.size and rest[done] < tail * got:
             break
