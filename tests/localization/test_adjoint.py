@@ -500,3 +500,37 @@ def test_censored_correction_reuses_a_memo_without_changing_a_number(monkeypatch
         np.testing.assert_array_equal(a, b)
     assert sum(seen) < n_fresh
     assert np.isfinite(memo["exact"]).sum() == sum(seen)  # each integrated once
+
+
+def test_candidates_far_below_the_best_keep_their_bound(monkeypatch) -> None:
+    """A candidate whose bound (positive readings' evidence, 1/2 a zero) lies
+    ``CENSORED_NEGLIGIBLE_NATS`` below the best plug-in value gets no plug-in value: it keeps its
+    bound unless the cut integrates it, and the posterior is within the cut's ``tail`` of the
+    one with every plug-in value computed."""
+    from dgse.localization import adjoint
+
+    rng = np.random.default_rng(22)
+    m, n = 100, 2000
+    A = rng.exponential(1.0, (m, n)) ** 2 * (rng.random((m, n)) < 0.6)
+    z = np.maximum(3.0 * A[:, 5] + rng.normal(0.0, 0.1, m), 0.0)
+    assert (z == 0).sum() >= 3
+    logl, det = adjoint_log_evidence(A, z, censored="deferred")
+    assert logl.max() - np.median(logl) > 1.5 * adjoint.CENSORED_NEGLIGIBLE_NATS
+
+    def posterior(x):
+        p = np.exp(x - x.max())
+        return p / p.sum()
+
+    memo: dict = {}
+    cut = censored_correction(logl=logl, memo=memo, **det["censor"])
+    skipped = np.isnan(memo["plug"])
+    assert skipped.sum() > n // 2
+    integrated = np.isfinite(memo["exact"])
+    np.testing.assert_array_equal(cut[skipped & ~integrated], memo["ceiling"][skipped & ~integrated])
+    monkeypatch.setattr(adjoint, "CENSORED_NEGLIGIBLE_NATS", np.inf)
+    memo_full: dict = {}
+    full = censored_correction(logl=logl, memo=memo_full, **det["censor"])
+    assert not np.isnan(memo_full["plug"]).any()
+    assert 0.5 * np.abs(posterior(logl + cut) - posterior(logl + full)).sum() < adjoint.CENSORED_TAIL
+    both = integrated & np.isfinite(memo_full["exact"])
+    np.testing.assert_array_equal(cut[both], full[both])

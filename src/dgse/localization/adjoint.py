@@ -603,7 +603,9 @@ def _censored_setup(
     """What :func:`censored_correction` computes from its inputs alone (not from ``logl``): the
     zeros' responses over their noise weights a row per candidate (``Bt``), the positive
     readings' rate estimate, sums and noise posterior, the plug-in factor of every candidate
-    (``plug``) and the candidates the zeros hardly see (``faint``, None without a rate bound)."""
+    and the candidates the zeros hardly see (``faint``, None without a rate bound), each zero's
+    bound ``(1/2)`` summed (``ceiling``), and room for the plug-in and integrated factors
+    (``plug``, ``exact``: nan until computed)."""
     cen = z <= 0.0
     pos = ~cen
     Ap = A[pos]
@@ -619,21 +621,14 @@ def _censored_setup(
     qh = az / aa
     beta_n = beta0 + 0.5 * np.maximum(zz - az * qh, 0.0)
     tilt_min = censored_kernel.TILT_MIN if tilt else math.inf
-    plug = censored_kernel.tilted_plug_in_log_factor(
-        Bt,
-        np.ascontiguousarray(qh),
-        np.ascontiguousarray(aa),
-        np.log(alpha_n / beta_n),
-        float(qmax),
-        tilt_min,
-    )
     faint = None
     if math.isfinite(qmax):
         tau_hi = special.gammainccinv(alpha_n, 1e-12) / beta_n
         faint = qmax * np.sqrt(tau_hi) * np.maximum(Bt, 0.0).sum(axis=1) < CENSORED_FAINT
     return {
         "Bt": Bt, "qh": qh, "aa": aa, "beta_n": beta_n, "alpha_n": alpha_n, "tilt_min": tilt_min,
-        "plug": plug, "faint": faint,
+        "faint": faint, "ceiling": -math.log(2.0) * (Bt >= 0.0).sum(axis=1),
+        "plug": np.full(qh.shape, np.nan), "exact": np.full(qh.shape, np.nan),
     }  # fmt: skip
 
 
@@ -660,7 +655,9 @@ def censored_correction(
     down the ranking until the rest hold less than ``tail`` of the mass computed so far; the
     rest keep a plug-in value (the noise at its point estimate, the rate at the positive
     readings' estimate or, where the zeros move it, at the maximum of the two factors
-    together: :func:`~dgse.localization.censored_kernel.tilted_plug_in_log_factor`).
+    together: :func:`~dgse.localization.censored_kernel.tilted_plug_in_log_factor`), and
+    those whose bound (``1/2`` a zero) lies :data:`CENSORED_NEGLIGIBLE_NATS` below the best
+    plug-in value keep that bound, no plug-in value computed.
 
     ``ranking`` (default :data:`CENSORED_RANKING`): ``"plug-in"`` ranks by that plug-in
     value.  It is an approximation: after few positive readings the noise posterior is
@@ -677,8 +674,8 @@ def censored_correction(
 
     ``memo``: a dict shared by calls with the same ``A``, ``z``, ``r``, ``q_max``, ``alpha0``,
     ``beta0`` and ``tilt`` (the caller's promise; ``logl``, ``tail`` and ``ranking`` may
-    differ): the plug-in pass and every candidate's integrated factor are computed once and
-    reused (the same numbers as computed afresh).  The two noise-weight modes of
+    differ): every candidate's plug-in and integrated factors are computed once and reused
+    (the same numbers as computed afresh).  The two noise-weight modes of
     :class:`~dgse.estimators.phys.PhysicsGuidedEstimator` share them where their most probable
     ``kappa`` gives the same weights.
 
@@ -694,11 +691,31 @@ def censored_correction(
         memo = {}
     if "plug" not in memo:
         memo.update(_censored_setup(A, z, r, q_max, alpha0, beta0, tilt))
-        memo["exact"] = np.full(logl.shape, np.nan)
     Bt, qh, aa, beta_n, alpha_n = memo["Bt"], memo["qh"], memo["aa"], memo["beta_n"], memo["alpha_n"]
-    tilt_min = memo["tilt_min"]
-    exact = memo["exact"]
-    out = memo["plug"].copy()
+    tilt_min, plug, exact, ceiling = memo["tilt_min"], memo["plug"], memo["exact"], memo["ceiling"]
+    # the plug-in value of every candidate whose bound (the positive readings' evidence and 1/2
+    # a zero) comes within CENSORED_NEGLIGIBLE_NATS of the best plug-in value, best bound first;
+    # the others keep their bound: their mass is below exp(-CENSORED_NEGLIGIBLE_NATS) each either way
+    bound = logl + ceiling
+    by_bound = np.argsort(bound)[::-1]
+    qmax = np.inf if q_max is None else q_max
+    best = -math.inf
+    for k in range(0, by_bound.size, CENSORED_PLUG_BLOCK):
+        blk = by_bound[k : k + CENSORED_PLUG_BLOCK]
+        if bound[blk[0]] < best - CENSORED_NEGLIGIBLE_NATS:
+            break
+        new = blk[np.isnan(plug[blk])]
+        if new.size:
+            plug[new] = censored_kernel.tilted_plug_in_log_factor(
+                np.ascontiguousarray(Bt[new]),
+                qh[new],
+                aa[new],
+                np.log(alpha_n / beta_n[new]),
+                float(qmax),
+                tilt_min,
+            )
+        best = max(best, float(np.max(logl[blk] + plug[blk])))
+    out = np.where(np.isnan(plug), ceiling, plug)
     key = logl + out
     # the ranking and the stop: the plug-in value, or an upper bound of the factor (see above)
     ranking = CENSORED_RANKING if ranking is None else ranking
@@ -751,7 +768,7 @@ def censored_correction(
             break
     # each zero with a non-negative response has probability at most 1/2: a bound the
     # quadrature can overshoot by a few hundredths of a nat when the posterior is broad
-    return np.minimum(out, -math.log(2.0) * (Bt >= 0.0).sum(axis=1))
+    return np.minimum(out, ceiling)
 
 
 #: Nats within which the plug-in zeros' factor stands for the integrated one of a candidate the
@@ -772,6 +789,12 @@ CENSORED_RANKING = "plug-in"
 CENSORED_RANKINGS = ("plug-in", "bound")
 #: Candidates per chunk of the censored correction (chunks run on :func:`dgse.threads.map_threads`).
 CENSORED_CHUNK = 256
+#: Candidates whose bound (positive readings' evidence, ``(1/2)`` a zero) lies this many nats below
+#: the best plug-in value get no plug-in value (:func:`censored_correction`): their bound stands,
+#: a mass below ``exp(-50)`` of the best candidate's either way.  The plug-in pass goes down
+#: the bounds in blocks of ``CENSORED_PLUG_BLOCK``.
+CENSORED_NEGLIGIBLE_NATS = 50.0
+CENSORED_PLUG_BLOCK = 512
 
 
 def adjoint_log_evidence(
