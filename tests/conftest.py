@@ -48,3 +48,20 @@ def two_rooms(width: int = 30, height: int = 20) -> Layout:
 @pytest.fixture
 def two_rooms_layout() -> Layout:
     return two_rooms()
+
+
+@pytest.fixture
+def factor_calls(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """The number of candidates of every call of the zeros' integrated factor
+    (``adjoint._censored_log_factor``) while the test runs."""
+    from dgse.localization import adjoint
+
+    seen: list[int] = []
+    factor = adjoint._censored_log_factor
+
+    def count(Bt, *args, **kwargs):
+        seen.append(len(Bt))
+        return factor(Bt, *args, **kwargs)
+
+    monkeypatch.setattr(adjoint, "_censored_log_factor", count)
+    return seen

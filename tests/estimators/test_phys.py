@@ -577,12 +577,11 @@ def test_censored_tilt_follows_the_knowledge_level_unless_given(case):
     assert PhysicsGuidedEstimator(censored_tilt=None).censored_tilt is None
 
 
-def test_a_weak_hypothesis_is_corrected_for_the_zeros_to_the_mixtures_precision(monkeypatch):
+def test_a_weak_hypothesis_is_corrected_for_the_zeros_to_the_mixtures_precision(monkeypatch, factor_calls):
     """The zeros' correction of a hypothesis with a small share of the weight may leave out more
     of its own mass (``CENSORED_TAIL / share``): it integrates fewer candidates, and the mixture
     posterior stays where the full correction puts it."""
     from dgse.estimators import phys
-    from dgse.localization import adjoint
 
     rng = np.random.default_rng(12)
     m, n = 40, 3000
@@ -603,14 +602,7 @@ def test_a_weak_hypothesis_is_corrected_for_the_zeros_to_the_mixtures_precision(
     details = [e[1] for e in evs]
     log_prior = [0.0, -6.0]  # the second hypothesis: about e^-6 of the weight
 
-    counted: list[int] = []
-    factor = adjoint._censored_log_factor
-
-    def count(Bt, *args, **kwargs):
-        counted.append(len(Bt))
-        return factor(Bt, *args, **kwargs)
-
-    monkeypatch.setattr(adjoint, "_censored_log_factor", count)
+    counted = factor_calls
     runs = {}
     for cap in (phys.CENSORED_TAIL, phys.CENSORED_TAIL_MAX):  # the tail of every hypothesis, the default
         monkeypatch.setattr(phys, "CENSORED_TAIL_MAX", cap)

@@ -470,27 +470,23 @@ def test_the_bound_ranking_never_drops_mass_the_plug_in_value_hides() -> None:
         censored_correction(logl=part, **det["censor"], ranking="best")
 
 
-def test_censored_correction_reuses_a_memo_without_changing_a_number(monkeypatch) -> None:
+def _zeros_evidence(seed: int, m: int, n: int, rate: float, noise: float) -> tuple[np.ndarray, dict]:
+    """Random responses, readings of a source in candidate ``seed % 7`` with some zeros, and the
+    positive readings' evidence with the zeros' factor deferred."""
+    rng = np.random.default_rng(seed)
+    A = rng.exponential(1.0, (m, n)) ** 2 * (rng.random((m, n)) < 0.6)
+    z = np.maximum(rate * A[:, seed % 7] + rng.normal(0.0, noise, m), 0.0)
+    assert (z == 0).sum() >= 3
+    return adjoint_log_evidence(A, z, censored="deferred")
+
+
+def test_censored_correction_reuses_a_memo_without_changing_a_number(factor_calls) -> None:
     """Calls that share ``memo`` (same responses, readings and noise weights; another ``logl``)
     integrate each candidate once, and give what a call without it gives."""
-    from dgse.localization import adjoint
-
-    rng = np.random.default_rng(21)
-    m, n = 30, 900
-    A = rng.exponential(1.0, (m, n)) ** 2 * (rng.random((m, n)) < 0.6)
-    z = np.maximum(2.0 * A[:, 3] + rng.normal(0.0, 0.3, m), 0.0)
-    assert (z == 0).sum() >= 3
-    logl, det = adjoint_log_evidence(A, z, censored="deferred")
+    logl, det = _zeros_evidence(21, 30, 900, 2.0, 0.3)
     kwargs = det["censor"]
-    other = logl + rng.normal(0.0, 2.0, n)  # another mode's positive-readings evidence
-    seen: list[int] = []
-    factor = adjoint._censored_log_factor
-
-    def count(Bt, *args, **kw):
-        seen.append(len(Bt))
-        return factor(Bt, *args, **kw)
-
-    monkeypatch.setattr(adjoint, "_censored_log_factor", count)
+    other = logl + np.random.default_rng(0).normal(0.0, 2.0, logl.size)  # another mode's evidence
+    seen = factor_calls
     fresh = [censored_correction(logl=x, **kwargs) for x in (logl, other)]
     n_fresh = sum(seen)
     seen.clear()
@@ -509,12 +505,8 @@ def test_candidates_far_below_the_best_keep_their_bound(monkeypatch) -> None:
     one with every plug-in value computed."""
     from dgse.localization import adjoint
 
-    rng = np.random.default_rng(22)
-    m, n = 100, 2000
-    A = rng.exponential(1.0, (m, n)) ** 2 * (rng.random((m, n)) < 0.6)
-    z = np.maximum(3.0 * A[:, 5] + rng.normal(0.0, 0.1, m), 0.0)
-    assert (z == 0).sum() >= 3
-    logl, det = adjoint_log_evidence(A, z, censored="deferred")
+    n = 2000
+    logl, det = _zeros_evidence(22, 100, n, 3.0, 0.1)
     assert logl.max() - np.median(logl) > 1.5 * adjoint.CENSORED_NEGLIGIBLE_NATS
 
     def posterior(x):
