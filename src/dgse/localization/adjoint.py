@@ -602,10 +602,9 @@ def _censored_setup(
 ) -> dict[str, Any]:
     """What :func:`censored_correction` computes from its inputs alone (not from ``logl``): the
     zeros' responses over their noise weights a row per candidate (``Bt``), the positive
-    readings' rate estimate, sums and noise posterior, the plug-in factor of every candidate
-    and the candidates the zeros hardly see (``faint``, None without a rate bound), each zero's
-    bound ``(1/2)`` summed (``ceiling``), and room for the plug-in and integrated factors
-    (``plug``, ``exact``: nan until computed)."""
+    readings' rate estimate, sums and noise posterior, the candidates the zeros hardly see
+    (``faint``, None without a rate bound), each zero's bound ``(1/2)`` summed (``ceiling``),
+    and room for the plug-in and integrated factors (``plug``, ``exact``: nan until computed)."""
     cen = z <= 0.0
     pos = ~cen
     Ap = A[pos]
@@ -615,8 +614,7 @@ def _censored_setup(
     rc = r[cen] if r.ndim == 2 else r[cen][:, None]
     Bt = np.ascontiguousarray((A[cen] / rc).T)
     qmax = np.inf if q_max is None else q_max
-    # a plug-in pass over every candidate (rate and noise at their estimates) orders the
-    # candidates and stands in for the exact factor where the mass is negligible
+    # the positive readings' rate and noise posterior, for the plug-in and integrated factors
     aa, az, zz = _weighted_sums(Ap, Ap * Ap, zp, r[pos])
     qh = az / aa
     beta_n = beta0 + 0.5 * np.maximum(zz - az * qh, 0.0)
@@ -693,9 +691,11 @@ def censored_correction(
         memo.update(_censored_setup(A, z, r, q_max, alpha0, beta0, tilt))
     Bt, qh, aa, beta_n, alpha_n = memo["Bt"], memo["qh"], memo["aa"], memo["beta_n"], memo["alpha_n"]
     tilt_min, plug, exact, ceiling = memo["tilt_min"], memo["plug"], memo["exact"], memo["ceiling"]
-    # the plug-in value of every candidate whose bound (the positive readings' evidence and 1/2
-    # a zero) comes within CENSORED_NEGLIGIBLE_NATS of the best plug-in value, best bound first;
-    # the others keep their bound: their mass is below exp(-CENSORED_NEGLIGIBLE_NATS) each either way
+    # a plug-in pass (rate and noise at their estimates) orders the candidates and stands in
+    # for the exact factor where the mass is negligible: for every candidate whose bound (the
+    # positive readings' evidence and 1/2 a zero) comes within CENSORED_NEGLIGIBLE_NATS of the
+    # best plug-in value, best bound first; the others keep their bound (a mass below
+    # exp(-CENSORED_NEGLIGIBLE_NATS) each either way)
     bound = logl + ceiling
     by_bound = np.argsort(bound)[::-1]
     qmax = np.inf if q_max is None else q_max
