@@ -469,7 +469,7 @@ def _censor(
     ranking: str | None = None,
     tilt: bool = True,
     hypothesis_temperature: float = 1.0,
-    memos: dict[int, list[tuple[np.ndarray, dict[str, Any]]]] | None = None,
+    memos: dict[int, dict[str, Any]] | None = None,
 ) -> list[np.ndarray]:
     """Add the zero readings' factor to each hypothesis's evidence, skipping hopeless ones.
 
@@ -481,9 +481,10 @@ def _censor(
     temperature) leaves out at most ``CENSORED_TAIL / w`` of its own mass (at most
     :data:`CENSORED_TAIL_MAX`), which is ``CENSORED_TAIL`` of the mixture's.
 
-    ``memos``: per hypothesis, the noise weights and the correction's memo of earlier calls
-    (another noise-weight mode's, :func:`~dgse.localization.adjoint.censored_correction`):
-    where this call's weights are the same, the factors computed there are reused.
+    ``memos``: per hypothesis, the correction's memo of an earlier call with the same noise
+    weights (another noise-weight mode's, :func:`~dgse.localization.adjoint.censored_correction`;
+    the caller checks the weights, :func:`_same_noise_weights`): the factors computed there are
+    reused.
     """
     out = list(log_ev)
     pending = [i for i, d in enumerate(details) if "censor" in d]
@@ -502,27 +503,12 @@ def _censor(
             continue
         share = math.exp(min((bounds[i] - best) / hypothesis_temperature, 0.0))
         tail = min(CENSORED_TAIL / share, CENSORED_TAIL_MAX)
-        memo = _memo_for(memos, i, details[i]["censor"]["r"])
+        memo = None if memos is None else memos.setdefault(i, {})
         out[i] = log_ev[i] + censored_correction(
             logl=log_ev[i], ranking=ranking, tilt=tilt, tail=tail, memo=memo, **details[i]["censor"]
         )
         best = max(best, total(i, out[i]))
     return out
-
-
-def _memo_for(
-    memos: dict[int, list[tuple[np.ndarray, dict[str, Any]]]] | None, i: int, r: np.ndarray
-) -> dict[str, Any] | None:
-    """The zeros' correction memo of hypothesis ``i`` for noise weights ``r`` (a new one where no
-    earlier call had the same weights; None without ``memos``)."""
-    if memos is None:
-        return None
-    known = memos.setdefault(i, [])
-    for r_seen, memo in known:
-        if r_seen.shape == r.shape and np.array_equal(r_seen, r):
-            return memo
-    known.append((r, {}))
-    return known[-1][1]
 
 
 def _same_noise_weights(modes: Sequence[Sequence[tuple[Any, dict[str, Any]]]]) -> bool:
@@ -1158,7 +1144,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         log_prior: list[float],
         temp: float,
         t_h: float,
-        memos: dict[int, list[tuple[np.ndarray, dict[str, Any]]]] | None,
+        memos: dict[int, dict[str, Any]] | None,
     ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], list[tuple[Any, dict[str, Any]]]]:
         """The source posterior and hypothesis weights from one noise-weight mode's evidence
         (:meth:`_gas_evidence`) and the zeros' factor: ``(post, weights, tempered log evidence
@@ -1232,7 +1218,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             [functools.partial(self._gas_evidence, hyps, rows, z, s0_floor, mode) for mode in modes]
         )
         if _same_noise_weights([det for _ev, det in evidence]):
-            memos: dict[int, list[tuple[np.ndarray, dict[str, Any]]]] = {}
+            memos: dict[int, dict[str, Any]] = {}
             runs = [self._gas_posterior(ev, det, log_prior, temp, t_h, memos) for ev, det in evidence]
         else:
             runs = side_by_side(
