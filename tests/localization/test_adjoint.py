@@ -277,6 +277,25 @@ def test_cached_fields_keep_the_cells_in_use(monkeypatch: pytest.MonkeyPatch) ->
     fm._fields.clear()
 
 
+def test_growing_responses_are_the_stacked_rows() -> None:
+    """Readings that accumulate get their rows appended to one buffer: the same rows as stacked
+    afresh, read-only, and a call that does not extend the last one starts again."""
+    case = channel_case()
+    fm = flow_model(case.layout, case.inlet_velocity)
+    fm._grown = None
+    cells = np.array([[8, 8], [8, 9], [9, 12], [8, 8], [10, 20], [9, 13]])
+    for k in (2, 3, 6):
+        got = fm.responses(cells[:k], growing=True)
+        np.testing.assert_array_equal(got, fm.responses(cells[:k]))
+        assert not got.flags.writeable
+    first = fm.responses(cells[:6], growing=True)
+    other = fm.responses(cells[[1, 0]], growing=True)  # not an extension: a new buffer
+    np.testing.assert_array_equal(other, fm.responses(cells[[1, 0]]))
+    np.testing.assert_array_equal(first, fm.responses(cells[:6]))  # the earlier answer is intact
+    assert fm._grown[0] == [(8, 9), (8, 8)]
+    fm._grown = None
+
+
 def test_oracle_on_the_case_and_registry() -> None:
     import dgse.localization.register  # noqa: F401
 

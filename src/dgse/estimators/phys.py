@@ -1213,7 +1213,10 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         # reads), then their zeros' factors: where the modes' most probable kappa gives every
         # flow the same noise weights (often kappa = 0, weights 1), one mode after the other,
         # the second reusing the factors the first integrated; otherwise side by side
-        rows = dict(zip(live, map_threads(lambda k: hyps[k].flow.responses(cells), live), strict=True))
+        flows = {id(hyps[k].flow): hyps[k].flow for k in live}  # a flow two hypotheses share: once
+        grown = map_threads(lambda f: f.responses(cells, growing=True), flows.values())
+        got = dict(zip(flows, grown, strict=True))
+        rows = {k: got[id(hyps[k].flow)] for k in live}
         evidence = side_by_side(
             [functools.partial(self._gas_evidence, hyps, rows, z, s0_floor, mode) for mode in modes]
         )

@@ -216,6 +216,7 @@ class FlowModel:
     _rows: dict[tuple[int, int], np.ndarray] = field(default_factory=dict, repr=False)
     _fields: dict[tuple[int, int], np.ndarray] = field(default_factory=dict, repr=False)
     _mean_concentrations: np.ndarray | None = field(default=None, repr=False)
+    _grown: tuple[list[tuple[int, int]], np.ndarray] | None = field(default=None, repr=False)
 
     @property
     def mean_concentrations(self) -> np.ndarray:
@@ -243,7 +244,7 @@ class FlowModel:
         """``bool (H, W)`` the free cells (candidate sources), numbered row-major."""
         return self.transport.mesh.free
 
-    def responses(self, cells: np.ndarray) -> np.ndarray:
+    def responses(self, cells: np.ndarray, *, growing: bool = False) -> np.ndarray:
         """``float64 (k, n_free)``: reading (ppm) at each of ``cells`` per g/s released in every free cell.
 
         Adjoint rows of the linear (``linearUpwind``) operator, computed in
@@ -254,18 +255,42 @@ class FlowModel:
         downstream of the sensor (to minus 0.18 of its peak on test 2005).  Left
         in, such lobes made a zero reading *favour* the candidates just
         downstream of it (``Phi(-q a / sigma) > 1/2`` for ``a < 0``).
+
+        ``growing``: the cells of a search's readings, which only grow.  The rows go into
+        one buffer, and a call whose cells extend the last growing call's copies only the
+        new rows (stacking every row afresh was a few per cent of a search step); a call
+        that does not extend it starts the buffer again.  The answer is then a read-only
+        view of that buffer, valid until the next growing call.
         """
         c = np.asarray(cells, dtype=np.int64).reshape(-1, 2)
         keys = [(int(i), int(j)) for i, j in c]
-        new = sorted({k for k in keys if k not in self._rows})
+        start = 0
+        if growing and self._grown is not None:
+            old = self._grown[0]
+            if len(keys) >= len(old) and keys[: len(old)] == old:
+                start = len(old)
+        new = sorted({k for k in keys[start:] if k not in self._rows})
         if new:
             adj = self.transport.adjoint(np.array(new, dtype=np.int64))
             vals = np.maximum(self.mesh.values(adj) * self.physics.ppm_per_gm3, 0.0)
             for k, row in zip(new, vals, strict=True):
                 self._rows[k] = row
         n = self.mesh.n
-        out = np.stack([self._rows[k] for k in keys]) if keys else np.zeros((0, n))
-        for k in keys:  # the cells just used move to the end: the least recently used go first
+        if growing:
+            buf = None if self._grown is None or not start else self._grown[1]
+            if buf is None or buf.shape[0] < len(keys):
+                grown = np.empty((len(keys) + max(64, len(keys) // 4), n))
+                if start:
+                    grown[:start] = buf[:start]
+                buf = grown
+            for i in range(start, len(keys)):
+                buf[i] = self._rows[keys[i]]
+            self._grown = (keys, buf)
+            out = buf[: len(keys)].view()
+            out.flags.writeable = False
+        else:
+            out = np.stack([self._rows[k] for k in keys]) if keys else np.zeros((0, n))
+        for k in keys[start:] if growing else keys:  # the cells just used move to the end
             self._rows[k] = self._rows.pop(k)
         while len(self._rows) > MAX_CACHED_ROWS:  # least recently used first
             del self._rows[next(iter(self._rows))]
@@ -416,25 +441,8 @@ def _weighted_sums(
     """
     w = 1.0 / r**2
     if w.ndim == 1:
-        return np.maximum(w @ A2, 1e-300), (w * z) @ A, float(w @ z**2)
-    return np.maximum((w * A2).sum(axis=0), 1e-300), z @ (w * A), (z * z) @ w
-
-
-def _evidence(
-    A: np.ndarray,
-    A2: np.ndarray,
-    z: np.ndarray,
-    r: np.ndarray,
-    q_max: float | None,
-    alpha0: float,
-    beta0: float,
-) -> tuple[np.ndarray, np.ndarray, float]:
-    """``(log p(z | s) per column of A up to an (s, r)-independent constant, qhat, alpha_n)``.
-
-    ``r``: the noise weights, ``(m,)`` or ``(m, N)`` (:func:`_weighted_sums`).
-    """
-    sums = (*_weighted_sums(A, A2, z, r), np.log(r).sum(axis=0))
-    return _evidence_from_sums(sums, z.size, q_max, alpha0, beta0)
+        return np.maximum(w @ A2, evidence_kernel.AA_FLOOR), (w * z) @ A, float(w @ z**2)
+    return np.maximum((w * A2).sum(axis=0), evidence_kernel.AA_FLOOR), z @ (w * A), (z * z) @ w
 
 
 def _evidence_from_sums(
@@ -444,8 +452,9 @@ def _evidence_from_sums(
     alpha0: float,
     beta0: float,
 ) -> tuple[np.ndarray, np.ndarray, float]:
-    """:func:`_evidence` of ``m`` readings from their weighted sums ``(aa, az, zz, sum_i log r_i)``
-    (:func:`_weighted_sums`, or :func:`~dgse.localization.evidence_kernel.candidate_sums`)."""
+    """``(log p(z | s) per candidate up to an (s, r)-independent constant, qhat, alpha_n)`` of ``m``
+    readings from their weighted sums ``(aa, az, zz, sum_i log r_i)``
+    (:mod:`~dgse.localization.evidence_kernel`, or :func:`_weighted_sums`)."""
     aa, az, zz, log_r = sums
     qhat = az / aa
     S = np.maximum(zz - az * qhat, 0.0)
@@ -526,7 +535,7 @@ def _censored_log_factor(
         alpha_n: the noise posterior's shape.
         q_max: the rate prior's upper end (None: unbounded).
         log_mass: ``(n,)`` ``log P(0 <= q <= q_max)`` under the uncensored posterior (the
-            Student-t mass of :func:`_evidence`): the normalizer.
+            Student-t mass of :func:`_evidence_from_sums`): the normalizer.
         tilt_min: where the rate's nodes follow the zeros
             (:data:`~dgse.localization.censored_kernel.TILT_MIN`; ``inf``: never).
 
@@ -599,23 +608,26 @@ def _censored_setup(
     alpha0: float,
     beta0: float,
     tilt: bool,
+    sums: tuple[np.ndarray, np.ndarray, np.ndarray | float] | None,
 ) -> dict[str, Any]:
     """What :func:`censored_correction` computes from its inputs alone (not from ``logl``): the
     zeros' responses over their noise weights a row per candidate (``Bt``), the positive
     readings' rate estimate, sums and noise posterior, the candidates the zeros hardly see
     (``faint``, None without a rate bound), each zero's bound ``(1/2)`` summed (``ceiling``),
-    and room for the plug-in and integrated factors (``plug``, ``exact``: nan until computed)."""
+    and room for the plug-in and integrated factors (``plug``, ``exact``: nan until computed).
+    ``sums``: the positive readings' weighted sums, where the caller has them."""
     cen = z <= 0.0
     pos = ~cen
-    Ap = A[pos]
-    zp = z[pos]
     alpha_n = alpha0 + 0.5 * (int(pos.sum()) - 1)
     # the zeros' responses over their noise weights, a row per candidate
     rc = r[cen] if r.ndim == 2 else r[cen][:, None]
     Bt = np.ascontiguousarray((A[cen] / rc).T)
     qmax = np.inf if q_max is None else q_max
     # the positive readings' rate and noise posterior, for the plug-in and integrated factors
-    aa, az, zz = _weighted_sums(Ap, Ap * Ap, zp, r[pos])
+    if sums is None:
+        Ap = A[pos]
+        sums = _weighted_sums(Ap, Ap * Ap, z[pos], r[pos])
+    aa, az, zz = sums
     qh = az / aa
     beta_n = beta0 + 0.5 * np.maximum(zz - az * qh, 0.0)
     tilt_min = censored_kernel.TILT_MIN if tilt else math.inf
@@ -643,6 +655,7 @@ def censored_correction(
     ranking: str | None = None,
     tilt: bool = True,
     memo: dict[str, Any] | None = None,
+    sums: tuple[np.ndarray, np.ndarray, np.ndarray | float] | None = None,
 ) -> np.ndarray:
     """``log p(z_censored | z_rest, s)`` per candidate ``s``: what the zero readings add.
 
@@ -680,7 +693,9 @@ def censored_correction(
     Args:
         A: ``(m, N)`` responses; z: ``(m,)`` readings (zeros are the censored ones);
         r: ``(m,)`` noise weights, or ``(m, N)``: each candidate's own; logl: ``(N,)`` the
-        positive readings' log evidence.
+        positive readings' log evidence; sums: the positive readings' weighted sums ``(sum w
+        a^2, sum w a z, sum w z^2)`` with these weights (``w = 1 / r^2``), where the caller has
+        them (:func:`adjoint_log_evidence` does; computed here otherwise).
     """
     cen = z <= 0.0
     if not cen.any():
@@ -688,7 +703,7 @@ def censored_correction(
     if memo is None:
         memo = {}
     if "plug" not in memo:
-        memo.update(_censored_setup(A, z, r, q_max, alpha0, beta0, tilt))
+        memo.update(_censored_setup(A, z, r, q_max, alpha0, beta0, tilt, sums))
     Bt, qh, aa, beta_n, alpha_n = memo["Bt"], memo["qh"], memo["aa"], memo["beta_n"], memo["alpha_n"]
     tilt_min, plug, exact, ceiling = memo["tilt_min"], memo["plug"], memo["exact"], memo["ceiling"]
     # a plug-in pass (rate and noise at their estimates) orders the candidates and stands in
@@ -846,7 +861,7 @@ def adjoint_log_evidence(
         probable ``kappa``'s noise weights, ``(m,)`` or ``(m, N)``).  The evidence is
         defined up to a constant independent of ``s`` (the same for every ``kappa``).
     """
-    A = np.asarray(A, dtype=np.float64)
+    A = np.ascontiguousarray(A, dtype=np.float64)
     z = np.maximum(np.asarray(z, dtype=np.float64).reshape(-1), 0.0)
     if A.ndim != 2 or A.shape[0] != z.size or z.size == 0:
         raise InputDataError(f"responses {A.shape} do not match {z.size} readings")
@@ -862,25 +877,29 @@ def adjoint_log_evidence(
     beta0 = alpha0 * s0**2
     ones = np.ones_like(z)
     # readings clipped at zero are censored: the Gaussian part takes the others, and the
-    # zeros enter as P(reading <= 0) (censored_correction)
+    # zeros enter as P(reading <= 0) (censored_correction); the sums read the positive
+    # readings' rows in place (evidence_kernel)
     cen = (z <= 0.0) if censored else np.zeros(z.shape, dtype=bool)
     pos = ~cen
-    Ap = A[pos] if cen.any() else A
-    Ap2 = Ap * Ap
+    rows = np.flatnonzero(pos)
     zp = z[pos]
+    m = int(rows.size)
     details: dict[str, Any] = {"s0": s0, "censored": int(cen.sum())}
 
-    def _censored(logl: np.ndarray, r: np.ndarray) -> np.ndarray:
+    def _censored(logl: np.ndarray, r: np.ndarray, sums: tuple[np.ndarray, ...]) -> np.ndarray:
         if not cen.any():
             return logl
+        kw = {"A": A, "z": z, "r": r, "q_max": q_max, "alpha0": alpha0, "beta0": beta0, "sums": sums}
         if censored == "deferred":
-            details["censor"] = {"A": A, "z": z, "r": r, "q_max": q_max, "alpha0": alpha0, "beta0": beta0}
+            details["censor"] = kw
             return logl
-        return logl + censored_correction(A, z, r, logl, q_max=q_max, alpha0=alpha0, beta0=beta0)
+        return logl + censored_correction(logl=logl, **kw)
 
-    logl0, qhat0, _ = _evidence(Ap, Ap2, zp, ones[pos], q_max, alpha0, beta0)
+    aa0, az0 = evidence_kernel.row_sums(A, rows, z, ones[None, :])
+    sums0 = (aa0[0], az0[0], float(zp @ zp))
+    logl0, qhat0, _ = _evidence_from_sums((*sums0, 0.0), m, q_max, alpha0, beta0)
     if ks == [0.0]:
-        logl0 = _censored(logl0, ones)
+        logl0 = _censored(logl0, ones, sums0)
         best = int(np.argmax(logl0))
         details.update(qhat=qhat0, kappa_weights=np.ones(1), kappa=0.0, chat=None, best=best, r=ones)
         return logl0, details
@@ -895,43 +914,45 @@ def adjoint_log_evidence(
         ks = [0.0]
     logls, qhats, totals = [], [], []
 
-    # each candidate's concentrations at the sensors, once for every kappa (the same arithmetic)
-    own = None
+    # each candidate's own concentrations at the sensors are max(a q, floor): its prediction
+    # ("candidate"), or at least the plug-in ("larger"); None: the plug-in for every candidate
+    floor = None
     if noise_weights == "candidate":
-        own = A * qclip
+        floor = np.zeros_like(z)
     elif noise_weights == "larger":
-        own = np.maximum(A * qclip, chat[:, None])
+        floor = chat
 
     def weights(k: float) -> np.ndarray:
         if k == 0.0:
             return ones
-        if own is not None:
-            return 1.0 + (k / cbar) * own
+        if floor is not None:
+            return evidence_kernel.own_weights(A, qclip, floor, k / cbar)
         return 1.0 + k * chat / cbar
 
-    # the weighted sums of every kappa > 0 from one pass over the responses: a candidate's own
-    # weights in one compiled pass (no (m, N) temporaries), the plug-in weights as one matrix
-    # product per sum
+    # the weighted sums of every kappa > 0 from one pass over the positive readings' rows
     heavy = [k for k in ks if k != 0.0]
     if not heavy:
         many: tuple[np.ndarray, ...] = ()
-    elif own is not None:
-        own_p = np.ascontiguousarray(own[pos] if cen.any() else own)
-        many = evidence_kernel.candidate_sums_many(
-            np.ascontiguousarray(Ap), own_p, zp, np.array([k / cbar for k in heavy])
-        )
+    elif floor is not None:
+        cs = np.array([k / cbar for k in heavy])
+        many = evidence_kernel.candidate_sums_many(A, rows, qclip, floor, z, cs)
     else:
-        r_all = np.stack([weights(k)[pos] for k in heavy])  # (K, m)
-        w_all = 1.0 / r_all**2
-        many = (np.maximum(w_all @ Ap2, 1e-300), (w_all * zp) @ Ap, w_all @ zp**2, np.log(r_all).sum(axis=1))
+        r_all = np.stack([weights(k)[pos] for k in heavy])  # (K, m_pos)
+        w_all = np.zeros((len(heavy), z.size))
+        w_all[:, pos] = 1.0 / r_all**2
+        aa_all, az_all = evidence_kernel.row_sums(A, rows, z, w_all)
+        many = (aa_all, az_all, w_all[:, pos] @ zp**2, np.log(r_all).sum(axis=1))
+    all_sums = []
     for k in ks:
         # kappa = 0 is the homoscedastic pass above
         if k == 0.0:
             ll, qh = logl0, qhat0
+            all_sums.append(sums0)
         else:
             j = heavy.index(k)
             sums = (many[0][j], many[1][j], many[2][j], many[3][j])
-            ll, qh = _evidence_from_sums(sums, zp.size, q_max, alpha0, beta0)[:2]
+            ll, qh = _evidence_from_sums(sums, m, q_max, alpha0, beta0)[:2]
+            all_sums.append(sums[:3])
         logls.append(ll)
         qhats.append(qh)
         top = ll.max()
@@ -945,7 +966,7 @@ def adjoint_log_evidence(
     kbest = int(np.argmax(kw))
     # the zeros' factor with the most probable kappa's noise weights (one pass, not one per kappa)
     r_best = weights(ks[kbest])
-    logl = _censored(logl, r_best)
+    logl = _censored(logl, r_best, all_sums[kbest])
     details.update(
         qhat=qhats[kbest],
         kappa_weights=kw,
@@ -1190,7 +1211,7 @@ class AdjointEstimator(KnowledgeUser):
         if fm.free.shape != occ.shape or not np.array_equal(fm.free, occ == 0):
             raise InputDataError(f"{self.name}: the scenario's map differs from the map passed to estimate()")
         t_flow = time.perf_counter() - t0
-        A = fm.responses(obs.cells)
+        A = fm.responses(obs.cells, growing=True)
         z = obs.gas
         s0_floor = prior_noise_floor([fm], z, self.q_max, self.sigma0_fraction, self.noise_floor_prior)
         logl, det = adjoint_log_evidence(

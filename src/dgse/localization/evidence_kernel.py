@@ -1,16 +1,23 @@
-"""Compiled sums of the positive readings' evidence when every candidate has its own noise weights.
+"""Compiled weighted sums of the positive readings' evidence, one pass over the response rows.
 
-With ``noise_weights="candidate"`` or ``"larger"`` (:func:`dgse.localization.adjoint.adjoint_log_evidence`)
-reading ``i`` has the noise weight ``r_is = 1 + c o_is`` under candidate ``s`` (``o``: the
-candidate's own predicted concentration, ``c = kappa / cbar``).  Done with NumPy, each
-``kappa`` builds ``r`` and ``1 / r^2`` as ``(m, N)`` arrays, multiplies them into two more and
-takes ``m N`` logarithms: in a long search episode that was most of a step (issue 12).
-:func:`candidate_sums` makes one pass over the readings' rows and keeps the sums per
-candidate; the logarithm is taken of running products of the weights (each at least 1), flushed
-into the sum before the largest weight of the next row could take them past ``1e250``: a
-few logarithms per candidate instead of one per reading.
+The evidence of a candidate source (:func:`dgse.localization.adjoint.adjoint_log_evidence`)
+needs, per noise-weight hypothesis ``kappa``, the sums ``sum_i w a_is^2``, ``sum_i w a_is z_i``,
+``sum_i w z_i^2`` and ``sum_i log r_is`` over the positive readings ``i`` (``w = 1 / r^2``).
+Done with NumPy, the positive readings' rows are first copied out of the ``(m, N)`` responses,
+squared, and (with each candidate's own noise weights) multiplied into the ``(m, N)`` weights
+``r`` and ``1 / r^2``: in a search step most of that time went into writing those
+temporaries, not into the sums (issue 12).  The kernels here read the rows in place, once, and
+keep only the sums:
 
-A pure function of arrays; compiled on first use and cached on disk, like
+- :func:`row_sums`: weights shared by every candidate (homoscedastic, ``w = 1``, or the
+  plug-in weights of several ``kappa``).
+- :func:`candidate_sums_many`: each candidate's own weights ``r_is = 1 + c o_is`` with
+  ``o_is = max(a_is q_s, f_i)`` (``q``: the candidates' rates, ``f``: a floor per reading),
+  several ``c`` (``kappa / cbar``) in one pass.  The logarithm is taken of running products
+  of the weights (each at least 1), flushed into the sum before the largest weight of the next
+  row could take them past ``1e250``: a few logarithms per candidate instead of one per reading.
+
+Pure functions of arrays; compiled on first use and cached on disk, like
 :mod:`dgse.localization.censored_kernel`.
 """
 
@@ -25,31 +32,76 @@ _jit = numba.njit(cache=True, nogil=True)
 
 #: The running products of the weights are turned into logarithms before they could exceed this.
 _PRODUCT_CAP = 1e250
+#: The least weighted ``sum a^2`` a candidate keeps (one no reading sees would divide by 0).
+AA_FLOOR = 1e-300
+
+
+@_jit
+def row_sums(A: np.ndarray, rows: np.ndarray, z: np.ndarray, W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(aa, az)``, each ``(K, N)``: ``sum_i W[j, i] A[i, s]^2`` and ``sum_i W[j, i] z_i A[i, s]``
+    over the readings ``i`` in ``rows``, for each weight row ``j`` (``aa`` kept at least
+    :data:`AA_FLOOR`).
+
+    Args:
+        A: ``(m, N)`` responses; rows: indices of the readings to sum; z: ``(m,)`` readings;
+            W: ``(K, m)`` weights (``1 / r^2``) of each reading under ``K`` noise hypotheses.
+    """
+    nk = W.shape[0]
+    n = A.shape[1]
+    aa = np.zeros((nk, n))
+    az = np.zeros((nk, n))
+    for i in rows:
+        a_row = A[i]
+        zi = z[i]
+        for j in range(nk):
+            w = W[j, i]
+            wz = w * zi
+            aa_j = aa[j]
+            az_j = az[j]
+            for s in range(n):
+                a = a_row[s]
+                aa_j[s] += w * a * a
+                az_j[s] += wz * a
+    for j in range(nk):
+        for s in range(n):
+            aa[j, s] = max(aa[j, s], AA_FLOOR)
+    return aa, az
 
 
 @_jit
 def candidate_sums_many(
-    A: np.ndarray, own: np.ndarray, z: np.ndarray, cs: np.ndarray
+    A: np.ndarray, rows: np.ndarray, q: np.ndarray, floor: np.ndarray, z: np.ndarray, cs: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`candidate_sums` for several ``c`` (``kappa / cbar``) in one pass over the rows: each
-    ``(K, N)``, row ``j`` that of ``cs[j]``, with the same arithmetic (and bits) as one ``c`` at a
-    time.  The rows of ``A`` and ``own`` are read once instead of once per ``kappa``."""
-    m, n = A.shape
+    """``(aa, az, zz, log_r)``, each ``(K, N)``, row ``j`` that of ``c = cs[j]``: per candidate
+    ``s``, ``sum_i w a_is^2``, ``sum_i w a_is z_i``, ``sum_i w z_i^2`` and ``sum_i log r_is`` over
+    the readings ``i`` in ``rows``, with ``r_is = 1 + c o_is``, ``o_is = max(a_is q_s, floor_i)``
+    and ``w = 1 / r_is^2`` (``aa`` kept at least :data:`AA_FLOOR`).
+
+    Args:
+        A: ``(m, N)`` responses; rows: indices of the readings to sum; q: ``(N,)`` each
+            candidate's rate (``>= 0``); floor: ``(m,)`` the least concentration a reading's weight
+            scales with (zeros: a candidate's own prediction, ``noise_weights="candidate"``; the
+            plug-in concentrations: the larger of the two, ``"larger"``); z: ``(m,)`` readings;
+            cs: ``(K,)`` the ``kappa / cbar`` (``>= 0``).
+
+    Every ``c`` gets the same arithmetic (and bits) as it would alone.
+    """
+    n = A.shape[1]
     nk = cs.size
     aa = np.zeros((n, nk))
     az = np.zeros((n, nk))
     zz = np.zeros((n, nk))
     log_r = np.zeros((n, nk))
     prod = np.ones((n, nk))
-    bound = np.ones(nk)  # the largest each kappa's running products can be
-    for i in range(m):
+    bound = np.ones(nk)  # the largest each c's running products can be
+    for i in rows:
         zi = z[i]
         z2 = zi * zi
         a_row = A[i]
-        o_row = own[i]
-        top = 0.0
+        f = floor[i]
+        top = f
         for s in range(n):
-            top = max(top, o_row[s])
+            top = max(top, a_row[s] * q[s])
         for j in range(nk):
             r_max = 1.0 + cs[j] * top
             if bound[j] * r_max > _PRODUCT_CAP:
@@ -58,7 +110,7 @@ def candidate_sums_many(
             bound[j] *= r_max
         for s in range(n):
             a = a_row[s]
-            o = o_row[s]
+            o = max(a * q[s], f)
             for j in range(nk):
                 r = 1.0 + cs[j] * o
                 w = 1.0 / (r * r)
@@ -71,25 +123,23 @@ def candidate_sums_many(
         _flush(prod[:, j], log_r[:, j])
     for s in range(n):
         for j in range(nk):
-            aa[s, j] = max(aa[s, j], 1e-300)
+            aa[s, j] = max(aa[s, j], AA_FLOOR)
     return aa.T.copy(), az.T.copy(), zz.T.copy(), log_r.T.copy()
 
 
 @_jit
-def candidate_sums(
-    A: np.ndarray, own: np.ndarray, z: np.ndarray, c: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """``(aa, az, zz, log_r)`` per candidate ``s``: ``sum_i w a_is^2``, ``sum_i w a_is z_i``,
-    ``sum_i w z_i^2`` and ``sum_i log r_is``, with ``r_is = 1 + c own_is`` and ``w = 1 / r_is^2``.
-
-    Args:
-        A: ``(m, N)`` responses of the readings; own: ``(m, N)`` the concentrations the noise
-            weights scale with (``>= 0``); z: ``(m,)`` readings; c: ``kappa / cbar`` (``>= 0``).
-
-    ``aa`` is kept at least ``1e-300``, as :func:`dgse.localization.adjoint._weighted_sums` does.
-    """
-    aa, az, zz, log_r = candidate_sums_many(A, own, z, np.array([c]))
-    return aa[0], az[0], zz[0], log_r[0]
+def own_weights(A: np.ndarray, q: np.ndarray, floor: np.ndarray, c: float) -> np.ndarray:
+    """``(m, N)`` the noise weights ``r_is = 1 + c max(a_is q_s, floor_i)`` of
+    :func:`candidate_sums_many`, in one pass (no temporaries)."""
+    m, n = A.shape
+    r = np.empty((m, n))
+    for i in range(m):
+        a_row = A[i]
+        f = floor[i]
+        r_row = r[i]
+        for s in range(n):
+            r_row[s] = 1.0 + c * max(a_row[s] * q[s], f)
+    return r
 
 
 @_jit
