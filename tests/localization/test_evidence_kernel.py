@@ -3,7 +3,12 @@
 import numpy as np
 import pytest
 
-from dgse.localization.adjoint import _evidence_from_sums, _weighted_sums, adjoint_log_evidence
+from dgse.localization.adjoint import (
+    _evidence_from_sums,
+    _weighted_sums,
+    adjoint_log_evidence,
+    censored_correction,
+)
 from dgse.localization.evidence_kernel import candidate_sums_many, own_weights, row_sums
 
 
@@ -108,9 +113,16 @@ def test_deferred_zeros_get_the_sums_of_the_weights_they_report(mode):
     _logl, det = adjoint_log_evidence(A, z, noise_weights=mode, censored="deferred")
     censor = det["censor"]
     pos = z > 0
-    want = _weighted_sums(A[pos], A[pos] ** 2, z[pos], censor["r"][pos])
+    want = _weighted_sums(A[pos], A[pos] ** 2, z[pos], det["r"][pos])
     for have, w in zip(censor["sums"], want, strict=True):
         np.testing.assert_allclose(have, w, rtol=1e-12)
+    # the zeros' factor gets the zeros' rows of the weights (every reading's is an (m, N) array
+    # in the modes with each candidate's own, built only when read)
+    np.testing.assert_array_equal(censor["r"], det["r"][~pos])
+    full = dict(censor, r=det["r"])
+    np.testing.assert_array_equal(
+        censored_correction(logl=_logl, **censor), censored_correction(logl=_logl, **full)
+    )
 
 
 def test_own_weights_are_the_numpy_weights():
@@ -120,3 +132,17 @@ def test_own_weights_are_the_numpy_weights():
     floor = rng.random(7)
     want = 1.0 + 0.7 * np.maximum(A * q, floor[:, None])
     np.testing.assert_array_equal(own_weights(A, q, floor, 0.7), want)
+
+
+def test_details_compute_a_lazy_entry_once_on_first_read():
+    from dgse.localization.adjoint import Details
+
+    calls = []
+    d = Details(a=1)
+    d.lazy("r", lambda: calls.append(1) or np.arange(3))
+    assert "r" in d and d.get("missing") is None and not calls
+    np.testing.assert_array_equal(d["r"], np.arange(3))
+    np.testing.assert_array_equal(d.get("r"), np.arange(3))
+    assert calls == [1]
+    with pytest.raises(KeyError):
+        d["missing"]

@@ -517,11 +517,15 @@ def _same_noise_weights(modes: Sequence[Sequence[tuple[Any, dict[str, Any]]]]) -
     if len(modes) < 2:
         return False
     for per_mode in zip(*modes, strict=True):
-        rs = [d["censor"]["r"] for _A, d in per_mode if "censor" in d]
-        if 0 < len(rs) < len(per_mode):
+        cs = [d["censor"] for _A, d in per_mode if "censor" in d]
+        if 0 < len(cs) < len(per_mode):
             return False
-        if any(r.shape != rs[0].shape or not np.array_equal(r, rs[0]) for r in rs[1:]):
-            return False
+        # the factor's inputs that depend on the weights: the zeros' weights and the positive
+        # readings' weighted sums
+        for c in cs[1:]:
+            pairs = [(c["r"], cs[0]["r"]), *zip(c["sums"], cs[0]["sums"], strict=True)]
+            if any(np.shape(a) != np.shape(b) or not np.array_equal(a, b) for a, b in pairs):
+                return False
     return True
 
 

@@ -141,7 +141,7 @@ import json
 import math
 import time
 from collections import OrderedDict
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -620,11 +620,13 @@ def _censored_setup(
     pos = ~cen
     alpha_n = alpha0 + 0.5 * (int(pos.sum()) - 1)
     # the zeros' responses over their noise weights, a row per candidate
-    rc = r[cen] if r.ndim == 2 else r[cen][:, None]
-    Bt = np.ascontiguousarray((A[cen] / rc).T)
+    rc = r if r.shape[0] != z.size else r[cen]  # the zeros' rows, or every reading's
+    Bt = np.ascontiguousarray((A[cen] / (rc if rc.ndim == 2 else rc[:, None])).T)
     qmax = np.inf if q_max is None else q_max
     # the positive readings' rate and noise posterior, for the plug-in and integrated factors
     if sums is None:
+        if r.shape[0] != z.size:
+            raise InputDataError("noise weights of the zeros alone need the positive readings' sums")
         Ap = A[pos]
         sums = _weighted_sums(Ap, Ap * Ap, z[pos], r[pos])
     aa, az, zz = sums
@@ -692,7 +694,8 @@ def censored_correction(
 
     Args:
         A: ``(m, N)`` responses; z: ``(m,)`` readings (zeros are the censored ones);
-        r: ``(m,)`` noise weights, or ``(m, N)``: each candidate's own; logl: ``(N,)`` the
+        r: ``(m,)`` noise weights, or ``(m, N)``: each candidate's own; with ``sums``, the
+        zeros' rows alone will do (``(n_zeros,)`` or ``(n_zeros, N)``); logl: ``(N,)`` the
         positive readings' log evidence; sums: the positive readings' weighted sums ``(sum w
         a^2, sum w a z, sum w z^2)`` with these weights (``w = 1 / r^2``), where the caller has
         them (:func:`adjoint_log_evidence` does; computed here otherwise).
@@ -812,6 +815,35 @@ CENSORED_NEGLIGIBLE_NATS = 50.0
 CENSORED_PLUG_BLOCK = 512
 
 
+class Details(dict):
+    """The ``details`` of :func:`adjoint_log_evidence`: a dict in which some entries are computed
+    when first read (:meth:`lazy`).  ``"r"`` is one: with each candidate's own noise weights it
+    is an ``(m, N)`` array, a few milliseconds to build in every call of a search step, and
+    only the step's best flow hypothesis reads it."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._lazy: dict[str, Callable[[], Any]] = {}
+
+    def lazy(self, key: str, make: Callable[[], Any]) -> None:
+        """Let ``self[key]`` be ``make()``, computed on the first read and kept."""
+        self.pop(key, None)
+        self._lazy[key] = make
+
+    def __missing__(self, key: str) -> Any:
+        make = self._lazy.pop(key, None)
+        if make is None:
+            raise KeyError(key)
+        value = self[key] = make()
+        return value
+
+    def __contains__(self, key: object) -> bool:
+        return super().__contains__(key) or key in self._lazy
+
+    def get(self, key: str, default: Any = None) -> Any:
+        return self[key] if key in self else default
+
+
 def adjoint_log_evidence(
     A: np.ndarray,
     z: np.ndarray,
@@ -884,7 +916,7 @@ def adjoint_log_evidence(
     rows = np.flatnonzero(pos)
     zp = z[pos]
     m = int(rows.size)
-    details: dict[str, Any] = {"s0": s0, "censored": int(cen.sum())}
+    details = Details(s0=s0, censored=int(cen.sum()))
 
     def _censored(logl: np.ndarray, r: np.ndarray, sums: tuple[np.ndarray, ...]) -> np.ndarray:
         if not cen.any():
@@ -899,7 +931,7 @@ def adjoint_log_evidence(
     sums0 = (aa0[0], az0[0], float(zp @ zp))
     logl0, qhat0, _ = _evidence_from_sums((*sums0, 0.0), m, q_max, alpha0, beta0)
     if ks == [0.0]:
-        logl0 = _censored(logl0, ones, sums0)
+        logl0 = _censored(logl0, ones[cen], sums0)
         best = int(np.argmax(logl0))
         details.update(qhat=qhat0, kappa_weights=np.ones(1), kappa=0.0, chat=None, best=best, r=ones)
         return logl0, details
@@ -922,12 +954,16 @@ def adjoint_log_evidence(
     elif noise_weights == "larger":
         floor = chat
 
-    def weights(k: float) -> np.ndarray:
+    def weights(k: float, which: np.ndarray | None = None) -> np.ndarray:
+        """The noise weights of ``kappa = k``, of every reading or of the readings ``which``."""
         if k == 0.0:
-            return ones
+            return ones if which is None else ones[which]
         if floor is not None:
-            return evidence_kernel.own_weights(A, qclip, floor, k / cbar)
-        return 1.0 + k * chat / cbar
+            if which is None:
+                return evidence_kernel.own_weights(A, qclip, floor, k / cbar)
+            return evidence_kernel.own_weights(np.ascontiguousarray(A[which]), qclip, floor[which], k / cbar)
+        r = 1.0 + k * chat / cbar
+        return r if which is None else r[which]
 
     # the weighted sums of every kappa > 0 from one pass over the positive readings' rows
     heavy = [k for k in ks if k != 0.0]
@@ -964,18 +1000,20 @@ def adjoint_log_evidence(
     kw = np.exp(tot - tot.max())
     kw /= kw.sum()
     kbest = int(np.argmax(kw))
-    # the zeros' factor with the most probable kappa's noise weights (one pass, not one per kappa)
-    r_best = weights(ks[kbest])
-    logl = _censored(logl, r_best, all_sums[kbest])
+    # the zeros' factor with the most probable kappa's noise weights (one pass, not one per
+    # kappa): the zeros' rows of them and the sums above; every reading's weights (an (m, N)
+    # array with each candidate's own) only when a caller reads details["r"]
+    k_best = ks[kbest]
+    logl = _censored(logl, weights(k_best, cen), all_sums[kbest])
     details.update(
         qhat=qhats[kbest],
         kappa_weights=kw,
-        kappa=ks[kbest],
+        kappa=k_best,
         chat=chat,
         cbar=cbar,
         best=int(np.argmax(logl)),
-        r=r_best,
     )
+    details.lazy("r", lambda: weights(k_best))
     return logl, details
 
 

@@ -28,7 +28,10 @@ import math
 import numba
 import numpy as np
 
-_jit = numba.njit(cache=True, nogil=True)
+#: ``error_model="numpy"``: a division by zero gives inf or nan, as in NumPy, instead of a
+#: check before every division that keeps the loops out of vector registers (here no
+#: divisor can be 0: every weight is at least 1).
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 
 #: The running products of the weights are turned into logarithms before they could exceed this.
 _PRODUCT_CAP = 1e250
@@ -84,16 +87,18 @@ def candidate_sums_many(
             plug-in concentrations: the larger of the two, ``"larger"``); z: ``(m,)`` readings;
             cs: ``(K,)`` the ``kappa / cbar`` (``>= 0``).
 
-    Every ``c`` gets the same arithmetic (and bits) as it would alone.
+    Every ``c`` gets the same arithmetic (and bits) as it would alone.  Each reading's row is
+    read once; the loop over the candidates is innermost, so that it runs in vector registers.
     """
     n = A.shape[1]
     nk = cs.size
-    aa = np.zeros((n, nk))
-    az = np.zeros((n, nk))
-    zz = np.zeros((n, nk))
-    log_r = np.zeros((n, nk))
-    prod = np.ones((n, nk))
+    aa = np.zeros((nk, n))
+    az = np.zeros((nk, n))
+    zz = np.zeros((nk, n))
+    log_r = np.zeros((nk, n))
+    prod = np.ones((nk, n))
     bound = np.ones(nk)  # the largest each c's running products can be
+    own = np.empty(n)
     for i in rows:
         zi = z[i]
         z2 = zi * zi
@@ -101,30 +106,31 @@ def candidate_sums_many(
         f = floor[i]
         top = f
         for s in range(n):
-            top = max(top, a_row[s] * q[s])
+            o = max(a_row[s] * q[s], f)
+            own[s] = o
+            top = max(top, o)
         for j in range(nk):
-            r_max = 1.0 + cs[j] * top
+            c = cs[j]
+            r_max = 1.0 + c * top
             if bound[j] * r_max > _PRODUCT_CAP:
-                _flush(prod[:, j], log_r[:, j])
+                _flush(prod[j], log_r[j])
                 bound[j] = 1.0
             bound[j] *= r_max
-        for s in range(n):
-            a = a_row[s]
-            o = max(a * q[s], f)
-            for j in range(nk):
-                r = 1.0 + cs[j] * o
+            aa_j, az_j, zz_j, prod_j = aa[j], az[j], zz[j], prod[j]
+            for s in range(n):
+                a = a_row[s]
+                r = 1.0 + c * own[s]
                 w = 1.0 / (r * r)
                 wa = w * a
-                aa[s, j] += wa * a
-                az[s, j] += wa * zi
-                zz[s, j] += w * z2
-                prod[s, j] *= r
+                aa_j[s] += wa * a
+                az_j[s] += wa * zi
+                zz_j[s] += w * z2
+                prod_j[s] *= r
     for j in range(nk):
-        _flush(prod[:, j], log_r[:, j])
-    for s in range(n):
-        for j in range(nk):
-            aa[s, j] = max(aa[s, j], AA_FLOOR)
-    return aa.T.copy(), az.T.copy(), zz.T.copy(), log_r.T.copy()
+        _flush(prod[j], log_r[j])
+        for s in range(n):
+            aa[j, s] = max(aa[j, s], AA_FLOOR)
+    return aa, az, zz, log_r
 
 
 @_jit
