@@ -3,33 +3,36 @@
 Each scenario is a random office floor (:func:`dgse.world.building.random_office_floor`:
 corridors, rooms with doors, 2-4 inlets and outlets), a random inlet speed of the
 training range and one random source, solved with the built-in RANS and transport.
-The utility planner with ``SEARCH_PLANNER`` (the settings chosen for dgse-phys on the
-paper-size validation scenarios; nothing was tuned on these floors) searches each one
-with the openings known.  Reported: success, error, search time (ST), distance
-(TD), and the computation per step against the map's size (the first estimate, which
-solves the flows, and the median step).
+The utility planner with ``search_planner("openings")`` and dgse-phys with
+``search_estimator("openings")`` (the settings chosen on the paper-size validation
+scenarios; nothing was tuned on these floors) search each one with the openings known.
+Reported: success, error, search time (ST), distance (TD), and the computation per step
+against the map's size (the first estimate, which solves the flows, and the median step).
 
 The floors are drawn at ``--resolution`` (default 0.2 m: a 30 m floor is 150 x 150
 cells; at the spec's 0.1 m it would be 300 x 300, whose flow alone takes minutes per
 inlet speed on 2 cores).  The time limit scales with the floor (default 4000 s,
 twice the paper-size default).  Scenarios are made once into ``_cases/`` beside the
 results; every finished episode is journaled, so an interrupted run resumes, and
-``--summary-only`` summarizes the episodes kept so far::
+``--summary-only`` summarizes the episodes kept so far; ``--tag`` names a run (a new
+journal and result beside the others)::
 
     python benchmarks/building_search.py --cases 10
+    python benchmarks/building_search.py --cases 10 --tag 2026-11-29
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import time
 from pathlib import Path
 
 import numpy as np
 from phys_search import write_result
 
-from dgse.estimators.phys import SEARCH_PLANNER
+from dgse.estimators.phys import search_estimator, search_planner
 from dgse.search.campaign import run_trials
 
 FIRST_SEED = 3000
@@ -105,16 +108,21 @@ def main() -> None:
         "--summary-only", action="store_true", help="summarize the episodes journaled so far, run nothing"
     )
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/building_search"))
+    ap.add_argument("--tag", default="", help="appended to the result's and journal's names")
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     cases = make_cases(args.out, args.cases, args.resolution, tuple(args.size))
     stem = f"building{args.cases}_{args.resolution:g}m_dgse-phys_openings"
+    stem += f"_{args.tag}" if args.tag else ""
+    planner = {"min_observations": 5, **search_planner("openings")}
+    estimator = search_estimator("openings")
     settings = {
         "cases_dir": str(cases),
         "resolution_m": args.resolution,
         "floor_size_m": list(args.size),
         "time_limit_s": args.time_limit,
-        "planner": {"min_observations": 5, **SEARCH_PLANNER},
+        "planner": planner,
+        "estimator": estimator,
         "knowledge": "openings",
         "trials": args.trials,
         "seed": args.seed,
@@ -126,13 +134,17 @@ def main() -> None:
             "utility",
             trials=args.trials,
             seed=args.seed,
-            planner_options={"min_observations": 5, **SEARCH_PLANNER},
+            planner_options=planner,
+            estimator_options=estimator,
             knowledge="openings",
             time_limit=args.time_limit,
             steps=True,
             journal=args.out / f"{stem}.journal.jsonl",
         )
-    write_result(args.out / f"{stem}.json", summarize(args.out, stem, settings), stem)
+    result = summarize(args.out, stem, settings)
+    # how busy the machine was: step times are only comparable on an otherwise idle machine
+    result["machine"] = {"cores": os.cpu_count(), "load_average_at_end": list(os.getloadavg())}
+    write_result(args.out / f"{stem}.json", result, stem)
 
 
 if __name__ == "__main__":

@@ -78,6 +78,12 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args()
     rows = paper_size_episodes(args.step_time) + building_episodes(args.building)
+    machine = json.loads(args.building.read_text()).get("machine")
+    load = (
+        "the building searches shared the 2 cores with one or two other runs"
+        if machine is None  # runs before 2026-11-29 recorded no load
+        else f"load average {machine['load_average_at_end'][1]:.1f} over the building run's last 5 minutes"
+    )
     rows.sort(key=lambda r: r["free_cells"])
     edges = [0, 5000, 10000, 15000, 20000, 10**9]
     bins = []
@@ -98,8 +104,7 @@ def main() -> None:
         "dgse-phys with the openings known, one search per scenario: the first estimate (flows of the "
         "inlet-speed candidates solved) and the median of the other steps' computation, against the "
         "map's free cells (`python benchmarks/phys_time_vs_size.py`, from "
-        f"`{args.step_time.relative_to(REPO)}` and `{args.building.relative_to(REPO)}`; the building "
-        "searches shared the 2 cores with one or two other runs).",
+        f"`{args.step_time.relative_to(REPO)}` and `{args.building.relative_to(REPO)}`; {load}).",
         "",
         "| free cells | episodes | first estimate s (median) | median step s (median) |",
         "|---|---|---|---|",
