@@ -151,6 +151,23 @@ def test_noise_weight_modes_share_the_zeros_factors_without_changing_the_belief(
     np.testing.assert_array_equal(shared.log_conc_mean, alone.log_conc_mean)
 
 
+def test_modes_share_the_zeros_factors_only_where_every_weighted_input_agrees():
+    """Equal zeros' weights are not enough: the positive readings' sums must agree too."""
+    from dgse.estimators import phys
+
+    r = np.ones(2)
+    sums = (np.array([1.0, 2.0]), np.array([0.5, 0.1]), 3.0)
+
+    def mode(r_, sums_):
+        return [(None, {"censor": {"r": r_, "sums": sums_}}), (None, {})]
+
+    assert phys._same_noise_weights([mode(r, sums), mode(r.copy(), tuple(sums))])
+    other = (sums[0], sums[1], 3.5)
+    assert not phys._same_noise_weights([mode(r, sums), mode(r, other)])
+    assert not phys._same_noise_weights([mode(r, sums), mode(np.ones((2, 4)), sums)])
+    assert not phys._same_noise_weights([mode(r, sums)])
+
+
 def test_neighbour_correlation_tells_shared_model_error_from_noise():
     """Independent residuals correlate about 0 between neighbours, a smooth shared error
     near 1, an alternating one below 0; no neighbour pair, or all-zero residuals, give 0."""

@@ -886,12 +886,14 @@ def adjoint_log_evidence(
             predicts less there).
 
     Returns:
-        ``(log_evidence (N,), details)`` with ``details``: ``qhat`` ``(N,)`` (least-squares
-        rate of the most probable ``kappa``, g/s), ``kappa_weights`` (posterior weights of
-        ``kappas``), ``kappa`` (the most probable), ``chat`` ``(m,)`` (plug-in concentrations),
-        ``sigma_floor`` (posterior-mean noise floor at the best cell, ppm), ``r`` (the most
-        probable ``kappa``'s noise weights, ``(m,)`` or ``(m, N)``).  The evidence is
-        defined up to a constant independent of ``s`` (the same for every ``kappa``).
+        ``(log_evidence (N,), details)`` with ``details`` (a :class:`Details`): ``qhat`` ``(N,)``
+        (least-squares rate of the most probable ``kappa``, g/s), ``kappa_weights`` (posterior
+        weights of ``kappas``), ``kappa`` (the most probable), ``chat`` ``(m,)`` (plug-in
+        concentrations) and ``cbar`` (their mean), ``best`` (the most probable candidate),
+        ``s0`` (the prior noise scale, ppm), ``censored`` (how many zeros), ``r`` (the most
+        probable ``kappa``'s noise weights, ``(m,)`` or ``(m, N)``, built when first read) and,
+        with ``censored="deferred"``, ``censor``.  The evidence is defined up to a constant
+        independent of ``s`` (the same for every ``kappa``).
     """
     A = np.ascontiguousarray(A, dtype=np.float64)
     z = np.maximum(np.asarray(z, dtype=np.float64).reshape(-1), 0.0)
