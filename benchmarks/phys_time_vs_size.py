@@ -73,16 +73,18 @@ def building_episodes(result: Path) -> list[dict]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--step-time", type=Path, default=RESULTS / "phys_search" / "step_time.json")
-    building = RESULTS / "building_search" / "building10_0.2m_dgse-phys_openings.json"
+    building = RESULTS / "building_search" / "building10_0.2m_dgse-phys_openings_2026-11-29.json"
     ap.add_argument("--building", type=Path, default=building)
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args()
+    args.step_time, args.building = args.step_time.resolve(), args.building.resolve()
     rows = paper_size_episodes(args.step_time) + building_episodes(args.building)
     machine = json.loads(args.building.read_text()).get("machine")
     load = (
         "the building searches shared the 2 cores with one or two other runs"
         if machine is None  # runs before 2026-11-29 recorded no load
-        else f"load average {machine['load_average_at_end'][1]:.1f} over the building run's last 5 minutes"
+        else f"load average {machine['load_average_at_end'][1]:.1f} on {machine['cores']} cores over the "
+        "building run's last 5 minutes"
     )
     rows.sort(key=lambda r: r["free_cells"])
     edges = [0, 5000, 10000, 15000, 20000, 10**9]
