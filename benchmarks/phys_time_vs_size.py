@@ -52,8 +52,7 @@ def paper_size_episodes(step_time: Path) -> list[dict]:
     return out
 
 
-def building_episodes(result: Path) -> list[dict]:
-    d = json.loads(result.read_text())
+def building_episodes(d: dict) -> list[dict]:
     res = d["settings"]["resolution_m"]
     return [
         {
@@ -78,8 +77,9 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args()
     args.step_time, args.building = args.step_time.resolve(), args.building.resolve()
-    rows = paper_size_episodes(args.step_time) + building_episodes(args.building)
-    machine = json.loads(args.building.read_text()).get("machine")
+    building_result = json.loads(args.building.read_text())
+    rows = paper_size_episodes(args.step_time) + building_episodes(building_result)
+    machine = building_result.get("machine")
     load = (
         "the building searches shared the 2 cores with one or two other runs"
         if machine is None  # runs before 2026-11-29 recorded no load

@@ -290,7 +290,7 @@ class FlowModel:
             out.flags.writeable = False
         else:
             out = np.stack([self._rows[k] for k in keys]) if keys else np.zeros((0, n))
-        for k in keys[start:] if growing else keys:  # the cells just used move to the end
+        for k in keys[start:]:  # the cells just used move to the end (start is 0 unless growing)
             self._rows[k] = self._rows.pop(k)
         while len(self._rows) > MAX_CACHED_ROWS:  # least recently used first
             del self._rows[next(iter(self._rows))]
@@ -963,7 +963,7 @@ def adjoint_log_evidence(
         if floor is not None:
             if which is None:
                 return evidence_kernel.own_weights(A, qclip, floor, k / cbar)
-            return evidence_kernel.own_weights(np.ascontiguousarray(A[which]), qclip, floor[which], k / cbar)
+            return evidence_kernel.own_weights(A[which], qclip, floor[which], k / cbar)
         r = 1.0 + k * chat / cbar
         return r if which is None else r[which]
 
@@ -976,10 +976,11 @@ def adjoint_log_evidence(
         many = evidence_kernel.candidate_sums_many(A, rows, qclip, floor, z, cs)
     else:
         r_all = np.stack([weights(k)[pos] for k in heavy])  # (K, m_pos)
+        w_pos = 1.0 / r_all**2
         w_all = np.zeros((len(heavy), z.size))
-        w_all[:, pos] = 1.0 / r_all**2
+        w_all[:, pos] = w_pos
         aa_all, az_all = evidence_kernel.row_sums(A, rows, z, w_all)
-        many = (aa_all, az_all, w_all[:, pos] @ zp**2, np.log(r_all).sum(axis=1))
+        many = (aa_all, az_all, w_pos @ zp**2, np.log(r_all).sum(axis=1))
     all_sums = []
     for k in ks:
         # kappa = 0 is the homoscedastic pass above
