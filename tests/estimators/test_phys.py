@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -254,6 +256,58 @@ def test_wind_level_works_without_openings(case):
         src = tuple(case.source)
         assert b.localization_error(src) < ref.localization_error(src) + 0.15
     assert b.info["hypotheses"][0]["label"] == "given wind"
+
+
+def test_given_wind_is_weighed_against_the_rans_flows_of_its_openings(case):
+    """``given_wind_prior < 1``: the RANS flows of the openings share the rest of the prior; a
+    given field that is wrong (here twice too fast everywhere) loses to them, the true one does not."""
+    speeds = (0.4, 1.2, 3.6)
+    opts = {"speeds": speeds, "refine_speeds": 0, "given_wind_prior": 0.3}
+    obs = draw_observations(case, 40, seed=2)
+    weights = {}
+    for told, wind in (("true", case.wind), ("too fast", 2.0 * case.wind)):
+        k = Knowledge.from_case(replace(case, wind=wind), "wind")
+        est = get_estimator("dgse-phys", knowledge=k, **opts)
+        hyps = est.hypotheses()
+        assert hyps[0].label == "given wind"
+        assert [h.flow.inlet_velocity for h in hyps[1:]] == pytest.approx(speeds)
+        assert hyps[0].prior == pytest.approx(0.3) and sum(h.prior for h in hyps) == pytest.approx(1.0)
+        b = est.estimate(case.occupancy, case.resolution, obs)
+        weights[told] = {h["label"]: h["weight"] for h in b.info["hypotheses"]}
+        assert b.localization_error(tuple(case.source)) < 0.5
+    # the true field (the RANS flow at 1.2 m/s made mass-conserving) keeps its weight
+    assert weights["true"]["given wind"] + weights["true"]["v_in 1.2 m/s"] > 0.99
+    assert weights["too fast"]["given wind"] < 0.01 and weights["too fast"]["v_in 1.2 m/s"] > 0.9
+    # the default: the given field alone
+    alone = get_estimator("dgse-phys", knowledge=Knowledge.from_case(case, "wind")).hypotheses()
+    assert [h.label for h in alone] == ["given wind"]
+    with pytest.raises(InputDataError, match="given_wind_prior"):
+        get_estimator("dgse-phys", given_wind_prior=0.0)
+
+
+def test_given_wind_without_openings_proposes_them_from_the_field(case):
+    """Openings unknown at ``wind``: the RANS flows use the pair the field crosses the edge at,
+    which on a built-in case are the true openings; the speed is refined as at ``openings``."""
+    k = Knowledge("wind", case.occupancy, case.resolution, wind=case.wind, name="no openings")
+    est = get_estimator(
+        "dgse-phys", knowledge=k, speeds=(0.4, 3.6), refine_speeds=1, refine_readings=10, given_wind_prior=0.5
+    )
+    hyps = est.hypotheses()
+    layout = est._speed_layout
+    assert layout is not None and len(hyps) == 3
+    for found, true in ((layout.inlets, case.layout.inlets), (layout.outlets, case.layout.outlets)):
+        assert [o.side for o in found] == [o.side for o in true]
+        for a, b in zip(found, true, strict=True):
+            assert abs(0.5 * (a.start_m + a.end_m) - 0.5 * (b.start_m + b.end_m)) <= 0.3
+    obs = draw_observations(case, 40, seed=2)
+    est.estimate(case.occupancy, case.resolution, obs)
+    hyps = est.hypotheses()
+    assert [h.flow.inlet_velocity for h in hyps[1:]] == pytest.approx([0.4, 1.2, 3.6])
+    assert hyps[0].label == "given wind" and hyps[0].prior == pytest.approx(0.5)
+    assert sum(h.prior for h in hyps) == pytest.approx(1.0)
+    # a field that crosses the map's edge nowhere: the given field alone
+    still = Knowledge("wind", case.occupancy, case.resolution, wind=np.zeros_like(case.wind), name="still")
+    assert len(get_estimator("dgse-phys", knowledge=still, given_wind_prior=0.5).hypotheses()) == 1
 
 
 def test_map_level_proposes_openings_from_the_wind_readings(case):

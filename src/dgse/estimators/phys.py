@@ -87,7 +87,12 @@ from dgse.localization.adjoint import (
 )
 from dgse.options import options_from
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
-from dgse.physics.openings import merge_proposals, potential_flow_proposals, wind_field_proposals
+from dgse.physics.openings import (
+    merge_proposals,
+    potential_flow_proposals,
+    propose_openings,
+    wind_field_proposals,
+)
 from dgse.physics.projection import project_wind, transport_from_wind
 from dgse.physics.rans import FlowSettings
 from dgse.sensing.sensors import Observations
@@ -405,6 +410,13 @@ def _log_speed_priors(hyps: list[FlowHypothesis]) -> list[FlowHypothesis]:
     width = np.diff(edges)
     width = width / width.sum()
     return [FlowHypothesis(h.label, h.flow, float(w)) for h, w in zip(hs, width, strict=True)]
+
+
+def _with_given(given: FlowHypothesis, prior: float, family: list[FlowHypothesis]) -> list[FlowHypothesis]:
+    """The given field's hypothesis (prior ``prior``) first, then ``family`` with the rest of
+    the prior in proportion to its own."""
+    rest = [FlowHypothesis(h.label, h.flow, (1.0 - prior) * h.prior) for h in family]
+    return [FlowHypothesis(given.label, given.flow, prior), *rest]
 
 
 def _logsumexp(x: np.ndarray) -> float:
@@ -784,6 +796,13 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             to the wind and concentration variances (the spread between hypotheses, the
             part readings reduce, stays in the belief's ``*_reducible`` fields, which the
             planner uses); None: the level's :data:`FIELD_ERROR`; zeros: none.
+        given_wind_prior: at knowledge ``wind``, the prior weight of the given field; the rest
+            goes to the built-in RANS flows of the openings at the ``speeds`` (log-uniform over
+            the speed, refined as at ``openings``): the knowledge's openings, or where it has
+            none those the given field crosses the map's edge at
+            (:func:`~dgse.physics.openings.propose_openings`).  The wind and gas readings then
+            weigh a user's field against the physics of its openings, which hedges a field
+            that is wrong (smoothed, from another speed).  1: the given field alone.
         flow_settings: SIMPLEC controls of the built-in solver.
         physics: physical constants.
     """
@@ -824,12 +843,14 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     misfit_threshold: float | None = None
     misfit_temperature: float = MISFIT_TEMPERATURE
     field_error: Sequence[float] | None = None
+    given_wind_prior: float = 1.0
     flow_settings: FlowSettings | None = None
     physics: Physics = DEFAULT_PHYSICS
     name: str = field(default="dgse-phys", init=False)
     _hypotheses: list[FlowHypothesis] | None = field(default=None, init=False, repr=False)
     _proposed_at: int = field(default=0, init=False, repr=False)
     _proposed_from: tuple[np.ndarray, np.ndarray] | None = field(default=None, init=False, repr=False)
+    _speed_layout: Layout | None = field(default=None, init=False, repr=False)
     _networks: dict[str, Any] = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -896,6 +917,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         mpm = str(self.map_proposal_model)
         if mpm != "default" and not Path(mpm).is_file():
             raise InputDataError(f"map_proposal_model: {mpm} is not a weights file (or 'default')")
+        if not (0.0 < self.given_wind_prior <= 1.0):
+            raise InputDataError(f"given_wind_prior must be in (0, 1], got {self.given_wind_prior}")
         if int(self.conc_components) < 1:
             raise InputDataError(f"conc_components must be >= 1, got {self.conc_components}")
         if self.field_error is not None:
@@ -909,6 +932,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         if knowledge.level == "openings" and not knowledge.has_openings:
             raise UnsupportedError("dgse-phys at 'openings' needs the inlets and outlets")
         self._hypotheses = None  # built on the first estimate (solves take seconds)
+        self._speed_layout = None
         self._proposed_at = 0
 
     def _map_hypotheses(self, obs: Observations) -> list[FlowHypothesis]:
@@ -982,16 +1006,42 @@ class PhysicsGuidedEstimator(KnowledgeUser):
                 fm = FlowModel(
                     proj.wind, transport_from_wind(proj, self.physics), math.nan, proj.info, self.physics
                 )
-                self._hypotheses = [FlowHypothesis("given wind", fm, 1.0)]
+                given = FlowHypothesis("given wind", fm, 1.0)
+                p = float(self.given_wind_prior)
+                self._speed_layout = None if p >= 1.0 else self._openings_of(k)
+                if self._speed_layout is None:
+                    self._hypotheses = [given]
+                else:
+                    family = self._speed_family(self._speed_layout, list(self.speeds))
+                    self._hypotheses = _with_given(given, p, family)
             else:
-                # in order of speed; warm: each solve starts from the one before (scaled)
-                hyps: list[FlowHypothesis] = []
-                for v in sorted(self.speeds):
-                    prev = hyps[-1].flow if hyps and self.warm_start else None
-                    fm = flow_model(k.layout, v, self.physics, self.flow_settings, warm_start=prev)
-                    hyps.append(FlowHypothesis(_speed_label(v), fm))
-                self._hypotheses = _log_speed_priors(hyps)
+                self._speed_layout = k.layout
+                self._hypotheses = self._speed_family(k.layout, list(self.speeds))
         return self._hypotheses
+
+    def _speed_family(self, layout: Layout, speeds: list[float]) -> list[FlowHypothesis]:
+        """The built-in RANS flows of ``layout`` at ``speeds``, with the log-uniform prior over
+        the speed; in order of speed, with ``warm_start`` each solve starting from the one
+        before (scaled)."""
+        hyps: list[FlowHypothesis] = []
+        for v in sorted(speeds):
+            prev = hyps[-1].flow if hyps and self.warm_start else None
+            fm = flow_model(layout, v, self.physics, self.flow_settings, warm_start=prev)
+            hyps.append(FlowHypothesis(_speed_label(v), fm))
+        return _log_speed_priors(hyps)
+
+    def _openings_of(self, k: Knowledge) -> Layout | None:
+        """The openings of the RANS flows at knowledge ``wind``: the knowledge's, or the
+        strongest inlet-outlet pair where the given field crosses the map's edge (None where it
+        crosses it nowhere)."""
+        if k.has_openings:
+            return k.layout
+        assert k.wind is not None
+        try:
+            prop = propose_openings(k.occupancy, k.resolution, k.wind)[0]
+        except (InputDataError, IndexError):
+            return None
+        return Layout(k.occupancy, prop.inlets, prop.outlets, resolution=k.resolution, name=k.name or "wind")
 
     def _refine_speed(self, hyps: list[FlowHypothesis], weights: np.ndarray, n_obs: int) -> None:
         """Add one inlet speed between the most probable one and its heavier neighbour.
@@ -1004,28 +1054,27 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         ``refine_speeds`` times per map (with ``warm_start``, the new flow starts from the
         best one's).  It is weighed from the next estimate on.
         """
-        k = self.knowledge
-        if (
-            k is None
-            or k.level != "openings"
-            or n_obs < self.refine_readings
-            or len(hyps) >= len(self.speeds) + self.refine_speeds
-        ):
+        layout = self._speed_layout
+        speed = [i for i, h in enumerate(hyps) if math.isfinite(h.flow.inlet_velocity)]
+        full = len(speed) >= len(self.speeds) + self.refine_speeds
+        if layout is None or n_obs < self.refine_readings or full:
             return
-        order = sorted(range(len(hyps)), key=lambda i: hyps[i].flow.inlet_velocity)
-        pos = order.index(int(np.argmax(weights)))
+        order = sorted(speed, key=lambda i: hyps[i].flow.inlet_velocity)
+        best = max(speed, key=lambda i: weights[i])
+        pos = order.index(best)
         sides = [order[j] for j in (pos - 1, pos + 1) if 0 <= j < len(order)]
         if not sides:
             return
         other = max(sides, key=lambda i: weights[i])
-        best = order[pos]
         v0, v1 = hyps[best].flow.inlet_velocity, hyps[other].flow.inlet_velocity
         if max(v0, v1) / min(v0, v1) <= self.refine_ratio:
             return
         v = math.sqrt(v0 * v1)
         start = hyps[best].flow if self.warm_start else None
-        fm = flow_model(k.layout, v, self.physics, self.flow_settings, warm_start=start)
-        self._hypotheses = _log_speed_priors([*hyps, FlowHypothesis(_speed_label(v), fm)])
+        fm = flow_model(layout, v, self.physics, self.flow_settings, warm_start=start)
+        family = _log_speed_priors([*(hyps[i] for i in speed), FlowHypothesis(_speed_label(v), fm)])
+        given = [h for h in hyps if not math.isfinite(h.flow.inlet_velocity)]
+        self._hypotheses = _with_given(given[0], given[0].prior, family) if given else family
 
     # -- the learned source belief ---------------------------------------------------------------
     def _learned_weight(self, m: int) -> float:
