@@ -27,6 +27,9 @@ journal each, one summary over both)::
         --variants steady filament --methods dgse-phys@openings --tag phys \
         --cache benchmarks/results/phys_robustness/_cases -o benchmarks/results/phys_calibration50
     # the same with --methods dgse-s@map --tag dgse-s
+
+``--cases FILE...`` takes case files instead of generated scenarios (the OpenFOAM reference
+cases: a flow the built-in solver did not make), each named by its stem.
 """
 
 from __future__ import annotations
@@ -117,14 +120,20 @@ def write_summary(out: Path, trials: int) -> None:
     if not rows:
         raise SystemExit(f"no estimates of trials below {trials} in the journals of {out}")
     cases = sorted({r["case"] for r in rows})
-    seeds = sorted(int(c.removeprefix("test")) for c in cases)  # journals name a scenario test<seed>
+    # journals name a generated scenario test<seed>, a case file by its stem (--cases)
+    seeds = sorted(int(c.removeprefix("test")) for c in cases if c.removeprefix("test").isdigit())
+    where = (
+        f"{len(cases)} scenarios, seeds {seeds[0]}-{seeds[-1]}"
+        if len(seeds) == len(cases)
+        else f"{len(cases)} case files ({', '.join(cases)})"
+    )
     counts = sorted({r["n"] for r in rows})
     summary: dict[str, Any] = {}
     sizes: set[int] = set()
     lines = [
         "# dgse-phys where the physics is wrong",
         "",
-        f"`python benchmarks/phys_robustness.py` ({len(cases)} scenarios, seeds {seeds[0]}-{seeds[-1]}, "
+        f"`python benchmarks/phys_robustness.py` ({where}, "
         f"up to {trials} trials each; the counts in brackets say how many estimates): "
         "SL error mean / median (m), source CE mean (nats), and the "
         "calibration error of the source posterior's highest-density credible sets "
@@ -184,6 +193,13 @@ def main() -> None:
         default=list(SEEDS),
         help="scenario seeds, e.g. 2000-2019 (test) or 900-923 (validation)",
     )
+    ap.add_argument(
+        "--cases",
+        type=Path,
+        nargs="+",
+        default=None,
+        help="case files to use instead of the generated scenarios (e.g. ../shared/reference-cases/*.npz)",
+    )
     ap.add_argument("--counts", type=int, nargs="+", default=list(COUNTS), help="numbers of readings")
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/phys_robustness"))
     ap.add_argument(
@@ -224,23 +240,26 @@ def main() -> None:
             done.add((r["variant"], r["method"], r["knowledge"], r["case"], r["n"], r["trial"]))
     estimators: dict[tuple[str, str], Any] = {}
     with journal.open("a") as jf:
-        for seed in args.seeds:
-            path = cache / f"test{seed}.npz"
-            if not path.exists():
-                random_cases(seed, n_sources=1)[0].save(path)
+        if args.cases is not None:
+            items = [(path.stem, path) for path in args.cases]
+        else:
+            items = [(f"test{seed}", cache / f"test{seed}.npz") for seed in args.seeds]
+        for case_id, path in items:
+            if args.cases is None and not path.exists():
+                random_cases(int(case_id.removeprefix("test")), n_sources=1)[0].save(path)
             base = Case.load(path)
             for variant in args.variants:
-                truth = variant_case(base, variant, cache, f"test{seed}")
+                truth = variant_case(base, variant, cache, case_id)
                 told = replace(base, wind=perturbed_wind(base, variant))
                 for n in args.counts:
                     for trial in range(args.trials):
-                        obs = draw_observations(truth, n, seed=0, case_id=f"test{seed}", trial=trial)
+                        obs = draw_observations(truth, n, seed=0, case_id=case_id, trial=trial)
                         for method, level in METHODS:
                             if f"{method}@{level}" not in args.methods:
                                 continue
                             if variant.startswith("wind_") and level != "wind":
                                 continue  # only the wind level reads the perturbed field
-                            key = (variant, method, level, f"test{seed}", n, trial)
+                            key = (variant, method, level, case_id, n, trial)
                             if key in done:
                                 continue
                             est = estimators.get((method, level))
@@ -257,7 +276,7 @@ def main() -> None:
                                 "variant": variant,
                                 "method": method,
                                 "knowledge": level,
-                                "case": f"test{seed}",
+                                "case": case_id,
                                 "n": n,
                                 "trial": trial,
                                 "sl_m": source_localization_error(b, base.source),

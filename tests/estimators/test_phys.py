@@ -12,6 +12,7 @@ from dgse.estimators.knowledge import Knowledge
 from dgse.estimators.phys import (
     CENSORED_TILT,
     DEFAULT_EFFECTIVE_READINGS,
+    GIVEN_WIND_PRIOR,
     LEARNED_FLOOR,
     MAP_TEMPERING,
     SEARCH_ESTIMATOR,
@@ -278,9 +279,12 @@ def test_given_wind_is_weighed_against_the_rans_flows_of_its_openings(case):
     # the true field (the RANS flow at 1.2 m/s made mass-conserving) keeps its weight
     assert weights["true"]["given wind"] + weights["true"]["v_in 1.2 m/s"] > 0.99
     assert weights["too fast"]["given wind"] < 0.01 and weights["too fast"]["v_in 1.2 m/s"] > 0.9
-    # the default: the given field alone
-    alone = get_estimator("dgse-phys", knowledge=Knowledge.from_case(case, "wind")).hypotheses()
+    # 1: the given field alone; the default shares the prior evenly
+    k = Knowledge.from_case(case, "wind")
+    alone = get_estimator("dgse-phys", knowledge=k, given_wind_prior=1.0).hypotheses()
     assert [h.label for h in alone] == ["given wind"]
+    shared = get_estimator("dgse-phys", knowledge=k, speeds=speeds).hypotheses()
+    assert len(shared) == 4 and shared[0].prior == pytest.approx(GIVEN_WIND_PRIOR) == 0.5
     with pytest.raises(InputDataError, match="given_wind_prior"):
         get_estimator("dgse-phys", given_wind_prior=0.0)
 

@@ -463,6 +463,18 @@ def mix_posteriors(
 #: evidence (its weight would need the gas readings to favour it by as much; between inlet
 #: speeds of one layout they differ by a few nats, since concentrations scale as ``q / v_in``).
 WIND_HOPELESS_NATS = 30.0
+#: The given field's prior weight at knowledge ``wind`` (``given_wind_prior``); the built-in
+#: RANS flows of its openings share the rest.  Chosen on validation 900-923 (2026-11-29;
+#: ``python benchmarks/phys_robustness.py --seeds 900-923 --counts 50 150 --trials 2 --variants
+#: steady wind_smoothed wind_x2 wind_rotated filament --methods dgse-phys@wind -E
+#: given_wind_prior=P``, 48 estimates a cell, chance calibration error 0.043), 0.5 against 1 (the
+#: given field alone): mean SL error equal or lower in all 10 cells (smoothed field at 150
+#: readings 0.63 against 0.85 m, twice too fast 0.62 against 0.78 m), mean CE lower in 8 (0.02
+#: nats higher with filament readings, the true wind), calibration error with the smoothed field
+#: 0.028 against 0.085 at 50 readings; at 150 readings the perturbed fields' posteriors became
+#: too flat as the true wind's is (the truth's mean credible level 0.39-0.42, calibration error
+#: 0.07-0.10 against 0.055-0.065; the true wind 0.081 against 0.089).
+GIVEN_WIND_PRIOR = 0.5
 #: the noise-weight modes ``noise_weights="mixture"`` averages (the first one's evidence also
 #: gives the predictive fields)
 MIXED_NOISE_WEIGHTS = ("plug-in", "candidate")
@@ -802,7 +814,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             none those the given field crosses the map's edge at
             (:func:`~dgse.physics.openings.propose_openings`).  The wind and gas readings then
             weigh a user's field against the physics of its openings, which hedges a field
-            that is wrong (smoothed, from another speed).  1: the given field alone.
+            that is wrong (smoothed, from another speed).  1: the given field alone (the
+            default before 2026-11-29); :data:`GIVEN_WIND_PRIOR` has the validation numbers.
         flow_settings: SIMPLEC controls of the built-in solver.
         physics: physical constants.
     """
@@ -843,7 +856,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     misfit_threshold: float | None = None
     misfit_temperature: float = MISFIT_TEMPERATURE
     field_error: Sequence[float] | None = None
-    given_wind_prior: float = 1.0
+    given_wind_prior: float = GIVEN_WIND_PRIOR
     flow_settings: FlowSettings | None = None
     physics: Physics = DEFAULT_PHYSICS
     name: str = field(default="dgse-phys", init=False)
