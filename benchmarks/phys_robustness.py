@@ -29,7 +29,8 @@ journal each, one summary over both)::
     # the same with --methods dgse-s@map --tag dgse-s
 
 ``--cases FILE...`` takes case files instead of generated scenarios (the OpenFOAM reference
-cases: a flow the built-in solver did not make), each named by its stem.
+cases: a flow the built-in solver did not make), each named by its stem.  ``--paired DIR``
+compares the run in ``-o`` with another on the estimates both made (``OUT/paired.md``).
 """
 
 from __future__ import annotations
@@ -113,10 +114,7 @@ def parse_seeds(text: str) -> list[int]:
 
 def write_summary(out: Path, trials: int) -> None:
     """``summary.md`` / ``summary.json`` from the journals (what they hold so far of the first ``trials``)."""
-    rows = [
-        json.loads(line) for j in sorted(out.glob("journal*.jsonl")) for line in j.read_text().splitlines()
-    ]
-    rows = [r for r in rows if r["trial"] < trials]  # the trials the summary covers
+    rows = [r for r in _journal_rows(out).values() if r["trial"] < trials]  # the trials the summary covers
     if not rows:
         raise SystemExit(f"no estimates of trials below {trials} in the journals of {out}")
     cases = sorted({r["case"] for r in rows})
@@ -181,6 +179,58 @@ def write_summary(out: Path, trials: int) -> None:
     print("\n".join(lines))
 
 
+def _journal_rows(out: Path) -> dict[tuple, dict[str, Any]]:
+    """Every estimate of a run's journals by (variant, method, level, case, n, trial)."""
+    journals = sorted(out.glob("journal*.jsonl"))
+    rows = (json.loads(line) for j in journals for line in j.read_text().splitlines())
+    return {(r["variant"], r["method"], r["knowledge"], r["case"], r["n"], r["trial"]): r for r in rows}
+
+
+def paired_summary(out: Path, against: Path) -> str:
+    """The run in ``out`` against the one in ``against``, over the estimates both made (the
+    same readings): per variant, method and count, each run's mean SL error (m), mean CE
+    (nats), calibration error and the truth's mean credible level, and the paired differences
+    of the SL error and CE (``out`` minus ``against``, mean +- standard error).  Written to
+    ``out/paired.md``."""
+    new, old = _journal_rows(out), _journal_rows(against)
+    cells: dict[tuple, list[tuple]] = {}
+    for key in sorted(set(new) & set(old)):
+        cells.setdefault((key[0], f"{key[1]}@{key[2]}", key[4]), []).append(key)
+    if not cells:
+        raise SystemExit(f"{out} and {against} have no estimate in common")
+
+    def stats(rows: dict[tuple, dict[str, Any]], keys: list[tuple]) -> tuple[np.ndarray, np.ndarray, str]:
+        sl = np.array([rows[k]["sl_m"] for k in keys])
+        ce = np.array([rows[k]["ce"] for k in keys])
+        levels = [rows[k]["credible_level"] for k in keys]
+        text = f"{sl.mean():.2f} / {ce.mean():.2f} / {calibration_error(coverage_curve(levels)):.3f} / "
+        return sl, ce, text + f"{np.mean(levels):.2f}"
+
+    lines = [
+        f"# {out} against {against}",
+        "",
+        "`python benchmarks/phys_robustness.py -o OUT --paired AGAINST` over the estimates both runs "
+        "made (the same readings). Each run: mean SL error (m) / mean CE (nats) / calibration error / "
+        "the truth's mean credible level (0.5 when calibrated); then the paired differences "
+        "(this run minus the other, mean +- standard error).",
+        "",
+        "| variant | method@knowledge | n | estimates | this run | the other | SL difference (m) "
+        "| CE difference |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for (variant, method, n), keys in sorted(cells.items()):
+        (sl_a, ce_a, text_a), (sl_b, ce_b, text_b) = stats(new, keys), stats(old, keys)
+        se = math.sqrt(len(keys))
+        d_sl, d_ce = sl_a - sl_b, ce_a - ce_b
+        lines.append(
+            f"| {variant} | {method} | {n} | {len(keys)} | {text_a} | {text_b} | "
+            f"{d_sl.mean():+.3f} +- {d_sl.std() / se:.3f} | {d_ce.mean():+.2f} +- {d_ce.std() / se:.2f} |"
+        )
+    text = "\n".join(lines) + "\n"
+    (out / "paired.md").write_text(text)
+    return text
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trials", type=int, default=2)
@@ -217,6 +267,13 @@ def main() -> None:
         help="a dgse-phys option, e.g. -E hypothesis_readings=10 (repeatable; give the run its own -o)",
     )
     ap.add_argument("--summary-only", action="store_true", help="summarize the journal, estimate nothing")
+    ap.add_argument(
+        "--paired",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="compare OUT's estimates with another run's on the same readings (writes OUT/paired.md)",
+    )
     args = ap.parse_args()
     if any(n < 1 for n in args.counts):
         ap.error("--counts must be positive")
@@ -224,6 +281,9 @@ def main() -> None:
         phys_options = parse_params(args.estimator_option, "-E")
     except InputDataError as exc:
         ap.error(str(exc))
+    if args.paired is not None:
+        print(paired_summary(args.out, args.paired))
+        return
     if args.summary_only:
         write_summary(args.out, args.trials)
         return
