@@ -309,9 +309,28 @@ def test_given_wind_without_openings_proposes_them_from_the_field(case):
     assert [h.flow.inlet_velocity for h in hyps[1:]] == pytest.approx([0.4, 1.2, 3.6])
     assert hyps[0].label == "given wind" and hyps[0].prior == pytest.approx(0.5)
     assert sum(h.prior for h in hyps) == pytest.approx(1.0)
-    # a field that crosses the map's edge nowhere: the given field alone
+    # a field that crosses the map's edge nowhere: the given field alone, and the belief says why
     still = Knowledge("wind", case.occupancy, case.resolution, wind=np.zeros_like(case.wind), name="still")
-    assert len(get_estimator("dgse-phys", knowledge=still, given_wind_prior=0.5).hypotheses()) == 1
+    alone = get_estimator("dgse-phys", knowledge=still, given_wind_prior=0.5)
+    assert len(alone.hypotheses()) == 1
+    b = alone.estimate(case.occupancy, case.resolution, obs)
+    assert "no openings found" in b.info["given_wind_note"]
+
+
+def test_given_wind_survives_rans_flows_that_fail(case, monkeypatch):
+    """The RANS flows beside a given field are a hedge: where they cannot be solved the field
+    stands alone and the belief says so (no traceback)."""
+    from dgse.errors import ConvergenceError
+    from dgse.estimators import phys
+
+    def fail(*_a, **_k):
+        raise ConvergenceError("no convergence in 3 iterations")
+
+    monkeypatch.setattr(phys, "flow_model", fail)
+    est = get_estimator("dgse-phys", knowledge=Knowledge.from_case(case, "wind"))
+    b = est.estimate(case.occupancy, case.resolution, draw_observations(case, 20, seed=1))
+    assert [h["label"] for h in b.info["hypotheses"]] == ["given wind"]
+    assert "no convergence" in b.info["given_wind_note"]
 
 
 def test_map_level_proposes_openings_from_the_wind_readings(case):

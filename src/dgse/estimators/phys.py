@@ -65,7 +65,7 @@ from typing import Any, ClassVar, Literal
 
 import numpy as np
 
-from dgse.errors import InputDataError, UnsupportedError
+from dgse.errors import ConvergenceError, InputDataError, UnsupportedError
 from dgse.estimators.belief import Belief
 from dgse.estimators.knowledge import Knowledge, KnowledgeUser, Level
 from dgse.localization import check_inputs, log_moments_from_ppm
@@ -864,6 +864,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
     _proposed_at: int = field(default=0, init=False, repr=False)
     _proposed_from: tuple[np.ndarray, np.ndarray] | None = field(default=None, init=False, repr=False)
     _speed_layout: Layout | None = field(default=None, init=False, repr=False)
+    _family_note: str | None = field(default=None, init=False, repr=False)
     _networks: dict[str, Any] = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -946,6 +947,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             raise UnsupportedError("dgse-phys at 'openings' needs the inlets and outlets")
         self._hypotheses = None  # built on the first estimate (solves take seconds)
         self._speed_layout = None
+        self._family_note = None
         self._proposed_at = 0
 
     def _map_hypotheses(self, obs: Observations) -> list[FlowHypothesis]:
@@ -1022,11 +1024,14 @@ class PhysicsGuidedEstimator(KnowledgeUser):
                 given = FlowHypothesis("given wind", fm, 1.0)
                 p = float(self.given_wind_prior)
                 self._speed_layout = None if p >= 1.0 else self._openings_of(k)
-                if self._speed_layout is None:
-                    self._hypotheses = [given]
-                else:
-                    family = self._speed_family(self._speed_layout, list(self.speeds))
-                    self._hypotheses = _with_given(given, p, family)
+                family: list[FlowHypothesis] = []
+                if self._speed_layout is not None:
+                    try:
+                        family = self._speed_family(self._speed_layout, list(self.speeds))
+                    except (ConvergenceError, InputDataError) as exc:  # the hedge is optional
+                        self._speed_layout = None
+                        self._family_note = f"the RANS flows of the openings left out: {exc}"
+                self._hypotheses = _with_given(given, p, family) if family else [given]
             else:
                 self._speed_layout = k.layout
                 self._hypotheses = self._speed_family(k.layout, list(self.speeds))
@@ -1045,16 +1050,18 @@ class PhysicsGuidedEstimator(KnowledgeUser):
 
     def _openings_of(self, k: Knowledge) -> Layout | None:
         """The openings of the RANS flows at knowledge ``wind``: the knowledge's, or the
-        strongest inlet-outlet pair where the given field crosses the map's edge (None where it
-        crosses it nowhere)."""
+        strongest inlet-outlet pair where the given field crosses the map's edge (None, and a
+        note, where it crosses it nowhere)."""
         if k.has_openings:
             return k.layout
         assert k.wind is not None
         try:
             prop = propose_openings(k.occupancy, k.resolution, k.wind)[0]
-        except (InputDataError, IndexError):
+            name = k.name or "wind"
+            return Layout(k.occupancy, prop.inlets, prop.outlets, resolution=k.resolution, name=name)
+        except (InputDataError, IndexError) as exc:
+            self._family_note = f"the given field alone: no openings found in it ({exc or 'none'})"
             return None
-        return Layout(k.occupancy, prop.inlets, prop.outlets, resolution=k.resolution, name=k.name or "wind")
 
     def _refine_speed(self, hyps: list[FlowHypothesis], weights: np.ndarray, n_obs: int) -> None:
         """Add one inlet speed between the most probable one and its heavier neighbour.
@@ -1367,6 +1374,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             "wind_misfit": min(misfits),
             "learned_weight": w_learned,
             "learned_note": learned_note,
+            "given_wind_note": self._family_note,
             "temperature": temp,
             "gas_misfit": misfit,
             "misfit_flattening": flatten,
