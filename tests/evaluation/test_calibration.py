@@ -5,6 +5,7 @@ from dgse.errors import InputDataError
 from dgse.evaluation.calibration import (
     DEFAULT_LEVELS,
     SIGMA_LEVELS,
+    calibration_difference,
     calibration_error,
     chance_calibration_error,
     coverage_curve,
@@ -65,6 +66,33 @@ def test_chance_calibration_error_is_the_sampling_noise_of_a_calibrated_posterio
     assert 4.0 < small / large < 6.0
     with pytest.raises(InputDataError):
         chance_calibration_error(0)
+
+
+def test_calibration_difference_resamples_whole_scenarios():
+    """A clear difference (one method's truth always in its tails) has an interval away from 0;
+    two calibrated methods' has one around 0; and scenarios whose trials agree make the
+    interval wider than independent estimates would."""
+    rng = np.random.default_rng(3)
+    groups = np.repeat(np.arange(20), 10)
+    good = rng.uniform(size=200)
+    sure = 0.7 + 0.3 * rng.uniform(size=200)  # overconfident: the truth above level 0.7
+    d = calibration_difference(sure, good, groups, n_boot=300)
+    assert d["difference"] == pytest.approx(
+        calibration_error(coverage_curve(sure)) - calibration_error(coverage_curve(good))
+    )
+    assert d["low"] > 0.1 and d["groups"] == 20
+    other = rng.uniform(size=200)
+    same = calibration_difference(other, good, groups, n_boot=300)
+    assert same["low"] < 0.0 < same["high"]
+    # each scenario's trials share a level (plus a little noise): fewer independent draws
+    shared = np.clip(np.repeat(rng.uniform(size=20), 10) + rng.normal(0, 0.02, 200), 0, 1)
+    clustered = calibration_difference(shared, good, groups, n_boot=300)
+    spread = calibration_difference(shared, good, np.arange(200), n_boot=300)
+    assert clustered["high"] - clustered["low"] > 1.5 * (spread["high"] - spread["low"])
+    with pytest.raises(InputDataError):
+        calibration_difference(good, good[:-1], groups)
+    with pytest.raises(InputDataError):
+        calibration_difference(good, good, groups, coverage=1.0)
 
 
 def test_bad_input():

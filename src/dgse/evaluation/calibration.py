@@ -129,3 +129,51 @@ def chance_calibration_error(n_cases: int, levels: Sequence[float] = DEFAULT_LEV
     k = np.arange(n_cases + 1)
     pmf = binom.pmf(k[None, :], n_cases, lv[:, None])
     return float((pmf * np.abs(k[None, :] / n_cases - lv[:, None])).sum(axis=1).mean())
+
+
+def calibration_difference(
+    levels_a: Sequence[float],
+    levels_b: Sequence[float],
+    groups: Sequence[object],
+    *,
+    n_boot: int = 2000,
+    coverage: float = 0.9,
+    seed: int = 0,
+    levels: Sequence[float] = DEFAULT_LEVELS,
+) -> dict[str, float]:
+    """The calibration error of ``a`` minus that of ``b`` on the same estimates, with a
+    bootstrap interval that resamples whole groups (scenarios).
+
+    Trials of one scenario share its flow and source, so their credible levels are not
+    independent: :func:`chance_calibration_error`, which assumes they are, understates how
+    much a difference between two methods moves from one set of scenarios to another.
+    Resampling the groups with replacement keeps that dependence.  ``levels_a[i]`` and
+    ``levels_b[i]`` are the truth's credible levels of estimate ``i`` under the two methods,
+    ``groups[i]`` its scenario.
+
+    Returns ``{"a", "b", "difference", "low", "high", "groups"}``: both errors, their
+    difference, its central ``coverage`` bootstrap interval and the number of groups.
+    """
+    a = np.asarray(levels_a, dtype=float)
+    b = np.asarray(levels_b, dtype=float)
+    g = np.asarray([str(x) for x in groups])
+    if a.size == 0 or a.shape != b.shape or g.shape != a.shape:
+        raise InputDataError(f"{a.size}, {b.size} and {g.size} levels and groups: need as many, at least one")
+    if not (0.0 < coverage < 1.0) or int(n_boot) < 1:
+        raise InputDataError(f"coverage must be in (0, 1) and n_boot >= 1, got {coverage} and {n_boot}")
+    names, idx = np.unique(g, return_inverse=True)
+    members = [np.flatnonzero(idx == k) for k in range(names.size)]
+
+    def error(x: np.ndarray) -> float:
+        return calibration_error(coverage_curve(x, levels), levels)
+
+    rng = np.random.default_rng(seed)
+    diffs = np.empty(int(n_boot))
+    for t in range(diffs.size):
+        pick = np.concatenate([members[k] for k in rng.integers(0, names.size, names.size)])
+        diffs[t] = error(a[pick]) - error(b[pick])
+    tail = 0.5 * (1.0 - coverage)
+    low, high = np.quantile(diffs, [tail, 1.0 - tail])
+    ea, eb = error(a), error(b)
+    out = {"a": ea, "b": eb, "difference": ea - eb, "low": float(low), "high": float(high)}
+    return {**out, "groups": float(names.size)}
