@@ -1056,11 +1056,14 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             return k.layout
         assert k.wind is not None
         try:
-            prop = propose_openings(k.occupancy, k.resolution, k.wind)[0]
+            props = propose_openings(k.occupancy, k.resolution, k.wind)
+            if not props:
+                raise InputDataError("no separate inflow and outflow at the map's edge")
+            prop = props[0]
             name = k.name or "wind"
             return Layout(k.occupancy, prop.inlets, prop.outlets, resolution=k.resolution, name=name)
-        except (InputDataError, IndexError) as exc:
-            self._family_note = f"the given field alone: no openings found in it ({exc or 'none'})"
+        except InputDataError as exc:
+            self._family_note = f"the given field alone: no openings found in it ({exc})"
             return None
 
     def _refine_speed(self, hyps: list[FlowHypothesis], weights: np.ndarray, n_obs: int) -> None:
