@@ -39,6 +39,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from dgse.evaluation.evaluate import evaluate, write_json
 from dgse.journal import journal_path
 
@@ -312,8 +314,10 @@ def main() -> None:
             per_estimate.setdefault(name, {})[f"{method}@{level}"] = {
                 (r["case"], r["n_obs"], r["trial"]): r["sl_error_m"] for r in res["per_case"]
             }
+            seconds = [r["seconds"] for r in res["per_case"] if r.get("seconds") is not None]
             table.setdefault(name, {})[f"{method}@{level}"] = {
                 "trials": res["trials"],
+                "median_seconds": float(np.median(seconds)) if seconds else None,
                 **{
                     n: {
                         k: res["aggregate"][str(n)].get(k)
@@ -324,15 +328,23 @@ def main() -> None:
             }
     lines = []
     for name, rows in table.items():
-        lines += [f"## {name}", "", "SL error mean / median (m), CE mean (nats); trials per case", ""]
-        lines.append("| method@knowledge | trials | " + " | ".join(str(n) for n in COUNTS) + " |")
-        lines.append("|---|---|" + "---|" * len(COUNTS))
+        lines += [
+            f"## {name}",
+            "",
+            "SL error mean / median (m), CE mean (nats); trials per case; the median seconds an estimate "
+            "took (as the run was made: with --workers N, N estimates at a time)",
+            "",
+        ]
+        lines.append("| method@knowledge | trials | " + " | ".join(str(n) for n in COUNTS) + " | median s |")
+        lines.append("|---|---|" + "---|" * (len(COUNTS) + 1))
         for key, by_n in rows.items():
             cells = [
                 f"{v['sl_error_m_mean']:.2f} / {v['sl_error_m_median']:.2f} / {v['ce_mean']:.1f}"
                 for n, v in by_n.items()
-                if n != "trials"
+                if n in COUNTS
             ]
+            secs = by_n["median_seconds"]
+            cells.append("-" if secs is None else f"{secs:.2f}")
             lines.append(f"| {key} | {by_n['trials']} | " + " | ".join(cells) + " |")
         lines.append("")
     lines += _comparisons(per_estimate)
