@@ -184,7 +184,12 @@ LEARNED_READINGS = 50.0
 #:   the 10 cells, most with the smoothed wind (6.04 to 5.85, 6.10 to 5.69), the rotated wind
 #:   and filament readings at 150 (5.22 to 4.86, 5.94 to 5.63), and at most 0.008 higher in the
 #:   others; SL error unchanged to 0.01 m; calibration error lower in 8 of the 10 cells, at
-#:   most 0.006 higher in the other two (steady and twice too fast at 150).
+#:   most 0.006 higher in the other two (steady and twice too fast at 150).  Checked again
+#:   with the given field weighed against its openings' RANS flows (:data:`GIVEN_WIND_PRIOR`,
+#:   2026-11-29; the same command with ``--cache`` of the robustness runs, ``-o
+#:   benchmarks/results/phys_fusion_tuning_wind_given``): 0.02 again (0.05 put the rotated
+#:   wind at 150 readings 0.018 above); against no floor the calibration error at 50 readings
+#:   0.024-0.053 against 0.030-0.062, at 150 at most 0.004 higher.
 #: * ``openings``: none.  0.05 brought the filament calibration error at 50 readings from 0.050
 #:   to 0.028 but the steady one from 0.025 to 0.040 (``--counts 20 50 150 --trials 5``).
 #:
