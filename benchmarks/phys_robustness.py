@@ -220,11 +220,12 @@ def paired_summary(out: Path, against: Path) -> str:
     ]
     for (variant, method, n), keys in sorted(cells.items()):
         (sl_a, ce_a, text_a), (sl_b, ce_b, text_b) = stats(new, keys), stats(old, keys)
-        se = math.sqrt(len(keys))
+        root = math.sqrt(len(keys))
         d_sl, d_ce = sl_a - sl_b, ce_a - ce_b
+        se_sl, se_ce = (float(d.std(ddof=1)) / root if d.size > 1 else math.nan for d in (d_sl, d_ce))
         lines.append(
             f"| {variant} | {method} | {n} | {len(keys)} | {text_a} | {text_b} | "
-            f"{d_sl.mean():+.3f} +- {d_sl.std() / se:.3f} | {d_ce.mean():+.2f} +- {d_ce.std() / se:.2f} |"
+            f"{d_sl.mean():+.3f} +- {se_sl:.3f} | {d_ce.mean():+.2f} +- {se_ce:.2f} |"
         )
     text = "\n".join(lines) + "\n"
     (out / "paired.md").write_text(text)
