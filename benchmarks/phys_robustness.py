@@ -38,6 +38,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import time
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -332,7 +333,9 @@ def main() -> None:
                                 )
                                 est = estimators[(method, level)] = get_estimator(method, **kw)
                             est.set_knowledge(Knowledge.from_case(told, level))
+                            t0 = time.perf_counter()
                             b = est.estimate(base.occupancy, base.resolution, obs)
+                            seconds = time.perf_counter() - t0  # with the flows it solves for this map
                             rec = {
                                 "variant": variant,
                                 "method": method,
@@ -343,6 +346,7 @@ def main() -> None:
                                 "sl_m": source_localization_error(b, base.source),
                                 "ce": source_cross_entropy(b, base.source_cell),
                                 "credible_level": credible_level(b.source_probs, base.source_cell),
+                                "seconds": seconds,
                             }
                             if method == "dgse-phys" and phys_options:
                                 rec["options"] = phys_options
