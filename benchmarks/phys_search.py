@@ -184,6 +184,27 @@ def cases_dir(out: Path, name: str, limit: int | None = None) -> Path:
     return d
 
 
+def told_wind_estimator(method: str, options: dict[str, Any], variant: str) -> Any:
+    """``method`` built with ``options``, told at knowledge ``wind`` the case's wind perturbed as
+    ``variant`` of ``benchmarks/phys_robustness.py`` (the readings stay the case's)."""
+    from dataclasses import replace
+
+    from phys_robustness import perturbed_wind  # this folder's
+
+    from dgse.estimators.registry import get_estimator
+
+    est = get_estimator(method, **options)
+    tell = est.set_knowledge
+
+    def set_knowledge(knowledge: Any) -> None:
+        if knowledge.wind is not None:
+            knowledge = replace(knowledge, wind=perturbed_wind(knowledge, variant))
+        tell(knowledge)
+
+    est.set_knowledge = set_knowledge
+    return est
+
+
 def record_calls(
     owner: Any, name: str, path: Path, every: int, estimator_options: dict[str, Any] | None = None
 ) -> list[tuple[tuple, dict]]:
@@ -377,6 +398,13 @@ def main() -> None:
         action="store_true",
         help="keep every step's record (cell, readings, estimate) in the journal (not in the JSON)",
     )
+    ap.add_argument(
+        "--told-wind",
+        default=None,
+        choices=["wind_rotated", "wind_smoothed", "wind_x2"],
+        help="at --knowledge wind, tell the estimator the case's wind perturbed as in "
+        "benchmarks/phys_robustness.py (a user's CFD that is off); the robot still reads the true wind",
+    )
     ap.add_argument("--tag", default="", help="appended to the output names (a variant's own files)")
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results/phys_search"))
     ap.add_argument(
@@ -435,10 +463,16 @@ def main() -> None:
     if missing:  # kept out of the defaults: the recorded runs' commands must mean what they meant
         opts = " ".join(f"-P {k}={json.dumps(v)}" for k, v in missing.items())
         print(f"note: dgse demo's search at {args.knowledge} also sets {opts}; this run does not", flush=True)
+    if args.told_wind is not None and args.knowledge != "wind":
+        ap.error("--told-wind changes only what --knowledge wind is told")
+    estimator: Any = args.method
+    if args.told_wind is not None:
+        estimator = told_wind_estimator(args.method, est_opts, args.told_wind)
     result = run_trials(
         cases,
-        args.method,
+        estimator,
         "utility",
+        method=args.method,
         trials=args.trials,
         seed=args.seed,
         planner_options=planner_opts,
@@ -454,6 +488,7 @@ def main() -> None:
     result["settings"]["rule"] = args.rule
     result["settings"]["set"] = args.set
     result["settings"]["estimator_options"] = est_opts
+    result["settings"]["told_wind"] = args.told_wind
     write_result(args.out / f"{stem}.json", result, stem, f", stops {result['stops']}")
 
 
