@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from phys_robustness import journal_rows  # this folder's
 
 from dgse.evaluation.calibration import calibration_difference
 
@@ -34,12 +35,11 @@ Key = tuple[str, str, int, int]
 def levels(folder: Path, method: str) -> dict[Key, float]:
     """``{(variant, case, n, trial): credible level}`` of ``method@knowledge`` in a run's journals."""
     name, _, level = method.partition("@")
-    out: dict[Key, float] = {}
-    for journal in sorted(folder.glob("journal*.jsonl")):
-        for line in journal.read_text().splitlines():
-            r = json.loads(line)
-            if r["method"] == name and r["knowledge"] == level:
-                out[(r["variant"], r["case"], int(r["n"]), int(r["trial"]))] = float(r["credible_level"])
+    out = {
+        (v, case, int(n), int(trial)): float(r["credible_level"])
+        for (v, m, lv, case, n, trial), r in journal_rows(folder).items()
+        if (m, lv) == (name, level)
+    }
     if not out:
         raise SystemExit(f"no estimates of {method} in {folder}")
     return out

@@ -115,7 +115,7 @@ def parse_seeds(text: str) -> list[int]:
 
 def write_summary(out: Path, trials: int) -> None:
     """``summary.md`` / ``summary.json`` from the journals (what they hold so far of the first ``trials``)."""
-    rows = [r for r in _journal_rows(out).values() if r["trial"] < trials]  # the trials the summary covers
+    rows = [r for r in journal_rows(out).values() if r["trial"] < trials]  # the trials the summary covers
     if not rows:
         raise SystemExit(f"no estimates of trials below {trials} in the journals of {out}")
     cases = sorted({r["case"] for r in rows})
@@ -180,7 +180,7 @@ def write_summary(out: Path, trials: int) -> None:
     print("\n".join(lines))
 
 
-def _journal_rows(out: Path) -> dict[tuple, dict[str, Any]]:
+def journal_rows(out: Path) -> dict[tuple, dict[str, Any]]:
     """Every estimate of a run's journals by (variant, method, level, case, n, trial)."""
     journals = sorted(out.glob("journal*.jsonl"))
     rows = (json.loads(line) for j in journals for line in j.read_text().splitlines())
@@ -193,7 +193,7 @@ def paired_summary(out: Path, against: Path) -> str:
     (nats), calibration error and the truth's mean credible level, and the paired differences
     of the SL error and CE (``out`` minus ``against``, mean +- standard error).  Written to
     ``out/paired.md``."""
-    new, old = _journal_rows(out), _journal_rows(against)
+    new, old = journal_rows(out), journal_rows(against)
     cells: dict[tuple, list[tuple]] = {}
     for key in sorted(set(new) & set(old)):
         cells.setdefault((key[0], f"{key[1]}@{key[2]}", key[4]), []).append(key)

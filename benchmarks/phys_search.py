@@ -60,6 +60,9 @@ import json
 from pathlib import Path
 from typing import Any
 
+from phys_robustness import VARIANTS as ROBUSTNESS_VARIANTS  # this folder's
+from phys_robustness import perturbed_wind
+
 from dgse.estimators.phys import SEARCH_PLANNER, SEARCH_PLANNER_AT_LEVEL, search_estimator
 from dgse.search.campaign import json_safe, run_trials
 
@@ -188,8 +191,6 @@ def told_wind_estimator(method: str, options: dict[str, Any], variant: str) -> A
     """``method`` built with ``options``, told at knowledge ``wind`` the case's wind perturbed as
     ``variant`` of ``benchmarks/phys_robustness.py`` (the readings stay the case's)."""
     from dataclasses import replace
-
-    from phys_robustness import perturbed_wind  # this folder's
 
     from dgse.estimators.registry import get_estimator
 
@@ -401,7 +402,7 @@ def main() -> None:
     ap.add_argument(
         "--told-wind",
         default=None,
-        choices=["wind_rotated", "wind_smoothed", "wind_x2"],
+        choices=[v for v in ROBUSTNESS_VARIANTS if v.startswith("wind_")],
         help="at --knowledge wind, tell the estimator the case's wind perturbed as in "
         "benchmarks/phys_robustness.py (a user's CFD that is off); the robot still reads the true wind",
     )
