@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -80,6 +81,42 @@ def test_tiny_dataset_is_shaped_like_the_papers(tmp_path):
 
     with _generation_lock(out), pytest.raises(InputDataError, match="another process"):
         generate(4, out, seed=SEED, progress=False, **TINY)
+
+
+def untimed(case):
+    return dataclasses.replace(case, meta={k: v for k, v in case.meta.items() if k != "timings"})
+
+
+def test_one_split_first_then_the_rest(tmp_path):
+    n = 6
+    splits = assign_splits(n, SEED)
+    wanted = [i for i in range(n) if splits[i] in ("val", "test")]
+    out = tmp_path / "part.h5"
+    report = generate(n, out, workers=1, seed=SEED, progress=False, only_splits=["val", "test"], **TINY)
+    assert not report.complete and report.n_new == len(wanted) and report.n_before == 0
+    with DatasetStore(out) as s:
+        assert s.layout_indices() == set(wanted)
+        assert {s.split_of(lid) for lid in s.layouts()} == {"val", "test"}
+        assert s.has_fixed_configurations("test")
+        part = {lid: s.case(lid, 0) for lid in s.layouts()}
+        test_configs = s.fixed_configurations("test")
+    # running again without the filter completes the store; what was made stays as it was
+    report = generate(n, out, workers=1, seed=SEED, progress=False, **TINY)
+    assert report.complete and report.n_before == len(wanted) and report.n_new == n - len(wanted)
+    check_store(out, n)
+    with DatasetStore(out) as s:
+        for lid, case in part.items():
+            assert cases_equal(s.case(lid, 0), case)
+        again = s.fixed_configurations("test")
+        assert np.array_equal(again.cells, test_configs.cells)
+    # the same layouts as a store made in one go
+    whole = tmp_path / "whole.h5"
+    generate(n, whole, workers=1, seed=SEED, progress=False, **TINY)
+    with DatasetStore(whole) as s:
+        for lid, case in part.items():  # equal but for the solver's wall times in meta
+            assert cases_equal(untimed(s.case(lid, 0)), untimed(case))
+    with pytest.raises(InputDataError, match="only_splits"):
+        generate(n, tmp_path / "bad.h5", seed=SEED, progress=False, only_splits=["dev"], **TINY)
 
 
 def test_resume_after_sigkill(tmp_path):

@@ -76,6 +76,14 @@ def generate_cmd(
         typer.Option("--checkpoint", help="Least seconds between commits into the store file."),
     ] = 60.0,
     progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")] = True,
+    split: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--split",
+            help="Make only the layouts of this split (repeatable: train, val, test); the same layouts "
+            "as in the whole dataset. Run again without it to complete the store.",
+        ),
+    ] = None,
 ) -> None:
     """Generate a dataset: random layouts x 4 sources, solved on a Dask cluster.
 
@@ -105,6 +113,7 @@ def generate_cmd(
             retries=retries,
             retry_failed=retry_failed,
             checkpoint_s=checkpoint,
+            only_splits=split or None,
             **kwargs,
         )
     except KeyboardInterrupt:

@@ -46,7 +46,7 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -386,6 +386,7 @@ def generate(
     configs_per_env: int = DEFAULT_CONFIGS_PER_ENV,
     checkpoint_s: float = 60.0,
     connect_timeout: float = 5.0,
+    only_splits: Sequence[str] | None = None,
     **layout_kwargs: Any,
 ) -> GenerationReport:
     """Generate (or finish generating) a dataset store of ``n_layouts`` layouts.
@@ -409,6 +410,9 @@ def generate(
         configs_per_env: fixed sensor configurations per val/test environment.
         checkpoint_s: least seconds between commits of the journal into the store.
         connect_timeout: seconds to wait for the scheduler and its first worker.
+        only_splits: make only the layouts these splits get (e.g. ``["test"]``: a
+            dataset's test scenarios without its training set).  The layouts are the
+            same as in the whole dataset; running again without it completes the store.
         **layout_kwargs: options of :func:`~dgse.world.generate.random_layout`, e.g.
             ``width_range=(3, 3.5), height_range=(3, 3.5)`` for tiny layouts.
 
@@ -439,6 +443,7 @@ def generate(
     get_engine(engine)  # UnsupportedError, clear, before any work
     kwargs = _check_layout_kwargs(layout_kwargs)
     fractions = _check_fractions(split_fractions)
+    wanted_splits = _check_only_splits(only_splits)
     out = Path(out)
     info = {
         "seed": seed,
@@ -453,9 +458,9 @@ def generate(
         raise InputDataError(f"{out} is a directory; give the dataset store's file name")
     with _generation_lock(out):
         done, _ = _read_state(out, info, retry_failed) if out.exists() else (set(), 0)
-        todo = [i for i in range(n_layouts) if i not in done]
-        report = GenerationReport(out, n_layouts, n_before=n_layouts - len(todo))
         splits = assign_splits(n_layouts, seed, fractions)
+        todo = [i for i in range(n_layouts) if i not in done and splits[i] in wanted_splits]
+        report = GenerationReport(out, n_layouts, n_before=len(done))
         if todo:
             with _dask_client(scheduler, workers, connect_timeout) as client:
                 if not out.exists():
@@ -481,6 +486,17 @@ def generate(
     report.complete = all(i in stored for i in range(n_layouts))
     report.seconds = time.perf_counter() - t_start
     return report
+
+
+def _check_only_splits(only_splits: Sequence[str] | None) -> set[str]:
+    if only_splits is None:
+        return set(SPLITS)
+    if isinstance(only_splits, str):
+        only_splits = [only_splits]
+    wanted = set(only_splits)
+    if not wanted or not wanted <= set(SPLITS):
+        raise InputDataError(f"only_splits must be among {', '.join(SPLITS)}; got {sorted(wanted)}")
+    return wanted
 
 
 def _run(
@@ -522,7 +538,7 @@ def _run(
         futures[client.submit(task, info["seed"], i, info["engine"], pure=False)] = i
     last_commit = time.monotonic()
     commit_cost = 0.0
-    n_total = info["n_layouts"]
+    n_total = report.n_before + len(todo)  # fewer than n_layouts with only_splits
     columns = (
         SpinnerColumn(),
         TextColumn("[bold]{task.description}"),
