@@ -83,6 +83,7 @@ def test_gdm_evaluations_are_reused_only_for_the_same_plan(gdm: dict, bench_root
     first = json.loads((bench_root / "gdm" / "eval_kdmvw.json").read_text())
     same = evaluate_cached(ctx, "eval_kdmvw", cases, "kdmvw", first["observation_counts"], first["trials"])
     assert same["created"] == first["created"]
+    assert ctx.reused == [f"eval_kdmvw of {first['created'][:10]}"]  # the manifest's note says so
     other = evaluate_cached(ctx, "eval_kdmvw_other", cases, "kdmvw", [20], 1)
     assert other["observation_counts"] == [20] and other["trials"] == 1
     (bench_root / "gdm" / "eval_kdmvw_other.json").unlink()

@@ -244,7 +244,7 @@ class BenchContext:
         self.description = description
         self.sections: list[Section] = []
         self.notes: list[str] = []
-        self.reused: list[str] = []  # results of cached() that an earlier run wrote
+        self.reused: list[str] = []  # results an earlier run wrote (cached(), evaluate_cached())
         self.started = _now()
         self._t0 = time.perf_counter()
         self.data_info: dict[str, Any] = {}
@@ -283,13 +283,18 @@ class BenchContext:
         """The JSON result ``name`` if an earlier run of this directory wrote it, else ``compute()`` saved."""
         got = self.load_json(name)
         if got is not None:
-            self.reused.append(name)
+            self.mark_reused(name, got)
             return got
         t0 = time.perf_counter()
         result = compute()
         self.save_json(name, result)
         self._record_seconds(name, time.perf_counter() - t0)
         return jsonable(result)
+
+    def mark_reused(self, name: str, result: Any) -> None:
+        """Note that result ``name`` came from an earlier run (with its date, when it has one)."""
+        created = result.get("created") if isinstance(result, dict) else None
+        self.reused.append(f"{name} of {str(created)[:10]}" if created else name)
 
     def _record_seconds(self, name: str, seconds: float) -> None:
         path = self.out / TIMINGS

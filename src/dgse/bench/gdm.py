@@ -83,6 +83,7 @@ def evaluate_cached(
         and got.get("seed") == ctx.seed
         and got.get("knowledge", "map") == ctx.knowledge
     ):
+        ctx.mark_reused(name, got)
         return got
     import torch
 

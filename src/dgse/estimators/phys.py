@@ -199,14 +199,14 @@ LEARNED_FLOOR: dict[str, float] = {"map": 0.05, "wind": 0.02}
 #: knowledge level; a level not named here has it on.  It was made for the searches at
 #: ``openings`` (2026-11-28 e: validation 900-923 found 24 of 24 sources against 22 of 24,
 #: and test 2008's failure, a noise floor far above the plume, was fixed).  At ``map`` it is
-#: off, as every ``map`` search and random-readings result of the README up to 2026-11-28 e
+#: off, as every ``map`` search and random-readings result of ``docs/dgse-phys.md`` up to 2026-11-28 e
 #: was measured.  On validation 900-923 (``python benchmarks/tune_phys_calibration.py --seeds
 #: 900-923 --counts 150 300 --trials 2 --variants steady --knowledge map [-E
 #: censored_tilt=false]``, 48 estimates a count, ``benchmarks/results/phys_tilt_map_validation/``)
 #: it changed nothing there beyond noise: SL error with it minus without +0.005 +- 0.027 and
 #: +0.013 +- 0.022 m at 150 and 300 readings, CE +0.02 +- 0.02 and +0.04 +- 0.03 nats.  (On the
 #: test scenarios it was worse, +0.09 and +0.17 m, which is what prompted that check: see the
-#: README's random-readings section.)
+#: random-readings results of ``docs/dgse-phys.md``.)
 CENSORED_TILT: dict[str, bool] = {"map": False}
 #: The utility planner's settings for searches with dgse-phys (``dgse demo``, the search
 #: benchmarks), chosen on validation scenarios (``python benchmarks/phys_search.py --set
@@ -336,8 +336,8 @@ def search_estimator(level: str) -> dict[str, Any]:
 #: 1.35 / 7.9 / 0.09 against 1.16 / 7.1 / 0.05, filament 1.48 / 8.2 / 0.11 against 1.31 /
 #: 6.9 / 0.03.  Wind (``--counts 50 --trials 5``, 120 estimates): steady 0.98 / 5.8 / 0.03
 #: against 0.82 / 5.3 / 0.02, filament 1.13 / 7.2 / 0.08 against 0.91 / 6.1 / 0.06.  Before that
-#: date the default was ``"plug-in"``, and the random-readings tables of the README up to
-#: then were measured with it.
+#: date the default was ``"plug-in"``, and the random-readings tables of ``docs/dgse-phys.md`` up
+#: to then were measured with it.
 NOISE_WEIGHTS_CHOICE: Literal["mixture"] = "mixture"
 
 #: The misfit flattening (``misfit_threshold``, ``misfit_temperature``) is off by default. The
