@@ -115,8 +115,10 @@ def test_one_split_first_then_the_rest(tmp_path):
     with DatasetStore(whole) as s:
         for lid, case in part.items():  # equal but for the solver's wall times in meta
             assert cases_equal(untimed(s.case(lid, 0)), untimed(case))
-    with pytest.raises(InputDataError, match="only_splits"):
+    with pytest.raises(InputDataError, match=r"unknown split.*dev: the splits are train, val, test"):
         generate(n, tmp_path / "bad.h5", seed=SEED, progress=False, only_splits=["dev"], **TINY)
+    with pytest.raises(InputDataError, match="none given"):
+        generate(n, tmp_path / "bad.h5", seed=SEED, progress=False, only_splits=[], **TINY)
 
 
 def test_resume_after_sigkill(tmp_path):

@@ -494,8 +494,11 @@ def _check_only_splits(only_splits: Sequence[str] | None) -> set[str]:
     if isinstance(only_splits, str):
         only_splits = [only_splits]
     wanted = set(only_splits)
-    if not wanted or not wanted <= set(SPLITS):
-        raise InputDataError(f"only_splits must be among {', '.join(SPLITS)}; got {sorted(wanted)}")
+    unknown = sorted(wanted - set(SPLITS))
+    if not wanted or unknown:
+        raise InputDataError(
+            f"unknown split(s) {', '.join(unknown) or '(none given)'}: the splits are {', '.join(SPLITS)}"
+        )
     return wanted
 
 
