@@ -84,8 +84,9 @@ def test_profile_wind_likelihood_counts_readings_up_to_a_cap():
 
 def test_one_hypothesis_equals_the_adjoint_posterior(case):
     """With one flow hypothesis, dgse-phys's source posterior is the adjoint evidence's (with
-    the plug-in noise weights; the default mixture is tested against them below)."""
-    est = PhysicsGuidedEstimator(noise_weights="plug-in")
+    the plug-in noise weights; the default mixture is tested against them below), DGSE-S's floor
+    left out."""
+    est = PhysicsGuidedEstimator(noise_weights="plug-in", learned_floor=0.0)
     est.set_knowledge(Knowledge.from_case(case, "openings"))
     fm = flow_model(case.layout, case.inlet_velocity)
     est._hypotheses = [FlowHypothesis("true speed", fm, 1.0)]
@@ -437,7 +438,9 @@ def test_learned_belief_is_mixed_in_where_the_readings_are_few(case):
     default.set_knowledge(Knowledge.from_case(case, "wind"))
     assert default._learned_weight(3) == pytest.approx(LEARNED_FLOOR["wind"])
     default.set_knowledge(Knowledge.from_case(case, "openings"))
-    assert default._learned_weight(3) == 0.0 and "openings" not in LEARNED_FLOOR
+    assert LEARNED_FLOOR["openings"] > 0
+    assert default._learned_weight(3) == pytest.approx(LEARNED_FLOOR["openings"])
+    assert get_estimator("dgse-phys", knowledge=k, learned_floor=0.0)._learned_weight(400) == 0.0
     with pytest.raises(InputDataError, match="learned_levels"):
         get_estimator("dgse-phys", learned_levels=("plan",))
 

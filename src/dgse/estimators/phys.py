@@ -190,11 +190,18 @@ LEARNED_READINGS = 50.0
 #:   benchmarks/results/phys_fusion_tuning_wind_given``): 0.02 again (0.05 put the rotated
 #:   wind at 150 readings 0.018 above); against no floor the calibration error at 50 readings
 #:   0.024-0.053 against 0.030-0.062, at 150 at most 0.004 higher.
-#: * ``openings``: none.  0.05 brought the filament calibration error at 50 readings from 0.050
-#:   to 0.028 but the steady one from 0.025 to 0.040 (``--counts 20 50 150 --trials 5``).
+#: * ``openings`` (``--counts 20 50 150 --trials 5``, 120 estimates a cell, chance 0.027): 0.02
+#:   since 2026-11-29 (``benchmarks/results/phys_fusion_tuning_openings_tilt/``, with the
+#:   zeros-following rate nodes; none before).  Against no floor the calibration error falls
+#:   with filament readings at 20 and 50 (0.048 to 0.035, 0.051 to 0.043) and with steady
+#:   ones at 20 (0.038 to 0.032), and rises by at most 0.006 in the other three cells (steady
+#:   at 150: 0.094 to 0.100); CE 0.02-0.20 nats lower with filament readings, within 0.01
+#:   with steady ones; SL error unchanged to 0.01 m.  0.05 put the steady readings at 50 and
+#:   the filament ones at 150 0.015 and 0.013 above (the grid of 2026-11-28, before the
+#:   rate nodes followed the zeros, said the same: ``benchmarks/results/phys_fusion_tuning/``).
 #:
 #: Searches keep no floor (:data:`SEARCH_ESTIMATOR`): they were measured without it.
-LEARNED_FLOOR: dict[str, float] = {"map": 0.05, "wind": 0.02}
+LEARNED_FLOOR: dict[str, float] = {"map": 0.05, "wind": 0.02, "openings": 0.02}
 #: Whether the zeros' factor lets the rate's nodes follow the zeros (``censored_tilt``), per
 #: knowledge level; a level not named here has it on.  It was made for the searches at
 #: ``openings`` (2026-11-28 e: validation 900-923 found 24 of 24 sources against 22 of 24,
@@ -741,7 +748,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         learned_floor: the network's weight never falls below this, at any level (0: the
             physics alone from ``learned_readings`` on, and at the levels not in
             ``learned_levels``); None: the level's :data:`LEARNED_FLOOR` (0.05 at ``map``,
-            0.02 at ``wind`` since 2026-11-28 d; the searches use 0).  A floor caps how sure of
+            0.02 at ``wind`` since 2026-11-28 d and at ``openings`` since 2026-11-29; the
+            searches use 0).  A floor caps how sure of
             a wrong spot the mixture can be, at the cost of slower mass stops.
         learned_opinion: attach to every belief ``info["learned_source_probs"]``, a function
             of no arguments that returns DGSE-S's own source belief from the same readings
