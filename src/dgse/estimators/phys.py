@@ -749,8 +749,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             physics alone from ``learned_readings`` on, and at the levels not in
             ``learned_levels``); None: the level's :data:`LEARNED_FLOOR` (0.05 at ``map``,
             0.02 at ``wind`` since 2026-11-28 d and at ``openings`` since 2026-11-29; the
-            searches use 0).  A floor caps how sure of
-            a wrong spot the mixture can be, at the cost of slower mass stops.
+            searches use 0).  A floor caps how sure of a wrong spot the mixture can be, at
+            the cost of slower mass stops and of running the network for every estimate.
         learned_opinion: attach to every belief ``info["learned_source_probs"]``, a function
             of no arguments that returns DGSE-S's own source belief from the same readings
             (``(H, W)``), whatever the network's weight in the posterior: a second opinion the
