@@ -5,7 +5,7 @@ brute-force integral on a sample of candidates.
 
 Runs one dgse-phys search episode per test scenario (knowledge ``openings``,
 ``SEARCH_PLANNER``), keeps the arguments of every ``every``-th call of
-:func:`dgse.localization.censored_kernel.censored_log_factor` (the candidates that hold
+:func:`dgse.posterior.censored_kernel.censored_log_factor` (the candidates that hold
 the posterior mass, as the correction hands them over), and replays them::
 
     python benchmarks/censored_accuracy.py --cases 2
@@ -33,7 +33,7 @@ from phys_search import cases_dir, record_calls
 from scipy import special
 
 from dgse.estimators.phys import search_estimator
-from dgse.localization import adjoint, censored_kernel
+from dgse.posterior import adjoint, censored_kernel
 
 WAYS = {"gauss-hermite": math.inf, "default": adjoint.CENSORED_SCAN_MARGIN, "scan": -math.inf}
 

@@ -4,14 +4,14 @@ same correction computed for every candidate.
 
 Runs one dgse-phys search episode (knowledge ``openings``, ``SEARCH_PLANNER``) on a test
 scenario, keeps the arguments of every ``every``-th call of
-:func:`dgse.localization.adjoint.censored_correction`, and for each reports the total
+:func:`dgse.posterior.adjoint.censored_correction`, and for each reports the total
 variation between each ranking's posterior and the full one, and how many candidates got
 the integrated factor::
 
     python benchmarks/censored_cut.py --case test2001_src0
 
 Writes ``benchmarks/results/censored_cut.json``.  The episode runs with the default
-ranking (:data:`dgse.localization.adjoint.CENSORED_RANKING`).
+ranking (:data:`dgse.posterior.adjoint.CENSORED_RANKING`).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ import numpy as np
 from phys_search import cases_dir, record_calls
 
 import dgse.estimators.phys as phys
-from dgse.localization import adjoint
+from dgse.posterior import adjoint
 
 
 def _posterior(logl: np.ndarray, factor: np.ndarray) -> np.ndarray:

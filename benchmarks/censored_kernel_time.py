@@ -2,7 +2,7 @@
 
 Runs one dgse-phys search episode (knowledge ``openings``, ``SEARCH_PLANNER``, the searches'
 ``SEARCH_ESTIMATOR``) on a test scenario, keeps every ``every``-th call of
-:func:`dgse.localization.censored_kernel.censored_log_factor`, and replays them (best of
+:func:`dgse.posterior.censored_kernel.censored_log_factor`, and replays them (best of
 ``--repeats``, one thread): microseconds a candidate, and the share of the zeros that enter
 through their power sums (faint at the candidate's cap, ``censored_kernel._split_zeros``).
 ``--against DIR`` replays the same calls with the kernel of another checkout's ``src``
@@ -29,7 +29,7 @@ import numpy as np
 from phys_search import cases_dir, record_calls
 
 from dgse.estimators.phys import search_estimator
-from dgse.localization import censored_kernel
+from dgse.posterior import censored_kernel
 
 
 def _replay(kernel: ModuleType, calls: list[tuple], repeats: int) -> tuple[float, list[np.ndarray]]:

@@ -6,7 +6,7 @@ ended at its deadline, the final belief is rebuilt from the recorded readings (d
 two, as in the search) and scored with several point estimates: the posterior mean (the
 paper's ``s_hat``, what searches declared), the mode, and the centre of the free cell whose
 disk of 0.5, 1 or 2 m holds the most posterior mass
-(:func:`dgse.search.planners.declared_source`).  A later journal's episode replaces an earlier
+(:func:`dgse.planning.planners.declared_source`).  A later journal's episode replaces an earlier
 one's of the same case.  The rebuilt mean must equal the journal's error (checked).
 
     python benchmarks/deadline_estimate.py \\
@@ -26,7 +26,7 @@ import numpy as np
 from phys_search import journal_episodes, map_estimator_at_end, step_observations  # this folder's
 
 from dgse.estimators.phys import search_estimator
-from dgse.search.planners import UtilityPlanner, declared_source
+from dgse.planning.planners import UtilityPlanner, declared_source
 from dgse.world.case import Case
 
 RADII = (0.5, 1.0, 2.0)

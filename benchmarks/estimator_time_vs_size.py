@@ -28,8 +28,8 @@ from pathlib import Path
 from building_search import make_cases  # this folder's
 from phys_search import cases_dir  # this folder's
 
+from dgse.belief.knowledge import Knowledge
 from dgse.errors import DGSEError
-from dgse.estimators.knowledge import Knowledge
 from dgse.estimators.registry import estimator_names, get_estimator
 from dgse.evaluation.evaluate import draw_observations
 from dgse.world.case import Case

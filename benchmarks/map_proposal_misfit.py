@@ -21,10 +21,10 @@ from pathlib import Path
 import numpy as np
 from phys_search import journal_episodes, map_estimator_at_end, step_observations  # this folder's
 
-from dgse.estimators.knowledge import Knowledge
-from dgse.estimators.phys import fitted_wind_scale, relative_wind_misfit
+from dgse.belief.knowledge import Knowledge
 from dgse.estimators.registry import get_estimator
 from dgse.physics.openings import potential_flow_proposals
+from dgse.posterior.mixture import fitted_wind_scale, relative_wind_misfit
 from dgse.world.case import Case
 from dgse.world.layout import Opening
 

@@ -41,7 +41,7 @@ from phys_search import journal_episodes, map_estimator_at_end, step_observation
 
 from dgse.estimators.phys import search_estimator
 from dgse.estimators.registry import get_estimator
-from dgse.search.planners import mass_around, mass_within
+from dgse.planning.planners import mass_around, mass_within
 from dgse.world.case import Case
 from dgse.world.grid import Grid
 

@@ -4,7 +4,7 @@
   linear-upwind operator are, per sensor cell: the share of candidates with a
   negative response and the most negative response over the row's largest.  Left
   in, such responses made a zero reading favour the candidates just downstream of
-  its sensor (:meth:`dgse.localization.adjoint.FlowModel.responses` clips them).
+  its sensor (:meth:`dgse.posterior.adjoint.FlowModel.responses` clips them).
 * ``speed``: how far dgse-phys's source estimate moves with the inlet speed it is
   given, from the same random readings (Table I noise) of one scenario: dgse-phys
   with the openings known and a single candidate speed, for each of ``--speeds``.
@@ -28,10 +28,10 @@ from pathlib import Path
 import numpy as np
 from phys_search import cases_dir
 
-from dgse.estimators.knowledge import Knowledge
+from dgse.belief.knowledge import Knowledge
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.evaluate import draw_observations
-from dgse.localization.adjoint import flow_model
+from dgse.posterior.adjoint import flow_model
 from dgse.world.case import Case
 
 

@@ -46,9 +46,9 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
+from dgse.belief.knowledge import Knowledge
 from dgse.cli.common import parse_params
 from dgse.errors import InputDataError
-from dgse.estimators.knowledge import Knowledge
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.calibration import (
     calibration_error,

@@ -157,7 +157,7 @@ def map_estimator_at_end(case: Any, obs: Any, **options: Any) -> Any:
     """dgse-phys at ``map`` holding the opening proposals a search held after the readings ``obs``:
     those made from the last power of two of them (a search estimates after every reading, and
     ``PhysicsGuidedEstimator`` proposes anew when the readings have doubled)."""
-    from dgse.estimators.knowledge import Knowledge
+    from dgse.belief.knowledge import Knowledge
     from dgse.estimators.registry import get_estimator
 
     est = get_estimator("dgse-phys", knowledge=Knowledge.from_case(case, "map"), **options)

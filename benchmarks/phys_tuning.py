@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from dgse.estimators.knowledge import Knowledge
+from dgse.belief.knowledge import Knowledge
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.evaluate import draw_observations
 from dgse.physics.scenario import random_cases

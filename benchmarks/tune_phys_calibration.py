@@ -27,12 +27,12 @@ from typing import Any
 import numpy as np
 from validation_tuning import checked_options, pooled, scores, tuning_parser, validation_readings
 
-from dgse.estimators.knowledge import Knowledge
-from dgse.estimators.phys import flattened, neighbour_correlation, standardized_residuals
+from dgse.belief.knowledge import Knowledge
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.calibration import (
     chance_calibration_error,
 )
+from dgse.posterior.mixture import flattened, neighbour_correlation, standardized_residuals
 from dgse.world.grid import Grid
 
 TAUS = (1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0)
@@ -45,7 +45,7 @@ CORRELATIONS = (0.2, 0.3, 0.4, 0.5)
 
 
 def residual_statistics(belief: Any, observations: Any, resolution: float) -> dict[str, float]:
-    """The neighbour correlation (:func:`~dgse.estimators.phys.neighbour_correlation`) of the
+    """The neighbour correlation (:func:`~dgse.posterior.mixture.neighbour_correlation`) of the
     gas readings' standardized residuals about the belief's most probable source, per radius
     of :data:`CORRELATION_RADII` (``"corr1"``: 1 m)."""
     model = belief.info["response_model"]

@@ -1,7 +1,7 @@
 """Choose dgse-phys's field model error on generated validation scenarios.
 
 The wind and concentration variances of ``dgse-phys`` are the spread between its
-flow hypotheses plus a model error (:func:`dgse.estimators.phys.field_error_variance`:
+flow hypotheses plus a model error (:func:`dgse.posterior.mixture.field_error_variance`:
 a wind component errs by ``sqrt((a |u|)^2 + b^2)``, ``log(1 + c)`` by ``sqrt((c L)^2 +
 d^2)``).  Per knowledge level this script estimates with the model error off, on 12
 generated scenarios (seeds 900-911, the range kept for validation) from 25, 100 and
@@ -27,11 +27,11 @@ from pathlib import Path
 
 import numpy as np
 
-from dgse.estimators.knowledge import Knowledge
-from dgse.estimators.phys import field_error_variance
+from dgse.belief.knowledge import Knowledge
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.evaluate import draw_observations
 from dgse.physics.scenario import random_cases
+from dgse.posterior.mixture import field_error_variance
 
 A_GRID = (0.0, 0.02, 0.03, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0)
 B_GRID = (0.0, 0.005, 0.01, 0.02, 0.03, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.75, 1.0)

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 from validation_tuning import checked_options, pooled, scores, tuning_parser, validation_readings
 
-from dgse.estimators.knowledge import Knowledge
+from dgse.belief.knowledge import Knowledge
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.calibration import (
     chance_calibration_error,

@@ -2,7 +2,7 @@
 
 Source-localization error and cross-entropy of ``dgse-phys --knowledge openings``
 with each ``noise_floor_prior`` (when the prior noise scale is kept at least the floor
-from the flows' mean concentrations, :func:`dgse.localization.adjoint.prior_noise_floor`), from 5,
+from the flows' mean concentrations, :func:`dgse.posterior.adjoint.prior_noise_floor`), from 5,
 20, 50 and 150 random readings (Table I noise), 2 trials on each of 12 generated
 scenarios (seeds 900-911, a range kept for validation).  The floor matters where
 few readings are positive, so the low counts are the ones to read.

@@ -1,7 +1,7 @@
 """Choose where dgse-phys's proportional noise takes its concentrations, on generated validation scenarios.
 
 Table I's gas noise is ``alpha_g c + sigma_env``: proportional to the true concentration
-at the sensor.  The evidence (:func:`dgse.localization.adjoint.adjoint_log_evidence`)
+at the sensor.  The evidence (:func:`dgse.posterior.adjoint.adjoint_log_evidence`)
 models it as ``sigma (1 + kappa c_i / cbar)`` with ``c_i`` either a plug-in (the
 posterior-predictive mean of a homoscedastic first pass, the same for every candidate:
 ``noise_weights="plug-in"``), each candidate's own prediction (``"candidate"``) or the

@@ -54,7 +54,7 @@ def two_rooms_layout() -> Layout:
 def factor_calls(monkeypatch: pytest.MonkeyPatch) -> list[int]:
     """The number of candidates of every call of the zeros' integrated factor
     (``adjoint._censored_log_factor``) while the test runs."""
-    from dgse.localization import adjoint
+    from dgse.posterior import adjoint
 
     seen: list[int] = []
     factor = adjoint._censored_log_factor

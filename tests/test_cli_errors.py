@@ -46,9 +46,7 @@ def test_outputs_are_checked_before_the_work(capsys, tmp_path, case_file):
     # a folder where a file goes; a file where a folder goes; a file in the way of a folder
     t0 = time.perf_counter()
     _assert_user_error(*_run(capsys, "solve", case_file, "-o", tmp_path), "is a folder")
-    _assert_user_error(
-        *_run(capsys, "scenario", "--seed", "1", "--out", a_file), "is a file, not a folder"
-    )
+    _assert_user_error(*_run(capsys, "scenario", "--seed", "1", "--out", a_file), "is a file, not a folder")
     _assert_user_error(
         *_run(capsys, "generate", "--layouts", "2", "--out", a_file / "x.h5"), "is a file, not a folder"
     )

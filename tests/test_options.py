@@ -10,7 +10,7 @@ import pytest
 from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators.registry import estimator_names, get_estimator
 from dgse.options import check_options, options_from
-from dgse.search.planners import get_planner, planner_names
+from dgse.planning.planners import get_planner, planner_names
 
 
 @dataclass

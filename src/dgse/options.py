@@ -60,7 +60,7 @@ def options_from(
 
 
 def _hints(target: Callable[..., Any]) -> dict[str, Any]:
-    for obj in ((target.__init__, target) if inspect.isclass(target) else (target,)):  # type: ignore[misc]
+    for obj in (target.__init__, target) if inspect.isclass(target) else (target,):  # type: ignore[misc]
         try:
             return typing.get_type_hints(obj)
         except Exception:  # unresolvable string annotations: check names only
@@ -200,7 +200,5 @@ def check_options(what: str, target: Callable[..., Any], options: Mapping[str, A
         try:
             out[name] = _convert(value, hint)
         except TypeError:
-            raise InputDataError(
-                f"{what}: option {name}={value!r} must be {_describe(hint)}"
-            ) from None
+            raise InputDataError(f"{what}: option {name}={value!r} must be {_describe(hint)}") from None
     return out

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
+from dgse.belief.belief import Belief, normalize_source_probs
 from dgse.errors import InputDataError
-from dgse.estimators.belief import Belief, normalize_source_probs
 
 
 def _occ() -> np.ndarray:

@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 import torch
 
+from dgse.belief.estimator import Estimator, StreamingEstimator
 from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators.dgse import DGSEEstimator, default_model_path
-from dgse.estimators.registry import Estimator, StreamingEstimator, get_estimator
+from dgse.estimators.registry import get_estimator
 from dgse.models.checkpoint import CheckpointError, save_model
 from dgse.models.inference import native_bf16
 from dgse.sensing.sensors import Observations

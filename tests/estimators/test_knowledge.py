@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from dgse.belief.knowledge import LEVELS, Knowledge, KnowledgeUser, check_level
 from dgse.errors import InputDataError, UnsupportedError
-from dgse.estimators.knowledge import LEVELS, Knowledge, KnowledgeUser, check_level
 from dgse.estimators.registry import estimator_names, get_estimator
 from dgse.physics.scenario import solve_cases
 from tests.conftest import two_rooms
@@ -32,8 +32,11 @@ def test_each_level_holds_what_it_allows_and_no_truth(case):
     for k in (m, o, w):
         values = [getattr(k, f) for f in ("occupancy", "resolution", "inlets", "outlets", "wind", "name")]
         for v in values:
-            assert not (isinstance(v, np.ndarray) and v.shape == case.concentration.shape
-                        and np.array_equal(v, case.concentration))
+            assert not (
+                isinstance(v, np.ndarray)
+                and v.shape == case.concentration.shape
+                and np.array_equal(v, case.concentration)
+            )
         assert not hasattr(k, "concentration") and not hasattr(k, "source")
         assert k.to_dict()["level"] == k.level
     # the arrays are read-only copies
@@ -83,8 +86,11 @@ def test_adjoint_uses_the_openings_it_is_told(case):
     obs_cells = np.array([[5, 5], [10, 20], [15, 25], [3, 28]])
     from dgse.sensing.sensors import Observations
 
-    obs = Observations(obs_cells, case.concentration[obs_cells[:, 0], obs_cells[:, 1]],
-                       case.wind[:, obs_cells[:, 0], obs_cells[:, 1]].T)
+    obs = Observations(
+        obs_cells,
+        case.concentration[obs_cells[:, 0], obs_cells[:, 1]],
+        case.wind[:, obs_cells[:, 0], obs_cells[:, 1]].T,
+    )
     est = get_estimator("adjoint", knowledge=Knowledge.from_case(case, "openings"), candidate_speeds=(1.0,))
     b = est.estimate(case.occupancy, case.resolution, obs)
     assert b.info["knowledge"] == "openings"
@@ -106,7 +112,7 @@ class _Spy(KnowledgeUser):
         self.seen.append(knowledge)
 
     def estimate(self, occupancy, resolution, observations):
-        from dgse.estimators.belief import Belief, normalize_source_probs
+        from dgse.belief.belief import Belief, normalize_source_probs
 
         self.seen += [occupancy, resolution, observations]
         probs = normalize_source_probs(np.ones(occupancy.shape), occupancy)
@@ -117,8 +123,8 @@ class _Spy(KnowledgeUser):
 def test_an_estimator_at_map_cannot_reach_the_truth(case, loop):
     """The evaluation and search loops hand an estimator at 'map' the map and readings only."""
     from dgse.evaluation.evaluate import evaluate
+    from dgse.planning.planners import get_planner
     from dgse.search.episode import run_episode
-    from dgse.search.planners import get_planner
     from dgse.world.case import Case
 
     spy = _Spy()

@@ -7,17 +7,25 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from dgse.belief.knowledge import Knowledge
 from dgse.errors import InputDataError
-from dgse.estimators.knowledge import Knowledge
 from dgse.estimators.phys import (
     CENSORED_TILT,
     DEFAULT_EFFECTIVE_READINGS,
-    GIVEN_WIND_PRIOR,
     LEARNED_FLOOR,
     MAP_TEMPERING,
     SEARCH_ESTIMATOR,
-    FlowHypothesis,
     PhysicsGuidedEstimator,
+    search_estimator,
+    search_planner,
+)
+from dgse.estimators.registry import get_estimator
+from dgse.evaluation.evaluate import draw_observations
+from dgse.physics.scenario import solve_cases
+from dgse.posterior.adjoint import AdjointResponseModel, adjoint_log_evidence, flow_model
+from dgse.posterior.mixture import (
+    GIVEN_WIND_PRIOR,
+    FlowHypothesis,
     flattened,
     gas_misfit,
     mix_posteriors,
@@ -25,15 +33,9 @@ from dgse.estimators.phys import (
     predictive_sources,
     profile_wind_log_likelihood,
     relative_wind_misfit,
-    search_estimator,
-    search_planner,
     standardized_residuals,
     wind_log_likelihood,
 )
-from dgse.estimators.registry import get_estimator
-from dgse.evaluation.evaluate import draw_observations
-from dgse.localization.adjoint import AdjointResponseModel, adjoint_log_evidence, flow_model
-from dgse.physics.scenario import solve_cases
 from dgse.sensing.sensors import Observations
 from tests.conftest import two_rooms
 
@@ -142,13 +144,13 @@ def test_noise_weight_modes_share_the_zeros_factors_without_changing_the_belief(
     opts = {"knowledge": k, "speeds": (0.6, 1.2), "refine_speeds": 0, "kappas": (0.0,)}
     shared = get_estimator("dgse-phys", **opts).estimate(case.occupancy, case.resolution, obs)
     asked: list[bool] = []
-    same = phys._same_noise_weights
+    same = phys.same_noise_weights
 
     def never(modes):
         asked.append(same(modes))
         return False
 
-    monkeypatch.setattr(phys, "_same_noise_weights", never)
+    monkeypatch.setattr(phys, "same_noise_weights", never)
     alone = get_estimator("dgse-phys", **opts).estimate(case.occupancy, case.resolution, obs)
     assert asked == [True]  # kappa = 0 only: weights 1 in both modes
     np.testing.assert_array_equal(shared.source_probs, alone.source_probs)
@@ -165,11 +167,11 @@ def test_modes_share_the_zeros_factors_only_where_every_weighted_input_agrees():
     def mode(r_, sums_):
         return [(None, {"censor": {"r": r_, "sums": sums_}}), (None, {})]
 
-    assert phys._same_noise_weights([mode(r, sums), mode(r.copy(), tuple(sums))])
+    assert phys.same_noise_weights([mode(r, sums), mode(r.copy(), tuple(sums))])
     other = (sums[0], sums[1], 3.5)
-    assert not phys._same_noise_weights([mode(r, sums), mode(r, other)])
-    assert not phys._same_noise_weights([mode(r, sums), mode(np.ones((2, 4)), sums)])
-    assert not phys._same_noise_weights([mode(r, sums)])
+    assert not phys.same_noise_weights([mode(r, sums), mode(r, other)])
+    assert not phys.same_noise_weights([mode(r, sums), mode(np.ones((2, 4)), sums)])
+    assert not phys.same_noise_weights([mode(r, sums)])
 
 
 def test_neighbour_correlation_tells_shared_model_error_from_noise():
@@ -547,7 +549,7 @@ def test_levels_and_bad_input(case):
 
 def test_speed_flows_are_warm_started_unless_told_otherwise(case):
     """Cold: each candidate speed is the flow ``dgse solve`` gives; warm starts are cached apart."""
-    from dgse.localization.adjoint import clear_flow_cache
+    from dgse.posterior.adjoint import clear_flow_cache
 
     clear_flow_cache()
     k = Knowledge.from_case(case, "openings")
@@ -590,8 +592,8 @@ def test_censored_ranking_reaches_the_zeros_correction(case, monkeypatch):
 def test_field_variances_add_a_model_error_the_planner_leaves_out(case):
     """The belief's variances are the hypotheses' spread plus the model error; the spread alone
     (what readings reduce) is kept apart, and the utility planner sees only it."""
-    from dgse.estimators.phys import field_error_variance
-    from dgse.search.planners import UtilityPlanner
+    from dgse.planning.planners import UtilityPlanner
+    from dgse.posterior.mixture import field_error_variance
 
     k = Knowledge.from_case(case, "openings")
     obs = draw_observations(case, 30, seed=5)
@@ -617,7 +619,7 @@ def test_field_variances_add_a_model_error_the_planner_leaves_out(case):
 def test_search_planner_at_map_holds_stops_and_declares_the_heaviest_disk():
     """At ``map`` a search stop waits for a flow that explains the wind and a deadline stop
     declares the centre of the 1 m disk with the most mass; other levels do neither."""
-    from dgse.search.planners import get_planner
+    from dgse.planning.planners import get_planner
 
     at_map = get_planner("utility", **search_planner("map"))
     assert at_map.max_wind_misfit == pytest.approx(0.7)
@@ -704,7 +706,7 @@ def test_a_weak_hypothesis_is_corrected_for_the_zeros_to_the_mixtures_precision(
     for cap in (phys.CENSORED_TAIL, phys.CENSORED_TAIL_MAX):  # the tail of every hypothesis, the default
         monkeypatch.setattr(phys, "CENSORED_TAIL_MAX", cap)
         counted.clear()
-        out = phys._censor(list(log_ev), log_prior, details, 1.0)
+        out = phys.censor_zeros(list(log_ev), log_prior, details, 1.0)
         runs[cap] = (phys.mix_posteriors(out, log_prior)[0], sum(counted))
     (full, n_full), (cut, n_cut) = runs[phys.CENSORED_TAIL], runs[0.5]
     assert n_cut < n_full

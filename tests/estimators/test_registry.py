@@ -5,17 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from dgse.belief.belief import Belief, normalize_source_probs
+from dgse.belief.estimator import Estimator, StreamingEstimator
+from dgse.belief.knowledge import KnowledgeUser
 from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators import registry
-from dgse.estimators.belief import Belief, normalize_source_probs
-from dgse.estimators.knowledge import KnowledgeUser
-from dgse.estimators.registry import (
-    Estimator,
-    StreamingEstimator,
-    estimator_names,
-    get_estimator,
-    register_estimator,
-)
+from dgse.estimators.registry import estimator_names, get_estimator, register_estimator
 from dgse.sensing.sensors import Observations
 
 

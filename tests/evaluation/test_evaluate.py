@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 import typer
 
+from dgse.belief.belief import Belief, normalize_source_probs
+from dgse.belief.knowledge import KnowledgeUser
 from dgse.cli.common import parse_params
 from dgse.cli.main import main as models_main
 from dgse.cli.models import register
 from dgse.errors import InputDataError, UnsupportedError
-from dgse.estimators.belief import Belief, normalize_source_probs
-from dgse.estimators.knowledge import KnowledgeUser
 from dgse.evaluation.evaluate import (
     draw_observations,
     evaluate,

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
+from dgse.belief.belief import Belief
 from dgse.errors import InputDataError
-from dgse.estimators.belief import Belief
 from dgse.evaluation.metrics import (
     METRIC_KEYS,
     PROB_FLOOR,

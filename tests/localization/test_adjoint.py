@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from scipy import integrate, special, stats
 
+from dgse.belief.knowledge import Knowledge
 from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators import get_estimator
-from dgse.estimators.knowledge import Knowledge
-from dgse.localization.adjoint import (
-    AdjointEstimator,
+from dgse.localization.adjoint import AdjointEstimator
+from dgse.posterior.adjoint import (
     adjoint_log_evidence,
     censored_correction,
     flow_model,
@@ -262,7 +262,7 @@ def test_oracle_noiseless_linear_forward_peaks_at_the_source() -> None:
 
 def test_cached_fields_keep_the_cells_in_use(monkeypatch: pytest.MonkeyPatch) -> None:
     """The field cache drops the least recently used cell, and a cached field is the solved one."""
-    import dgse.localization.adjoint as adjoint
+    import dgse.posterior.adjoint as adjoint
 
     case = channel_case()
     fm = flow_model(case.layout, case.inlet_velocity)
@@ -370,7 +370,7 @@ def test_estimated_wind_fits_the_inlet_speed() -> None:
 
 def test_flow_model_warm_start_matches_the_cold_solve() -> None:
     """A flow started from another speed's converges to the cold-start flow (solver tolerance)."""
-    from dgse.localization.adjoint import clear_flow_cache
+    from dgse.posterior.adjoint import clear_flow_cache
 
     layout = channel_case().layout
     clear_flow_cache()
@@ -522,7 +522,7 @@ def test_candidates_far_below_the_best_keep_their_bound(monkeypatch) -> None:
     ``CENSORED_NEGLIGIBLE_NATS`` below the best plug-in value gets no plug-in value: it keeps its
     bound unless the cut integrates it, and the posterior is within the cut's ``tail`` of the
     one with every plug-in value computed."""
-    from dgse.localization import adjoint
+    from dgse.posterior import adjoint
 
     n = 2000
     logl, det = _zeros_evidence(22, 100, n, 3.0, 0.1)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import special
 
-from dgse.localization.censored_kernel import log_ndtr, log_ndtr_table, ndtri_exp
+from dgse.posterior.censored_kernel import log_ndtr, log_ndtr_table, ndtri_exp
 
 
 def test_log_ndtr_agrees_with_scipy_in_both_tails() -> None:
@@ -51,7 +51,7 @@ def test_ndtri_exp_above_zero_is_nan() -> None:
 
 
 def test_mills_ratio_by_series_near_zero_and_by_the_table_beyond() -> None:
-    from dgse.localization.censored_kernel import _mills
+    from dgse.posterior.censored_kernel import _mills
 
     x = np.concatenate([np.linspace(-3e-3, 3e-3, 61), np.linspace(-5.0, 30.0, 71)])
     ours = np.array([_mills(float(v)) for v in x])
@@ -65,7 +65,7 @@ def test_mills_ratio_by_series_near_zero_and_by_the_table_beyond() -> None:
 def test_zeros_slopes_in_one_pass_are_the_separate_passes_to_the_bit() -> None:
     """``_zeros_slopes`` fuses ``G`` and its slopes into one pass (the tilted rate's Newton steps);
     a search's numbers must not move by it, so it must give the same bits as the two passes."""
-    from dgse.localization.censored_kernel import _log_phi_sum, _tau_sums, _zeros_slopes
+    from dgse.posterior.censored_kernel import _log_phi_sum, _tau_sums, _zeros_slopes
 
     rng = np.random.default_rng(5)
     b = rng.exponential(1.0, 40) * (rng.random(40) < 0.7)
@@ -84,7 +84,7 @@ def test_log_phi_series_stands_for_a_faint_zero_within_2e_12_nats() -> None:
     """The Taylor series of ``log Phi(-x)`` that the faint zeros' power sums feed, against SciPy
     on the faint range ``|x| <= _SERIES_X``; its first two derivatives against ``-m`` and
     ``-m (m - x)`` (``m``: the Mills ratio)."""
-    from dgse.localization.censored_kernel import _SERIES, _SERIES_X, _series_slopes
+    from dgse.posterior.censored_kernel import _SERIES, _SERIES_X, _series_slopes
 
     x = np.linspace(-_SERIES_X, _SERIES_X, 801)  # lambda < 0 in the tilted rate's Newton steps
     poly = np.polynomial.Polynomial(_SERIES)
@@ -102,7 +102,7 @@ def test_split_zeros_give_the_sums_of_every_zero() -> None:
     """A candidate's zeros split into those it reaches and the faint ones (power sums): ``G``, its
     slopes and the Newton sums over ``log tau`` equal the sums over every zero, to the series'
     1e-12 nats a zero within the cap and to rounding above it (every zero summed)."""
-    from dgse.localization.censored_kernel import (
+    from dgse.posterior.censored_kernel import (
         _SERIES_ORDER,
         _SERIES_X,
         _g_split,
@@ -143,7 +143,7 @@ def test_split_zeros_give_the_sums_of_every_zero() -> None:
 
 
 def test_plug_in_factor_is_the_sum_of_log_phi() -> None:
-    from dgse.localization.censored_kernel import plug_in_log_factor
+    from dgse.posterior.censored_kernel import plug_in_log_factor
 
     rng = np.random.default_rng(3)
     Bt = rng.exponential(1.0, (50, 7)) * (rng.random((50, 7)) < 0.6)  # zeros a candidate does not reach
@@ -158,7 +158,7 @@ def test_tilted_plug_in_factor_is_the_plug_in_one_where_the_zeros_do_not_move_th
     :func:`plug_in_log_factor`'s; where many zeros see a candidate the positive readings see
     weakly, the rate moves towards 0 and the factor is far less negative, what the positive
     readings lose by the move charged against it."""
-    from dgse.localization.censored_kernel import plug_in_log_factor, tilted_plug_in_log_factor
+    from dgse.posterior.censored_kernel import plug_in_log_factor, tilted_plug_in_log_factor
 
     rng = np.random.default_rng(4)
     n, c = 40, 12
@@ -178,7 +178,7 @@ def test_tilted_plug_in_factor_is_the_plug_in_one_where_the_zeros_do_not_move_th
 
 def _factor(Bt, qhat, aa, beta_n, alpha_n, margin, tilt_min=None):
     """The kernel on its own, with the censored correction's rules and a given scan margin."""
-    from dgse.localization import adjoint, censored_kernel
+    from dgse.posterior import adjoint, censored_kernel
 
     u, log_wu, xh, wh = adjoint._censored_nodes(
         adjoint.CENSORED_Q_NODES, adjoint.CENSORED_Q_PIECES, adjoint.CENSORED_TAU_NODES

@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
-from dgse.localization.adjoint import (
+from dgse.posterior.adjoint import (
     _evidence_from_sums,
     _weighted_sums,
     adjoint_log_evidence,
     censored_correction,
 )
-from dgse.localization.evidence_kernel import candidate_sums_many, own_weights, row_sums
+from dgse.posterior.evidence_kernel import candidate_sums_many, own_weights, row_sums
 
 
 def _numpy_evidence(A, z, r, q_max, alpha0, beta0):
@@ -135,7 +135,7 @@ def test_own_weights_are_the_numpy_weights():
 
 
 def test_details_compute_a_lazy_entry_once_on_first_read():
-    from dgse.localization.adjoint import Details
+    from dgse.posterior.adjoint import Details
 
     calls = []
     d = Details(a=1)

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import dgse.localization.register  # noqa: F401  (registers infotaxis, entrotaxis)
+from dgse.belief.belief import Belief, normalize_source_probs
 from dgse.errors import InputDataError
-from dgse.estimators.belief import Belief, normalize_source_probs
 from dgse.localization.infotaxis import (
     InfotaxisPlanner,
     ObstacleGaussianModel,
@@ -18,8 +18,8 @@ from dgse.localization.infotaxis import (
     information_gain,
     outcome_probabilities,
 )
-from dgse.search.paths import graph_for
-from dgse.search.planners import SearchHistory, get_planner
+from dgse.planning.paths import graph_for
+from dgse.planning.planners import SearchHistory, get_planner
 
 
 def _two_hypotheses() -> tuple[np.ndarray, Belief]:

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from dgse.belief.belief import Belief, normalize_source_probs
 from dgse.errors import InputDataError
-from dgse.estimators.belief import Belief, normalize_source_probs
 from dgse.localization import blur_probs, free_graph, graph_distances
 from dgse.localization.particle_filter import DualModePlanner, ParticleFilterEstimator, position_spread
-from dgse.search.planners import SearchHistory
+from dgse.planning.planners import SearchHistory
 from dgse.sensing.sensors import Observations
 from tests.localization import cell_distance
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from dgse.belief.belief import Belief, normalize_source_probs
+from dgse.belief.knowledge import Knowledge
 from dgse.errors import InputDataError
-from dgse.estimators.belief import Belief, normalize_source_probs
-from dgse.estimators.knowledge import Knowledge
 from dgse.localization.pmfs import (
     PMFSEstimator,
     PMFSMaps,
@@ -20,8 +20,8 @@ from dgse.localization.pmfs import (
     simulate_hits,
     wind_map,
 )
-from dgse.search.paths import graph_for
-from dgse.search.planners import SearchHistory
+from dgse.planning.paths import graph_for
+from dgse.planning.planners import SearchHistory
 from dgse.sensing.sensors import Observations
 from tests.localization import cell_distance, channel_case, dense_readings
 

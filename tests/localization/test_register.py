@@ -13,7 +13,8 @@ from dgse.estimators import estimator_names, get_estimator
 from dgse.localization.grgsl import GrGSLEstimator
 from dgse.localization.particle_filter import DualModePlanner, ParticleFilterEstimator
 from dgse.localization.pmfs import PMFSPlanner
-from dgse.search import get_planner, planner_names, run_episode
+from dgse.planning.planners import get_planner, planner_names
+from dgse.search import run_episode
 from tests.localization import channel_case
 
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from dgse.localization import student_t
-from dgse.localization.student_t import log_interval, log_interval_exact
+from dgse.posterior import student_t
+from dgse.posterior.student_t import log_interval, log_interval_exact
 
 
 @pytest.mark.parametrize("nu", [2.0, 5.0, 31.0, 400.0, 3000.0])

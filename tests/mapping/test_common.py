@@ -7,10 +7,11 @@ import json
 import numpy as np
 import pytest
 
+from dgse.belief.belief import Belief
+from dgse.belief.estimator import Estimator
 from dgse.errors import InputDataError
 from dgse.estimators import registry
-from dgse.estimators.belief import Belief
-from dgse.estimators.registry import Estimator, estimator_names, get_estimator
+from dgse.estimators.registry import estimator_names, get_estimator
 from dgse.mapping import TUNING_FORMAT, GasMap, load_tuning, ppm_to_log_moments
 from dgse.mapping.gmrf import GGMRF
 from dgse.mapping.register import GDM_ESTIMATORS, register

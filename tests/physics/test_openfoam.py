@@ -32,17 +32,17 @@ HAVE_OPENFOAM = of.find_openfoam() is not None
 def needs_openfoam(test):
     """Mark ``test`` ``openfoam`` and skip it where OpenFOAM is not installed."""
     test = pytest.mark.openfoam(test)
-    return pytest.mark.skipif(
-        not HAVE_OPENFOAM, reason="OpenFOAM not installed (apt-get install openfoam)"
-    )(test)
+    return pytest.mark.skipif(not HAVE_OPENFOAM, reason="OpenFOAM not installed (apt-get install openfoam)")(
+        test
+    )
+
 
 def _two_rooms() -> Layout:
     """30 x 20 cells (3 x 2 m): a wall at x = 1.5-1.6 m with a door at y = 0.8-1.2 m."""
     occ = np.zeros((20, 30), dtype=np.uint8)
     occ[:, 15] = 1
     occ[8:12, 15] = 0
-    return Layout(occ, (Opening("west", 1.2, 1.8),), (Opening("east", 0.2, 0.8),),
-                  name="two_rooms")
+    return Layout(occ, (Opening("west", 1.2, 1.8),), (Opening("east", 0.2, 0.8),), name="two_rooms")
 
 
 @pytest.fixture

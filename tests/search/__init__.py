@@ -8,8 +8,8 @@ import time
 
 import numpy as np
 
-from dgse.estimators.belief import Belief, normalize_source_probs
-from dgse.estimators.knowledge import KnowledgeUser
+from dgse.belief.belief import Belief, normalize_source_probs
+from dgse.belief.knowledge import KnowledgeUser
 from dgse.sensing.sensors import Observations
 from dgse.world.case import Case
 

@@ -8,8 +8,8 @@ import pytest
 
 from dgse.errors import InputDataError
 from dgse.journal import count_records, journal_path
+from dgse.planning.planners import UtilityPlanner
 from dgse.search.campaign import estimator_options, load_cases, run_trials, trial_seed
-from dgse.search.planners import UtilityPlanner
 from tests.search import PeakEstimator, corridor_case
 
 

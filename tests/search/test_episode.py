@@ -10,9 +10,9 @@ import pytest
 import torch
 
 from dgse.estimators.dgse import DGSEEstimator
+from dgse.planning.paths import graph_for
+from dgse.planning.planners import UtilityPlanner
 from dgse.search.episode import run_episode
-from dgse.search.paths import graph_for
-from dgse.search.planners import UtilityPlanner
 from dgse.sensing.noise import NoiseParams
 from tests.models.helpers import tiny_model
 from tests.search import PeakEstimator, UniformEstimator, corridor_case, solved_two_rooms

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from dgse.errors import InputDataError
-from dgse.search.paths import FreeSpaceGraph, graph_for
+from dgse.planning.paths import FreeSpaceGraph, graph_for
 
 
 def _neighbours(occ: np.ndarray, i: int, j: int, connectivity: int):

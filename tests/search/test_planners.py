@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
+from dgse.belief.belief import Belief, normalize_source_probs
 from dgse.errors import InputDataError, UnsupportedError
-from dgse.estimators.belief import Belief, normalize_source_probs
-from dgse.search.paths import FreeSpaceGraph
-from dgse.search.planners import (
+from dgse.planning.paths import FreeSpaceGraph
+from dgse.planning.planners import (
     Planner,
     SearchHistory,
     UtilityPlanner,
@@ -451,7 +451,7 @@ def test_registry():
     assert isinstance(get_planner("test-stay"), Planner)
     with pytest.raises(InputDataError, match="already registered"):
         register_planner("test-stay", UtilityPlanner)
-    register_planner("test-lazy", "dgse.search.planners:UtilityPlanner")
+    register_planner("test-lazy", "dgse.planning.planners:UtilityPlanner")
     assert isinstance(get_planner("test-lazy", w_d=0.2), UtilityPlanner)
 
 

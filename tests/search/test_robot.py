@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from dgse.errors import InputDataError
-from dgse.search.paths import graph_for
+from dgse.planning.paths import graph_for
 from dgse.search.robot import Robot, random_start_cell
 from dgse.sensing.noise import NoiseModel, NoiseParams
 from tests.search import corridor_case

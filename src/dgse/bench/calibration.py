@@ -39,7 +39,7 @@ SOURCE_METHODS = ("dgse-s", "dgse-phys", "dgse-p", "dgse-o", "adjoint", "dualmod
 
 
 def _collect(ctx: BenchContext, method: str, files: list[Path], counts: list[int], trials: int) -> dict:
-    from dgse.estimators.knowledge import Knowledge
+    from dgse.belief.knowledge import Knowledge
     from dgse.estimators.registry import get_estimator
     from dgse.evaluation.evaluate import draw_observations, estimator_seed
     from dgse.world.case import Case

@@ -204,7 +204,7 @@ class BenchContext:
             random layouts solved here).
         seed: the run's seed (scenarios, observations, episodes).
         knowledge: what every method is told about each scenario besides its
-            readings (:mod:`dgse.estimators.knowledge`); methods that do not work
+            readings (:mod:`dgse.belief.knowledge`); methods that do not work
             at this level are left out and named (:meth:`methods_at_level`).
         progress: show progress bars.
         command: the command line recorded in the manifest.
@@ -224,7 +224,7 @@ class BenchContext:
         title: str = "",
         description: str = "",
     ) -> None:
-        from dgse.estimators.knowledge import check_level
+        from dgse.belief.knowledge import check_level
 
         self.suite = suite
         self.root = Path(out_root)

@@ -10,7 +10,7 @@ them by case, count and trial).
 * **fig8**: concentration RMSE and NLL in ppm against the number of
   observations, one panel per scenario.  Scored by
   :func:`dgse.evaluation.metrics.concentration_metrics` in each method's native
-  space (:attr:`dgse.estimators.belief.Belief.conc_space`): DGSE-S's Gaussian
+  space (:attr:`dgse.belief.belief.Belief.conc_space`): DGSE-S's Gaussian
   over ``log(1 + c)`` is transformed back to ppm exactly (median map
   ``exp(m) - 1``; NLL of the density of ``c``, ``NLL_log(log(1 + c)) +
   log(1 + c)``), the baselines are scored by their own ppm mean and Gaussian.
@@ -264,7 +264,7 @@ def _wins_text(results: dict[str, dict[str, Any]], cases: list[str]) -> str:
 # -- fig7 -----------------------------------------------------------------------------------------
 def _maps(ctx: BenchContext, files: list[Path], n_obs: int) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """Trial-0 beliefs at ``n_obs`` per scenario and method; also the ppm-choice check rows."""
-    from dgse.estimators.knowledge import Knowledge
+    from dgse.belief.knowledge import Knowledge
     from dgse.estimators.registry import get_estimator
     from dgse.evaluation.evaluate import draw_observations, estimator_seed
     from dgse.evaluation.metrics import concentration_metrics, gaussian_nll

@@ -29,7 +29,7 @@ is designed for a sequential robot trajectory (it needs a first hit and
 orders the readings along the path), not for independent sparse readings.
 
 Metrics: source-localization error of the probability-weighted mean
-(:meth:`dgse.estimators.belief.Belief.source_estimate`) and cross-entropy of
+(:meth:`dgse.belief.belief.Belief.source_estimate`) and cross-entropy of
 the posterior at the true source cell, per scenario; and time per estimate.
 """
 

@@ -467,7 +467,7 @@ def _path_figure(
 
 def _process_figure(result: Any, case: Any, n_frames: int = 4, dpi: int = 60) -> Any:
     """Several steps of one episode (the three panels of :func:`plot_search_step`), stacked."""
-    from dgse.search.animate import frame_steps, plot_search_step
+    from dgse.viz.search import frame_steps, plot_search_step
 
     ks = frame_steps(len(result.steps), n_frames)
     images = []
@@ -763,7 +763,7 @@ def _report_ood(
 def _report_process(
     ctx: BenchContext, plan: Plan, record: Mapping[str, Any], first: tuple[Path, Any]
 ) -> None:
-    from dgse.search.animate import animate_episode
+    from dgse.viz.search import animate_episode
 
     result, case = record.get("result"), record.get("case")
     if result is None:  # the runs came from the cache: run that episode again (same seed: same search)
@@ -811,9 +811,9 @@ def _threads() -> int:
 
 def _rerun_first(ctx: BenchContext, first: tuple[Path, Any], plan: Plan) -> tuple[Any, Any]:
     from dgse.estimators.registry import get_estimator
+    from dgse.planning.planners import get_planner
     from dgse.search.campaign import estimator_options, trial_seed
     from dgse.search.episode import run_episode
-    from dgse.search.planners import get_planner
 
     m = METHODS[0]
     path, case = first

@@ -56,8 +56,8 @@ def bench_cmd(
     Every method is told the same --knowledge; methods that do not work at that level are
     left out and named in the suite's notes.
     """
+    from dgse.belief.knowledge import check_level
     from dgse.bench import SUITES, run_suite
-    from dgse.estimators.knowledge import check_level
 
     check_level(knowledge)
 

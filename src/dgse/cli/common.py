@@ -209,7 +209,7 @@ def parse_params(items: Sequence[str] | None, flag: str = "--param") -> dict[str
     return out
 
 
-#: ``--knowledge``: what an estimator is told besides its readings (dgse.estimators.knowledge).
+#: ``--knowledge``: what an estimator is told besides its readings (dgse.belief.knowledge).
 KNOWLEDGE_HELP = (
     "What the estimator is told besides the readings: map (occupancy only, the paper's setting), "
     "openings (plus the inlets and outlets), wind (plus the case's wind field and inlet speed, as from "

@@ -24,9 +24,9 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
+from dgse.belief.knowledge import DEFAULT_LEVEL, check_level, require_level
 from dgse.cli.common import KnowledgeOption, check_output_dir, console, path_text, user_errors
 from dgse.errors import InputDataError
-from dgse.estimators.knowledge import DEFAULT_LEVEL, check_level, require_level
 
 if TYPE_CHECKING:
     from dgse.search.episode import StepRecord
@@ -102,12 +102,12 @@ def demo_cmd(
 
     from dgse.estimators.registry import estimator_accepts, get_estimator
     from dgse.physics.scenario import random_cases
-    from dgse.search.animate import animate_episode, plot_search_step
+    from dgse.planning.planners import get_planner
     from dgse.search.episode import run_episode
     from dgse.search.metrics import episode_metrics
-    from dgse.search.planners import get_planner
     from dgse.sensing.sensors import MIN_SENSORS
     from dgse.viz.case import plot_case
+    from dgse.viz.search import animate_episode, plot_search_step
 
     torch.set_num_threads(max(1, threads))
     seed = secrets.randbelow(2**31) if seed is None else seed

@@ -37,6 +37,7 @@ from rich import box
 from rich.markup import escape
 from rich.table import Table
 
+from dgse.belief.knowledge import DEFAULT_LEVEL, Knowledge, check_level
 from dgse.cli.common import (
     KnowledgeOption,
     check_output_file,
@@ -46,7 +47,6 @@ from dgse.cli.common import (
     user_errors,
 )
 from dgse.errors import InputDataError
-from dgse.estimators.knowledge import DEFAULT_LEVEL, Knowledge, check_level
 
 __all__ = [
     "estimate_cmd",

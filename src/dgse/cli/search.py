@@ -4,7 +4,7 @@
 runs ``--trials`` episodes (:func:`dgse.search.episode.run_episode`) per case
 with the estimator ``--method`` (any registered name, built by
 :func:`~dgse.estimators.registry.get_estimator`) and the planner ``--planner``
-(:func:`~dgse.search.planners.get_planner`), prints a table of the paper's
+(:func:`~dgse.planning.planners.get_planner`), prints a table of the paper's
 metrics per case and over all trials, and writes them as JSON (the loop is
 :func:`dgse.search.campaign.run_trials`; the JSON is what it returns):
 
@@ -22,7 +22,7 @@ noise) do not depend on the method, the planner or the other cases.
 
 ``--animate DIR`` also writes ``DIR/<stem>.gif`` for trial 0 of every case:
 the trajectory, measurements and the predicted wind, concentration and
-source posterior over the steps (:mod:`dgse.search.animate`).
+source posterior over the steps (:mod:`dgse.viz.search`).
 
 For DGSE methods (``dgse-*``) the estimator gets ``model=`` (``--model``,
 default ``"default"``: the shipped weights) and ``seed=`` (``--seed``);
@@ -64,6 +64,7 @@ from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from dgse.belief.knowledge import DEFAULT_LEVEL, check_level
 from dgse.cli.common import (
     EXIT_INTERRUPTED,
     KnowledgeOption,
@@ -80,7 +81,6 @@ from dgse.cli.common import (
     user_errors,
 )
 from dgse.errors import InputDataError
-from dgse.estimators.knowledge import DEFAULT_LEVEL, check_level
 from dgse.journal import count_records, journal_path
 
 if TYPE_CHECKING:
@@ -91,6 +91,7 @@ __all__ = [
     "register",
     "search_cmd",
 ]
+
 
 def _step_text(stem: str, trial: int, trials: int, rec: StepRecord, time_limit: float) -> str:
     return (
@@ -222,8 +223,8 @@ def search_cmd(
     file); after Ctrl-C or a kill, the same command resumes where it stopped.
     """
     from dgse.estimators.registry import get_estimator
+    from dgse.planning.planners import get_planner
     from dgse.search.campaign import estimator_options, load_cases, run_trials
-    from dgse.search.planners import get_planner
 
     level = check_level(knowledge)
     if trials < 1:
@@ -269,7 +270,7 @@ def search_cmd(
         nonlocal fresh
         fresh += 1
         if animate is not None and trial == 0:
-            from dgse.search.animate import animate_episode
+            from dgse.viz.search import animate_episode
 
             gifs.append(animate_episode(result, case, animate / f"{path.stem}.gif"))
 

@@ -1,28 +1,12 @@
-"""Gas source estimators behind one interface, returning one :class:`Belief` type.
+"""The toolkit's estimators and the registry of every estimator by name.
 
 ``get_estimator(name, **kwargs)`` builds a registered estimator
-(:func:`estimator_names` lists them); every estimator has
-``estimate(occupancy, resolution, observations) -> Belief``.  The DGSE
-estimators (:mod:`dgse.estimators.dgse`) import PyTorch only when used.
+(:func:`estimator_names` lists them); every estimator implements
+:class:`dgse.belief.Estimator`.  DGSE's own: the networks DGSE-O/P/S
+(:mod:`dgse.estimators.dgse`, PyTorch imported only when used) and the
+physics-guided ``dgse-phys`` (:mod:`dgse.estimators.phys`).
 """
 
-from dgse.estimators.belief import Belief, normalize_source_probs
-from dgse.estimators.registry import (
-    Estimator,
-    EstimatorFactory,
-    StreamingEstimator,
-    estimator_names,
-    get_estimator,
-    register_estimator,
-)
+from dgse.estimators.registry import estimator_names, get_estimator, register_estimator
 
-__all__ = [
-    "Belief",
-    "Estimator",
-    "EstimatorFactory",
-    "StreamingEstimator",
-    "estimator_names",
-    "get_estimator",
-    "normalize_source_probs",
-    "register_estimator",
-]
+__all__ = ["estimator_names", "get_estimator", "register_estimator"]

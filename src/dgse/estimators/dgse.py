@@ -1,11 +1,11 @@
-"""DGSE networks as :class:`~dgse.estimators.registry.Estimator`\\ s.
+"""DGSE networks as :class:`~dgse.belief.estimator.Estimator`\\ s.
 
 :class:`DGSEEstimator` rasterizes the observations onto the network canvas
 (:func:`dgse.data.rasterize.canvas_shape_for`, :func:`~dgse.data.rasterize.rasterize`:
 100 x 100 for maps up to 100 x 100 cells, the map at the lower-left corner),
 runs :func:`dgse.models.inference.predict` (one pass for DGSE-O/P, ``K``
 and ``K * T`` samples for DGSE-S), crops the fields back to the map and
-returns a :class:`~dgse.estimators.belief.Belief` whose source probabilities
+returns a :class:`~dgse.belief.belief.Belief` whose source probabilities
 are renormalized over the free map cells (the networks spread their mass over
 all valid cells, walls included).
 
@@ -36,10 +36,10 @@ from typing import Any
 import numpy as np
 import torch
 
+from dgse.belief.belief import Belief, normalize_source_probs
+from dgse.belief.knowledge import KnowledgeUser
 from dgse.data.rasterize import DEFAULT_CANVAS, DEFAULT_STRIDE, canvas_shape_for, rasterize
 from dgse.errors import InputDataError, UnsupportedError
-from dgse.estimators.belief import Belief, normalize_source_probs
-from dgse.estimators.knowledge import KnowledgeUser
 from dgse.models.checkpoint import load_checkpoint
 from dgse.models.inference import Prediction, make_generator, native_bf16, predict, resolve_device
 from dgse.models.networks import DGSEModel
@@ -75,7 +75,7 @@ def _as_dtype(dtype: torch.dtype | str, device: torch.device) -> torch.dtype:
 
 
 class DGSEEstimator(KnowledgeUser):
-    """A DGSE network behind the :class:`~dgse.estimators.registry.Estimator` protocol.
+    """A DGSE network behind the :class:`~dgse.belief.estimator.Estimator` protocol.
 
     Args:
         model: a DGSE-O, -P or -S network (:mod:`dgse.models.networks`).

@@ -2,7 +2,7 @@
 
 * :mod:`dgse.evaluation.metrics`: source-localization error, cross-entropy at
   the true cell, wind and concentration RMSE / Gaussian NLL (log and ppm space),
-  all pure functions of a :class:`~dgse.estimators.belief.Belief` and the true
+  all pure functions of a :class:`~dgse.belief.belief.Belief` and the true
   :class:`~dgse.world.case.Case`;
 * :mod:`dgse.evaluation.evaluate`: :func:`evaluate` of any registered estimator
   on case files or a dataset store, with seeded observations shared by all

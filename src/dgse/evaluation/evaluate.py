@@ -100,10 +100,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from dgse.belief.belief import Belief
+from dgse.belief.estimator import Estimator
+from dgse.belief.knowledge import DEFAULT_LEVEL, Knowledge, check_level, require_level
 from dgse.errors import DGSEError, InputDataError
-from dgse.estimators.belief import Belief
-from dgse.estimators.knowledge import DEFAULT_LEVEL, Knowledge, check_level, require_level
-from dgse.estimators.registry import Estimator, get_estimator
+from dgse.estimators.registry import get_estimator
 from dgse.evaluation.metrics import METRIC_KEYS, EstimateMetrics, evaluate_belief
 from dgse.sensing.noise import NoiseModel, NoiseParams
 from dgse.sensing.sensors import Observations, random_observations
@@ -506,7 +507,7 @@ def evaluate(
             those already there (module docstring); None keeps nothing.
         restart: discard an existing journal instead of resuming it.
         knowledge: what the estimator is told about each case besides the readings
-            (:mod:`dgse.estimators.knowledge`: ``"map"``, ``"openings"`` or ``"wind"``);
+            (:mod:`dgse.belief.knowledge`: ``"map"``, ``"openings"`` or ``"wind"``);
             recorded in the result.
 
     Returns:

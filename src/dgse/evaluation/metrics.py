@@ -1,6 +1,6 @@
 """Metrics of one estimate against the truth (spec section 6, paper Sec. V-A to V-C).
 
-Every function is pure: it takes a :class:`~dgse.estimators.belief.Belief`
+Every function is pure: it takes a :class:`~dgse.belief.belief.Belief`
 and the true :class:`~dgse.world.case.Case` (same grid) and returns a float.
 A metric the belief cannot provide (no wind estimate, no variance, ...) is
 ``NaN``, never an error, so classical baselines with partial outputs are
@@ -67,8 +67,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from dgse.belief.belief import Belief
 from dgse.errors import InputDataError
-from dgse.estimators.belief import Belief
 from dgse.world.case import Case
 
 __all__ = [

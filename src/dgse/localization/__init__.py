@@ -14,7 +14,7 @@ PMFS (Ojeda 2024)          :mod:`.pmfs` (``pmfs``)              hit map + filame
 GrGSL (Ojeda 2021)         :mod:`.grgsl` (``grgsl``)            sequential upwind/last-hit direction cues
 =========================  ===================================  ==========================================
 
-Planners (``dgse.search.planners`` protocol, same registry names unless said):
+Planners (``dgse.planning.planners`` protocol, same registry names unless said):
 ``infotaxis`` and ``entrotaxis`` (:mod:`.infotaxis`, on any categorical posterior),
 ``dualmode`` (:mod:`.particle_filter`), ``pmfs`` (:mod:`.pmfs`).
 
@@ -39,87 +39,15 @@ Dijkstra from sensors, smoothing of a particle histogram).
 
 from __future__ import annotations
 
-import hashlib
 import math
 
 import numpy as np
 from scipy.sparse.csgraph import dijkstra
 
 from dgse.errors import InputDataError
-from dgse.estimators.belief import normalize_source_probs
-from dgse.search.paths import FreeSpaceGraph, graph_for
-from dgse.sensing.sensors import Observations, check_sensor_cells
+from dgse.planning.paths import FreeSpaceGraph, graph_for
 
-__all__ = [
-    "blur_probs",
-    "check_inputs",
-    "graph_distances",
-    "log_moments_from_ppm",
-    "map_key",
-    "probs_from_log",
-    "uniform_probs",
-]
-
-
-def check_inputs(
-    occupancy: np.ndarray, resolution: float, observations: Observations, *, allow_empty: bool = False
-) -> tuple[np.ndarray, float, Observations]:
-    """Validated ``(occupancy uint8 (H, W), resolution, observations)`` with gas clipped at 0.
-
-    Raises:
-        InputDataError: a map that is not 2-D or has no free cell, a bad
-            resolution, something other than :class:`Observations`, no readings
-            (unless ``allow_empty``), a reading outside the map or in a wall.
-    """
-    occ = np.asarray(occupancy)
-    if occ.ndim != 2 or min(occ.shape) < 1:
-        raise InputDataError(f"occupancy must be a non-empty 2-D array, got shape {occ.shape}")
-    occ = (occ != 0).astype(np.uint8)
-    if not (occ == 0).any():
-        raise InputDataError("the map has no free cell")
-    res = float(resolution)
-    if not (res > 0 and math.isfinite(res)):
-        raise InputDataError(f"resolution must be a positive number of metres, got {resolution}")
-    if not isinstance(observations, Observations):
-        raise InputDataError(
-            f"observations must be an Observations object, got {type(observations).__name__}"
-        )
-    if len(observations) == 0 and not allow_empty:
-        raise InputDataError("no observations: source localization needs at least one reading")
-    check_sensor_cells(occ, observations.cells)
-    if (observations.gas < 0).any():
-        observations = Observations(
-            observations.cells,
-            np.maximum(observations.gas, 0.0),
-            observations.wind,
-            observations.times,
-            observations.noise,
-        )
-    return occ, res, observations
-
-
-def map_key(occupancy: np.ndarray, resolution: float) -> str:
-    """A short content hash of a map and its cell size (cache key)."""
-    occ = np.ascontiguousarray((np.asarray(occupancy) != 0).astype(np.uint8))
-    h = hashlib.blake2b(occ.tobytes(), digest_size=12)
-    h.update(repr((occ.shape, float(resolution))).encode())
-    return h.hexdigest()
-
-
-def uniform_probs(occupancy: np.ndarray) -> np.ndarray:
-    """The uniform posterior over the free cells, ``float64 (H, W)``."""
-    occ = np.asarray(occupancy)
-    return normalize_source_probs((occ == 0).astype(np.float64), occ)
-
-
-def probs_from_log(log_p: np.ndarray, free: np.ndarray) -> np.ndarray:
-    """``exp(log_p - max)`` normalized over ``free`` cells (``-inf`` allowed), 0 elsewhere."""
-    lp = np.where(free, np.asarray(log_p, dtype=np.float64), -np.inf)
-    top = lp.max()
-    if not np.isfinite(top):
-        raise InputDataError("the log posterior has no finite value on a free cell")
-    p = np.exp(lp - top)
-    return p / p.sum()
+__all__ = ["blur_probs", "free_graph", "graph_distances"]
 
 
 def graph_distances(graph: FreeSpaceGraph, cells: np.ndarray) -> np.ndarray:
@@ -181,22 +109,6 @@ def blur_probs(weights: np.ndarray, occupancy: np.ndarray, sigma_cells: float, f
             new[dst] += move[src]
         p = new
     return (1.0 - floor) * np.maximum(p, 0.0) + floor * u
-
-
-def log_moments_from_ppm(
-    mean_ppm: np.ndarray, var_ppm: np.ndarray | None
-) -> tuple[np.ndarray, np.ndarray | None]:
-    """Lognormal moment match of ``1 + c``: ppm mean/variance -> mean/variance of ``log(1 + c)``.
-
-    ``s2 = log(1 + v / (1 + m)^2)``, ``mu = log(1 + m) - s2 / 2`` (the mean is
-    clipped at 0 first), so ``Belief.conc_mean_ppm`` gives back ``m``.
-    """
-    m = np.maximum(np.asarray(mean_ppm, dtype=np.float64), 0.0)
-    if var_ppm is None:
-        return np.log1p(m), None
-    v = np.maximum(np.asarray(var_ppm, dtype=np.float64), 0.0)
-    s2 = np.log1p(v / (1.0 + m) ** 2)
-    return np.log1p(m) - 0.5 * s2, s2
 
 
 def free_graph(occupancy: np.ndarray, resolution: float) -> FreeSpaceGraph:

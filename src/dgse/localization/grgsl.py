@@ -54,10 +54,10 @@ from typing import Any, Literal
 import numba as nb
 import numpy as np
 
+from dgse.belief.belief import Belief, probs_from_log, uniform_probs
+from dgse.belief.inputs import check_inputs
+from dgse.belief.knowledge import KnowledgeUser
 from dgse.errors import InputDataError
-from dgse.estimators.belief import Belief
-from dgse.estimators.knowledge import KnowledgeUser
-from dgse.localization import check_inputs, probs_from_log, uniform_probs
 from dgse.sensing.sensors import Observations
 
 __all__ = ["GrGSLEstimator", "grgsl_weights", "make_grgsl"]

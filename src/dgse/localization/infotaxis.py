@@ -56,11 +56,11 @@ from typing import Literal, Protocol, runtime_checkable
 import numpy as np
 from scipy import special
 
+from dgse.belief.belief import Belief
 from dgse.errors import InputDataError
-from dgse.estimators.belief import Belief
 from dgse.localization import graph_distances
-from dgse.search.paths import Cell, FreeSpaceGraph, graph_for
-from dgse.search.planners import SearchHistory
+from dgse.planning.paths import Cell, FreeSpaceGraph, graph_for
+from dgse.planning.planners import SearchHistory
 
 __all__ = [
     "InfotaxisPlanner",

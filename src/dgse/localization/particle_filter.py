@@ -81,17 +81,11 @@ import numba as nb
 import numpy as np
 from scipy import ndimage
 
+from dgse.belief.belief import Belief, log_moments_from_ppm, normalize_source_probs
+from dgse.belief.inputs import check_inputs, map_key
+from dgse.belief.knowledge import KnowledgeUser
 from dgse.errors import InputDataError
-from dgse.estimators.belief import Belief, normalize_source_probs
-from dgse.estimators.knowledge import KnowledgeUser
-from dgse.localization import (
-    blur_probs,
-    check_inputs,
-    free_graph,
-    graph_distances,
-    log_moments_from_ppm,
-    map_key,
-)
+from dgse.localization import blur_probs, free_graph, graph_distances
 from dgse.localization.infotaxis import (
     InfotaxisPlanner,
     ObstacleGaussianModel,
@@ -99,8 +93,8 @@ from dgse.localization.infotaxis import (
     information_gain,
     select_candidates,
 )
-from dgse.search.paths import Cell
-from dgse.search.planners import SearchHistory
+from dgse.planning.paths import Cell
+from dgse.planning.planners import SearchHistory
 from dgse.sensing.sensors import Observations
 
 __all__ = ["DualModePlanner", "ParticleFilterEstimator", "make_dualmode", "make_dualmode_planner"]

@@ -95,13 +95,13 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy import ndimage
 
+from dgse.belief.belief import Belief, probs_from_log
+from dgse.belief.inputs import check_inputs
+from dgse.belief.knowledge import Knowledge, KnowledgeUser
 from dgse.errors import InputDataError
-from dgse.estimators.belief import Belief
-from dgse.estimators.knowledge import Knowledge, KnowledgeUser
-from dgse.localization import check_inputs, probs_from_log
 from dgse.options import options_from
-from dgse.search.paths import Cell
-from dgse.search.planners import SearchHistory
+from dgse.planning.paths import Cell
+from dgse.planning.planners import SearchHistory
 from dgse.sensing.sensors import Observations
 from dgse.world.layout import Layout
 

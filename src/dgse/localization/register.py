@@ -18,14 +18,14 @@ Estimators (:func:`dgse.estimators.get_estimator`):
   through them);
 * ``grgsl``: GrGSL (any level; map only).
 
-Planners (:func:`dgse.search.planners.get_planner`): ``infotaxis``,
+Planners (:func:`dgse.planning.planners.get_planner`): ``infotaxis``,
 ``entrotaxis``, ``dualmode``, ``pmfs``.
 """
 
 from __future__ import annotations
 
 from dgse.estimators.registry import estimator_names, register_estimator
-from dgse.search.planners import planner_names, register_planner
+from dgse.planning.planners import planner_names, register_planner
 
 __all__ = ["ESTIMATORS", "PLANNERS", "register_all"]
 

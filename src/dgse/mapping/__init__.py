@@ -1,8 +1,8 @@
 """Classical gas distribution mapping (GDM): the baselines of the paper's Sec. V-B comparison.
 
 Methods (each a pure function ``f(occupancy, resolution, observations, **params) -> GasMap``
-and an :class:`~dgse.estimators.registry.Estimator` class returning a
-:class:`~dgse.estimators.belief.Belief`; registry names in brackets):
+and an :class:`~dgse.belief.estimator.Estimator` class returning a
+:class:`~dgse.belief.belief.Belief`; registry names in brackets):
 
 ====================  ==========================  ==========================================
 method                module                      what it estimates
@@ -26,7 +26,7 @@ Conventions shared by every method here
   or kernel).
 * Results (:class:`GasMap`) are in ppm on the ``(H, W)`` grid; solid cells hold
   mean 0 and variance 0 (none of these methods has a variable there).
-* **Belief representation.**  The :class:`~dgse.estimators.belief.Belief` stores a
+* **Belief representation.**  The :class:`~dgse.belief.belief.Belief` stores a
   Gaussian over ``L = log(1 + c)``.  These methods produce a ppm mean ``m`` and
   variance ``v``; :meth:`GasMap.to_belief` moment-matches a lognormal ``1 + c``
   to them (:func:`ppm_to_log_moments`): ``s2 = log(1 + v / (1 + m)^2)``,
@@ -91,9 +91,9 @@ from typing import Any
 
 import numpy as np
 
+from dgse.belief.belief import Belief, normalize_source_probs
+from dgse.belief.knowledge import KnowledgeUser
 from dgse.errors import InputDataError
-from dgse.estimators.belief import Belief, normalize_source_probs
-from dgse.estimators.knowledge import KnowledgeUser
 from dgse.options import check_options
 from dgse.sensing.sensors import Observations, check_sensor_cells
 
@@ -322,7 +322,7 @@ def positive(name: str, value: float, *, allow_zero: bool = False) -> float:
 
 
 class MappingEstimator(KnowledgeUser):
-    """An :class:`~dgse.estimators.registry.Estimator` around a mapping function.
+    """An :class:`~dgse.belief.estimator.Estimator` around a mapping function.
 
     Subclasses set ``name`` and implement :meth:`map`; :meth:`estimate` times
     it and converts the :class:`GasMap` with :meth:`GasMap.to_belief`.

@@ -113,9 +113,7 @@ def resolve_device(device: torch.device | str) -> torch.device:
         try:
             dev = torch.device(str(device).strip())
         except (RuntimeError, ValueError, TypeError):
-            raise InputDataError(
-                f"unknown device {device!r}: use cpu, cuda, cuda:N or mps"
-            ) from None
+            raise InputDataError(f"unknown device {device!r}: use cpu, cuda, cuda:N or mps") from None
     if dev.type == "cuda":
         if not torch.cuda.is_available():
             build = "a CPU build of PyTorch" if torch.version.cuda is None else "no usable CUDA GPU"

@@ -241,8 +241,16 @@ class _Patch:
 def _block_mesh_dict(layout: Layout, depth: float) -> str:
     g = layout.grid
     lx, ly = g.width * g.resolution, g.height * g.resolution
-    pts = [(0, 0, 0), (lx, 0, 0), (lx, ly, 0), (0, ly, 0),
-           (0, 0, depth), (lx, 0, depth), (lx, ly, depth), (0, ly, depth)]
+    pts = [
+        (0, 0, 0),
+        (lx, 0, 0),
+        (lx, ly, 0),
+        (0, ly, 0),
+        (0, 0, depth),
+        (lx, 0, depth),
+        (lx, ly, depth),
+        (0, ly, depth),
+    ]
     vertices = "\n".join("    " + _vec(p) for p in pts)
     return f"""convertToMeters 1;
 
@@ -402,35 +410,69 @@ def _flow_fields(
         d.update({p.name: outlet for p in outlets})
         return d
 
-    u_in = {p.name: _entry(type="fixedValue", value=f"uniform {_vec(s.velocity)}")
-            for p, s in zip(inlets, states, strict=True)}
-    k_in = {p.name: _entry(type="fixedValue", value=f"uniform {_num(s.k)}")
-            for p, s in zip(inlets, states, strict=True)}
-    e_in = {p.name: _entry(type="fixedValue", value=f"uniform {_num(s.epsilon)}")
-            for p, s in zip(inlets, states, strict=True)}
+    u_in = {
+        p.name: _entry(type="fixedValue", value=f"uniform {_vec(s.velocity)}")
+        for p, s in zip(inlets, states, strict=True)
+    }
+    k_in = {
+        p.name: _entry(type="fixedValue", value=f"uniform {_num(s.k)}")
+        for p, s in zip(inlets, states, strict=True)
+    }
+    e_in = {
+        p.name: _entry(type="fixedValue", value=f"uniform {_num(s.epsilon)}")
+        for p, s in zip(inlets, states, strict=True)
+    }
     zg = _entry(type="zeroGradient")
     calc0 = _entry(type="calculated", value="uniform 0")
     return {
-        "U": ("volVectorField", _field(
-            "[0 1 -1 0 0 0 0]", "uniform (0 0 0)",
-            bc(_entry(type="noSlip"), u_in, zg))),
-        "p": ("volScalarField", _field(
-            "[0 2 -2 0 0 0 0]", "uniform 0",
-            bc(zg, {p.name: zg for p in inlets}, _entry(type="fixedValue", value="uniform 0")))),
-        "k": ("volScalarField", _field(
-            "[0 2 -2 0 0 0 0]", f"uniform {_num(k0)}",
-            bc(_entry(type="kqRWallFunction", value=f"uniform {_num(k0)}"), k_in,
-               _entry(type="inletOutlet", inletValue=f"uniform {_num(k0)}",
-                      value=f"uniform {_num(k0)}")))),
-        "epsilon": ("volScalarField", _field(
-            "[0 2 -3 0 0 0 0]", f"uniform {_num(e0)}",
-            bc(_entry(type="epsilonWallFunction", value=f"uniform {_num(e0)}"), e_in,
-               _entry(type="inletOutlet", inletValue=f"uniform {_num(e0)}",
-                      value=f"uniform {_num(e0)}")))),
-        "nut": ("volScalarField", _field(
-            "[0 2 -1 0 0 0 0]", "uniform 0",
-            bc(_entry(type="nutkWallFunction", **wf_coeffs, value="uniform 0"),
-               {p.name: calc0 for p in inlets}, calc0))),
+        "U": (
+            "volVectorField",
+            _field("[0 1 -1 0 0 0 0]", "uniform (0 0 0)", bc(_entry(type="noSlip"), u_in, zg)),
+        ),
+        "p": (
+            "volScalarField",
+            _field(
+                "[0 2 -2 0 0 0 0]",
+                "uniform 0",
+                bc(zg, {p.name: zg for p in inlets}, _entry(type="fixedValue", value="uniform 0")),
+            ),
+        ),
+        "k": (
+            "volScalarField",
+            _field(
+                "[0 2 -2 0 0 0 0]",
+                f"uniform {_num(k0)}",
+                bc(
+                    _entry(type="kqRWallFunction", value=f"uniform {_num(k0)}"),
+                    k_in,
+                    _entry(type="inletOutlet", inletValue=f"uniform {_num(k0)}", value=f"uniform {_num(k0)}"),
+                ),
+            ),
+        ),
+        "epsilon": (
+            "volScalarField",
+            _field(
+                "[0 2 -3 0 0 0 0]",
+                f"uniform {_num(e0)}",
+                bc(
+                    _entry(type="epsilonWallFunction", value=f"uniform {_num(e0)}"),
+                    e_in,
+                    _entry(type="inletOutlet", inletValue=f"uniform {_num(e0)}", value=f"uniform {_num(e0)}"),
+                ),
+            ),
+        ),
+        "nut": (
+            "volScalarField",
+            _field(
+                "[0 2 -1 0 0 0 0]",
+                "uniform 0",
+                bc(
+                    _entry(type="nutkWallFunction", **wf_coeffs, value="uniform 0"),
+                    {p.name: calc0 for p in inlets},
+                    calc0,
+                ),
+            ),
+        ),
     }
 
 
@@ -582,8 +624,9 @@ RAS
 """
 
 
-def _gas_functions(field: str, point: tuple[float, float, float], rate: float,
-                   phys: Physics, n_corr: int) -> str:
+def _gas_functions(
+    field: str, point: tuple[float, float, float], rate: float, phys: Physics, n_corr: int
+) -> str:
     """Function objects solving one source's gas field (g/m^3) and writing it."""
     return f"""    {field}
     {{
@@ -642,7 +685,7 @@ coeffs
 # --------------------------------------------------------------------------------------
 def _strip_header(text: str) -> str:
     m = re.search(r"FoamFile\s*\{[^}]*\}", text)
-    body = text[m.end():] if m else text
+    body = text[m.end() :] if m else text
     body = re.sub(r"/\*.*?\*/", " ", body, flags=re.S)
     return re.sub(r"//[^\n]*", " ", body)
 
@@ -655,7 +698,7 @@ def _parse_values(text: str, n: int | None, ncomp: int) -> np.ndarray:
     """
     s = text.lstrip()
     if s.startswith("uniform"):
-        s = s[len("uniform"):].lstrip()
+        s = s[len("uniform") :].lstrip()
         if s.startswith("("):
             val = np.array(s[1 : s.index(")")].split(), dtype=float)
         else:
@@ -670,7 +713,7 @@ def _parse_values(text: str, n: int | None, ncomp: int) -> np.ndarray:
     if not m:
         raise DGSEError(f"cannot parse OpenFOAM value starting {s[:60]!r}")
     size = int(m.group(1))
-    rest = s[m.end():]
+    rest = s[m.end() :]
     if m.group(2) == "{":  # compacted uniform list  N{value}
         inner = rest[: rest.index("}")].replace("(", " ").replace(")", " ")
         val = np.array(inner.split(), dtype=float)
@@ -688,7 +731,7 @@ def _read_internal(path: Path, n_cells: int, ncomp: int = 1) -> np.ndarray:
     m = re.search(r"\binternalField\b", body)
     if not m:
         raise DGSEError(f"{path}: no internalField")
-    return _parse_values(body[m.end():], n_cells, ncomp)
+    return _parse_values(body[m.end() :], n_cells, ncomp)
 
 
 def _read_patch_value(path: Path, patch: str, n_faces: int, ncomp: int = 1) -> np.ndarray:
@@ -698,11 +741,11 @@ def _read_patch_value(path: Path, patch: str, n_faces: int, ncomp: int = 1) -> n
     if not m:
         raise DGSEError(f"{path}: no patch {patch!r}")
     end = re.compile(r"\n\s*\}[ \t]*\n").search(body, m.end())
-    block = body[m.end(): end.start() if end else len(body)]
+    block = body[m.end() : end.start() if end else len(body)]
     v = re.search(r"\bvalue\b", block)
     if not v:
         raise DGSEError(f"{path}: patch {patch!r} has no value")
-    return _parse_values(block[v.end():], n_faces, ncomp)
+    return _parse_values(block[v.end() :], n_faces, ncomp)
 
 
 def _read_label_list(path: Path) -> np.ndarray:
@@ -716,7 +759,7 @@ def _read_faces(path: Path) -> np.ndarray:
     if not m:
         raise DGSEError(f"{path}: cannot parse the face list")
     n = int(m.group(1))
-    tokens = body[m.end():].replace("(", " ").replace(")", " ").split(None, 5 * n)[: 5 * n]
+    tokens = body[m.end() :].replace("(", " ").replace(")", " ").split(None, 5 * n)[: 5 * n]
     arr = np.array(tokens, dtype=np.int64).reshape(n, 5)
     if not (arr[:, 0] == 4).all():
         raise DGSEError(f"{path}: not every face is a quadrilateral")
@@ -760,7 +803,7 @@ def _flow_log_facts(log: str) -> dict:
     """Iterations, convergence and the last iteration's initial residuals of a simpleFoam log."""
     times = list(re.finditer(r"^Time = (\S+)\s*$", log, flags=re.M))
     iterations = int(float(times[-1].group(1))) if times else 0
-    last = log[times[-1].end():] if times else ""
+    last = log[times[-1].end() :] if times else ""
     residuals: dict[str, float] = {}
     for m in _SOLVE_RE.finditer(last):
         residuals.setdefault(m.group(1), float(m.group(2)))
@@ -848,16 +891,16 @@ class OpenFOAMEngine:
         self.physics = physics
         bin_dir = find_openfoam()
         if bin_dir is None:
-            raise UnsupportedError(
-                f"engine {ENGINE_NAME!r} is not available: {unavailable_reason()}")
+            raise UnsupportedError(f"engine {ENGINE_NAME!r} is not available: {unavailable_reason()}")
         self.bin_dir = bin_dir
         self._env = openfoam_environment(bin_dir)
         self._deadline: float | None = None
         self._keeping = False
 
     # -- running utilities ----------------------------------------------------------------
-    def _run(self, case: Path, utility: str, args: Sequence[str] = (), log_name: str = "",
-             mpi: int = 0) -> float:
+    def _run(
+        self, case: Path, utility: str, args: Sequence[str] = (), log_name: str = "", mpi: int = 0
+    ) -> float:
         """Run ``utility -case case args`` into ``case/log.<log_name>``; returns seconds."""
         log_path = case / f"log.{log_name or utility}"
         exe = os.path.join(self.bin_dir, utility)
@@ -873,19 +916,30 @@ class OpenFOAMEngine:
         t0 = time.perf_counter()
         with open(log_path, "w") as log:
             try:
-                proc = subprocess.run(cmd, stdout=log, stderr=subprocess.STDOUT, env=self._env,
-                                      cwd=case, timeout=timeout, check=False)
+                proc = subprocess.run(
+                    cmd,
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
+                    env=self._env,
+                    cwd=case,
+                    timeout=timeout,
+                    check=False,
+                )
             except subprocess.TimeoutExpired:
                 raise OpenFOAMTimeoutError(
-                    utility, f"stopped after the engine's timeout of {self.timeout:g} s",
-                    _tail(log_path), self._log_ref(log_path)) from None
+                    utility,
+                    f"stopped after the engine's timeout of {self.timeout:g} s",
+                    _tail(log_path),
+                    self._log_ref(log_path),
+                ) from None
             except OSError as e:
                 raise OpenFOAMError(utility, f"could not start {exe} ({e})") from None
         seconds = time.perf_counter() - t0
         text = log_path.read_text(errors="replace")
         if proc.returncode != 0 or "FOAM FATAL" in text:
-            raise OpenFOAMError(utility, f"exit status {proc.returncode}", _tail(log_path),
-                                self._log_ref(log_path))
+            raise OpenFOAMError(
+                utility, f"exit status {proc.returncode}", _tail(log_path), self._log_ref(log_path)
+            )
         return seconds
 
     def _log_ref(self, log_path: Path) -> str:
@@ -961,12 +1015,14 @@ class OpenFOAMEngine:
                 if key in seen:
                     raise InputDataError(
                         f"openings {seen[key]} and {p.name} overlap at cell ({r}, {c}) on the "
-                        f"{p.opening.side} side")
+                        f"{p.opening.side} side"
+                    )
                 seen[key] = p.name
         return inlets, outlets
 
-    def _solve_in(self, case: Path, layout: Layout, v_in: float, sources: list[Source],
-                  src_cells: list[tuple[int, int]]) -> Solution:
+    def _solve_in(
+        self, case: Path, layout: Layout, v_in: float, sources: list[Source], src_cells: list[tuple[int, int]]
+    ) -> Solution:
         phys = self.physics
         g = layout.grid
         H, W = g.shape
@@ -984,17 +1040,19 @@ class OpenFOAMEngine:
         _write(case, "system/fvSchemes", "dictionary", _fv_schemes([]))
         _write(case, "system/fvSolution", "dictionary", _fv_solution())
         _write(case, "system/blockMeshDict", "dictionary", _block_mesh_dict(layout, depth))
-        _write(case, "system/topoSetDict.patches", "dictionary",
-               _topo_set_patches(layout, inlets + outlets, depth))
+        _write(
+            case,
+            "system/topoSetDict.patches",
+            "dictionary",
+            _topo_set_patches(layout, inlets + outlets, depth),
+        )
         _write(case, "system/createPatchDict", "dictionary", _create_patch_dict(inlets + outlets))
         _write(case, "system/topoSetDict.fluid", "dictionary", _topo_set_fluid(free_labels))
         t_mesh = self._run(case, "blockMesh")
-        t_mesh += self._run(case, "topoSet", ["-dict", "system/topoSetDict.patches"],
-                            "topoSet.patches")
+        t_mesh += self._run(case, "topoSet", ["-dict", "system/topoSetDict.patches"], "topoSet.patches")
         t_mesh += self._run(case, "createPatch", ["-overwrite"])
         if n_cells < free.size:
-            t_mesh += self._run(case, "topoSet", ["-dict", "system/topoSetDict.fluid"],
-                                "topoSet.fluid")
+            t_mesh += self._run(case, "topoSet", ["-dict", "system/topoSetDict.fluid"], "topoSet.fluid")
             t_mesh += self._run(case, "subsetMesh", ["fluid", "-patch", "walls", "-overwrite"])
         seconds["mesh"] = t_mesh
 
@@ -1002,20 +1060,34 @@ class OpenFOAMEngine:
         boundary = _read_boundary(mesh_dir / "boundary")
         for p in inlets + outlets:
             if boundary.get(p.name, (0, 0))[1] == 0:
-                raise OpenFOAMError("createPatch", f"patch {p.name} ({p.opening.to_dict()}) "
-                                    "got no boundary face", _tail(case / "log.createPatch"))
+                raise OpenFOAMError(
+                    "createPatch",
+                    f"patch {p.name} ({p.opening.to_dict()}) got no boundary face",
+                    _tail(case / "log.createPatch"),
+                )
         owner = _read_label_list(mesh_dir / "owner")
         n_mesh_cells = int(owner.max()) + 1 if owner.size else 0
         if n_mesh_cells != n_cells:
-            raise OpenFOAMError("subsetMesh", f"mesh has {n_mesh_cells} cells, expected "
-                                f"{n_cells} free cells", _tail(case / "log.subsetMesh"))
+            raise OpenFOAMError(
+                "subsetMesh",
+                f"mesh has {n_mesh_cells} cells, expected {n_cells} free cells",
+                _tail(case / "log.subsetMesh"),
+            )
         centres = _cell_centres(mesh_dir, owner)
         cols = np.floor(centres[:, 0] / res).astype(np.int64)
         rows = np.floor(centres[:, 1] / res).astype(np.int64)
-        if (rows.min() < 0 or cols.min() < 0 or rows.max() >= H or cols.max() >= W
-                or not np.array_equal(np.sort(rows * W + cols), free_labels)):
-            raise OpenFOAMError("subsetMesh", "the cells of the mesh are not the free cells of "
-                                "the layout", _tail(case / "log.subsetMesh"))
+        if (
+            rows.min() < 0
+            or cols.min() < 0
+            or rows.max() >= H
+            or cols.max() >= W
+            or not np.array_equal(np.sort(rows * W + cols), free_labels)
+        ):
+            raise OpenFOAMError(
+                "subsetMesh",
+                "the cells of the mesh are not the free cells of the layout",
+                _tail(case / "log.subsetMesh"),
+            )
 
         # ---- flow ------------------------------------------------------------------------
         states = []
@@ -1028,8 +1100,7 @@ class OpenFOAMEngine:
         _write(case, "constant/transportProperties", "dictionary", _transport_properties(phys))
         _write(case, "constant/turbulenceProperties", "dictionary", _turbulence_properties(phys))
         if self.n_procs > 1:
-            _write(case, "system/decomposeParDict", "dictionary",
-                   _decompose_par_dict(self.n_procs, W >= H))
+            _write(case, "system/decomposeParDict", "dictionary", _decompose_par_dict(self.n_procs, W >= H))
             t_flow = self._run(case, "decomposePar", ["-force"])
             t_flow += self._run(case, "simpleFoam", [], mpi=self.n_procs)
             t_flow += self._run(case, "reconstructPar", ["-latestTime"])
@@ -1056,7 +1127,9 @@ class OpenFOAMEngine:
                 f"OpenFOAM simpleFoam did not reach residuals {RESIDUAL_TARGET:g} within "
                 f"{self.max_iterations} SIMPLEC iterations for layout {layout.name!r} "
                 f"(worst: {worst[0]} {worst[1]:.3g}); raise max_iterations or pass "
-                "allow_unconverged=True", flow_info)
+                "allow_unconverged=True",
+                flow_info,
+            )
 
         U = _read_internal(tdir / "U", n_cells, 3)
         wind = np.zeros((2, H, W))
@@ -1068,13 +1141,19 @@ class OpenFOAMEngine:
             out[rows, cols] = _read_internal(tdir / name, n_cells)
             return out
 
-        flow = FlowField(wind=wind, k=to_grid("k"), epsilon=to_grid("epsilon"),
-                         nut=to_grid("nut"), pressure=to_grid("p"), info=flow_info)
+        flow = FlowField(
+            wind=wind,
+            k=to_grid("k"),
+            epsilon=to_grid("epsilon"),
+            nut=to_grid("nut"),
+            pressure=to_grid("p"),
+            info=flow_info,
+        )
 
         # boundary data for the mass balance
         def faces(p: _Patch) -> tuple[np.ndarray, np.ndarray]:
             start, n = boundary[p.name]
-            return owner[start:start + n], _read_patch_value(tdir / "phi", p.name, n)
+            return owner[start : start + n], _read_patch_value(tdir / "phi", p.name, n)
 
         out_faces = [faces(p) for p in outlets]
         in_faces = [faces(p) for p in inlets]
@@ -1091,42 +1170,52 @@ class OpenFOAMEngine:
             field = f"gas{n}"
             point = ((j + 0.5) * res, (i + 0.5) * res, 0.5 * depth)
             rate = src.release_rate / cell_volume  # g/(m^3 s)
-            (tdir / field).write_text(
-                _foam_file("volScalarField", field, _gas_field(inlets, outlets), tname))
+            (tdir / field).write_text(_foam_file("volScalarField", field, _gas_field(inlets, outlets), tname))
             _write(case, "system/fvSchemes", "dictionary", _fv_schemes([field]))
-            _write(case, "system/controlDict", "dictionary", _control_dict(
-                self.max_iterations, _gas_functions(field, point, rate, phys,
-                                                    self.gas_correctors)))
-            t_gas = self._run(case, "simpleFoam", ["-postProcess", "-latestTime"],
-                              f"gas{n}")
+            _write(
+                case,
+                "system/controlDict",
+                "dictionary",
+                _control_dict(
+                    self.max_iterations, _gas_functions(field, point, rate, phys, self.gas_correctors)
+                ),
+            )
+            t_gas = self._run(case, "simpleFoam", ["-postProcess", "-latestTime"], f"gas{n}")
             gas_seconds.append(t_gas)
             gas_log = (case / f"log.gas{n}").read_text(errors="replace")
             c = _read_internal(tdir / field, n_cells)
             if not np.isfinite(c).all():
-                raise OpenFOAMError("simpleFoam -postProcess", f"gas field {field} is not finite",
-                                    _tail(case / f"log.gas{n}"),
-                                    self._log_ref(case / f"log.gas{n}"))
+                raise OpenFOAMError(
+                    "simpleFoam -postProcess",
+                    f"gas field {field} is not finite",
+                    _tail(case / f"log.gas{n}"),
+                    self._log_ref(case / f"log.gas{n}"),
+                )
             out_flux = sum(float(np.sum(phi * c[cells])) for cells, phi in out_faces)
             d_in = [phys.D_m + nut / phys.Sc_t for nut in nut_in]
-            inlet_loss = sum(float(np.sum(d * c[cells] / (0.5 * res) * face_area))
-                             for (cells, _), d in zip(in_faces, d_in, strict=True))
+            inlet_loss = sum(
+                float(np.sum(d * c[cells] / (0.5 * res) * face_area))
+                for (cells, _), d in zip(in_faces, d_in, strict=True)
+            )
             ratio = out_flux / src.release_rate
             ratios.append(ratio)
             conc = np.zeros((H, W))
             conc[rows, cols] = c * phys.ppm_per_gm3
             gas_facts = _gas_log_facts(gas_log, field)
-            gas_info.append({
-                **gas_facts,
-                "converged": gas_facts.get("last_initial_residual", 1.0) <= GAS_RESIDUAL_OK,
-                "outlet_flux_gps": out_flux,
-                "outlet_flux_ratio": ratio,
-                "inlet_diffusive_loss_ratio": inlet_loss / src.release_rate,
-                "total_out_ratio": (out_flux + inlet_loss) / src.release_rate,
-                "min_raw_ppm": float(conc[rows, cols].min()) if n_cells else 0.0,
-                "source_cell": (i, j),
-                "source_gm3s": rate,
-                "seconds": t_gas,
-            })
+            gas_info.append(
+                {
+                    **gas_facts,
+                    "converged": gas_facts.get("last_initial_residual", 1.0) <= GAS_RESIDUAL_OK,
+                    "outlet_flux_gps": out_flux,
+                    "outlet_flux_ratio": ratio,
+                    "inlet_diffusive_loss_ratio": inlet_loss / src.release_rate,
+                    "total_out_ratio": (out_flux + inlet_loss) / src.release_rate,
+                    "min_raw_ppm": float(conc[rows, cols].min()) if n_cells else 0.0,
+                    "source_cell": (i, j),
+                    "source_gm3s": rate,
+                    "seconds": t_gas,
+                }
+            )
             concentrations.append(np.clip(conc, 0.0, None))
         seconds["gas"] = gas_seconds
 
@@ -1139,18 +1228,23 @@ class OpenFOAMEngine:
             "solver": f"openfoam-{_FOAM_VERSION_BANNER} simpleFoam kEpsilon + scalarTransport",
             "flow": flow_info,
             "gas": gas_info,
-            "iterations": {"flow": facts["iterations"],
-                           "gas": [gi.get("outer_iterations", 0) for gi in gas_info]},
+            "iterations": {
+                "flow": facts["iterations"],
+                "gas": [gi.get("outer_iterations", 0) for gi in gas_info],
+            },
             "converged": facts["converged"],
             "gas_converged": all(gi["converged"] for gi in gas_info),
-            "residuals": {"flow": facts["residuals"],
-                          "gas": [gi.get("last_initial_residual") for gi in gas_info]},
+            "residuals": {
+                "flow": facts["residuals"],
+                "gas": [gi.get("last_initial_residual") for gi in gas_info],
+            },
             "volume_flux_m3s": volume_flux,
             "n_procs": self.n_procs,
             "seconds": seconds,
         }
-        return Solution(flow=flow, sources=sources, concentrations=concentrations,
-                        outlet_flux_ratio=ratios, info=info)
+        return Solution(
+            flow=flow, sources=sources, concentrations=concentrations, outlet_flux_ratio=ratios, info=info
+        )
 
 
 register()

@@ -1,6 +1,6 @@
 """Candidate openings of a map from a wind field: where air comes in and goes out at the map's edge.
 
-At knowledge level ``map`` (:mod:`dgse.estimators.knowledge`) the inlets and
+At knowledge level ``map`` (:mod:`dgse.belief.knowledge`) the inlets and
 outlets are unknown, but a wind belief over the whole map (DGSE-S's mean wind,
 with the wind readings put in at their cells) says where air crosses the
 edge.  :func:`propose_openings` turns that into a few hypotheses:

@@ -1,6 +1,6 @@
 """A given mean wind field made into a flow the gas transport can use.
 
-Users with their own CFD (knowledge level ``wind``, :mod:`dgse.estimators.knowledge`)
+Users with their own CFD (knowledge level ``wind``, :mod:`dgse.belief.knowledge`)
 have a cell-centred mean wind on the map, often a 3-D flow sliced to 2-D:
 it does not conserve mass on the 2-D grid, and it comes without the
 turbulence fields the transport needs.  This module turns it into

@@ -49,11 +49,11 @@ from typing import Any
 
 import numpy as np
 
+from dgse.belief.estimator import Estimator
+from dgse.belief.knowledge import DEFAULT_LEVEL, check_level, require_level
 from dgse.errors import InputDataError
-from dgse.estimators.knowledge import DEFAULT_LEVEL, check_level, require_level
-from dgse.estimators.registry import Estimator
+from dgse.planning.planners import Planner
 from dgse.search.episode import DEFAULT_TIME_LIMIT, EpisodeResult, StepRecord
-from dgse.search.planners import Planner
 from dgse.search.robot import DEFAULT_DWELL, DEFAULT_SPEED
 from dgse.world.case import Case
 
@@ -209,7 +209,7 @@ def run_trials(
             built with: they are how a journal tells runs apart.
         restart: discard an existing journal instead of resuming it.
         knowledge: what the estimator is told about each case besides its readings
-            (:mod:`dgse.estimators.knowledge`); recorded in ``settings``.
+            (:mod:`dgse.belief.knowledge`); recorded in ``settings``.
 
     Returns:
         ``{"settings", "aggregate", "per_case"}``, JSON-ready.
@@ -221,9 +221,9 @@ def run_trials(
     """
     from dgse.estimators.registry import get_estimator
     from dgse.journal import Journal, case_fingerprint
+    from dgse.planning.planners import get_planner
     from dgse.search.episode import run_episode
     from dgse.search.metrics import aggregate, episode_metrics
-    from dgse.search.planners import get_planner
 
     _check_settings(trials, time_limit, speed, dwell, min_start_distance)
     level = check_level(knowledge)

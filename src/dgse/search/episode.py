@@ -4,7 +4,7 @@
 
 1. **sense**: dwell and read gas and wind at the robot's cell (:meth:`Robot.sense`);
 2. **estimate**: the estimator turns *all* readings so far into a belief
-   (:class:`~dgse.estimators.registry.StreamingEstimator`);
+   (:class:`~dgse.belief.estimator.StreamingEstimator`);
 3. **terminate?** ``planner.should_stop(belief, history)`` (the entropy test
    for the utility planner) ends the search;
 4. **plan**: ``planner.next_goal(...)`` picks the next cell (None ends the search);
@@ -21,7 +21,7 @@ when not even one measurement fitted), the search time (the clock at the
 end; ``time_limit`` after a timeout), the travelled distance, and per step
 (:class:`StepRecord`) the robot cell, time, readings, entropy, estimate,
 error, the computation time split into preprocessing / inference / planning
-and, with ``record=True``, the belief maps for :mod:`dgse.search.animate`
+and, with ``record=True``, the belief maps for :mod:`dgse.viz.search`
 (source posterior, wind mean, ``log(1 + c)`` mean), float32, block-averaged
 to at most ``record_max_cells`` cells.
 
@@ -54,12 +54,12 @@ from typing import Any
 
 import numpy as np
 
+from dgse.belief.belief import Belief
+from dgse.belief.estimator import Estimator, StreamingEstimator
+from dgse.belief.knowledge import DEFAULT_LEVEL, Knowledge
 from dgse.errors import InputDataError
-from dgse.estimators.belief import Belief
-from dgse.estimators.knowledge import DEFAULT_LEVEL, Knowledge
-from dgse.estimators.registry import Estimator, StreamingEstimator
-from dgse.search.paths import Cell, graph_for
-from dgse.search.planners import (
+from dgse.planning.paths import Cell, graph_for
+from dgse.planning.planners import (
     Planner,
     SearchHistory,
     declared_source,
@@ -171,7 +171,7 @@ class EpisodeResult:
         source_cell: the true source cell.
         start_cell: the robot's start cell.
         estimate_xy: the final estimate ``(x, y)``, m: the belief's posterior mean, or what
-            the planner declares at a deadline stop (:func:`~dgse.search.planners.declared_source`).
+            the planner declares at a deadline stop (:func:`~dgse.planning.planners.declared_source`).
         error_m: localization error of the final estimate, m.
         reason: one of :data:`REASONS`.
         search_time_s: the clock when the search ended (``time_limit_s`` after a timeout), s.
@@ -185,7 +185,7 @@ class EpisodeResult:
         resolution: the map's cell size, m.
         settings: the episode's settings (speed, dwell, flags, noise parameters, ...).
         end_errors_m: the error, m, of each point estimate of the final belief
-            (:func:`~dgse.search.planners.point_estimates`: mean, mode, disks), whatever the
+            (:func:`~dgse.planning.planners.point_estimates`: mean, mode, disks), whatever the
             episode declared; empty when it ended before any reading.
     """
 
@@ -333,8 +333,8 @@ def run_episode(
 
     Args:
         case: the true scenario.
-        estimator: any :class:`~dgse.estimators.registry.Estimator`.
-        planner: any :class:`~dgse.search.planners.Planner` (``reset()`` is called first).
+        estimator: any :class:`~dgse.belief.estimator.Estimator`.
+        planner: any :class:`~dgse.planning.planners.Planner` (``reset()`` is called first).
         start: the start cell; None draws one (connected to the source, at
             least ``min_start_distance`` m from it by path).
         rng: the episode's seed or generator (see the module docstring).
@@ -347,13 +347,13 @@ def run_episode(
         noise_model: Table I ranges of the noise parameters (default :class:`NoiseModel`).
         noise_params: fixed noise parameters instead of a draw (e.g. ``NoiseParams.zero()``).
         min_start_distance: see ``start``.
-        connectivity: 8 or 4 (:class:`~dgse.search.paths.FreeSpaceGraph`).
+        connectivity: 8 or 4 (:class:`~dgse.planning.paths.FreeSpaceGraph`).
         record_max_cells: recorded maps are block-averaged (the posterior
             block-summed) to at most this many cells.
         on_step: called with every step's record right after the step's
             decision (before the move); see :data:`StepCallback`.
         knowledge: what the estimator is told about ``case`` besides its readings
-            (:mod:`dgse.estimators.knowledge`: ``"map"``, ``"openings"``, ``"wind"``).
+            (:mod:`dgse.belief.knowledge`: ``"map"``, ``"openings"``, ``"wind"``).
 
     Returns:
         The :class:`EpisodeResult`.

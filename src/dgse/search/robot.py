@@ -2,7 +2,7 @@
 
 The robot lives on the free cells of ``case.occupancy`` and moves between
 cell centres along shortest obstacle-free paths
-(:class:`~dgse.search.paths.FreeSpaceGraph`, 8-connected, no corner cutting)
+(:class:`~dgse.planning.paths.FreeSpaceGraph`, 8-connected, no corner cutting)
 at a constant ``speed``.  It keeps one clock (s) that advances with
 
 * travel: each step of a path takes ``step length / speed``;
@@ -32,7 +32,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from dgse.errors import InputDataError
-from dgse.search.paths import Cell, FreeSpaceGraph, graph_for
+from dgse.planning.paths import Cell, FreeSpaceGraph, graph_for
 from dgse.sensing.noise import NoiseModel, NoiseParams
 from dgse.sensing.sensors import Observations, mean_free_concentration, measure
 from dgse.world.case import Case

@@ -18,8 +18,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
+from dgse.belief.belief import Belief
 from dgse.errors import InputDataError
-from dgse.estimators.belief import Belief
 from dgse.sensing.sensors import Observations
 from dgse.viz.case import SOURCE_STYLE as _CASE_SOURCE_STYLE
 from dgse.viz.case import _field_cmap, _log_ppm_ticks, _style_map_axes

@@ -112,9 +112,7 @@ def _style_map_axes(ax: Axes, title: str, width_m: float, height_m: float) -> No
         spine.set_linewidth(0.8)
 
 
-def _draw_occupancy(
-    ax: Axes, occupancy: np.ndarray, extent: tuple[float, float, float, float]
-) -> None:
+def _draw_occupancy(ax: Axes, occupancy: np.ndarray, extent: tuple[float, float, float, float]) -> None:
     ax.imshow(
         occupancy,
         cmap=_OCC_CMAP,
@@ -301,9 +299,7 @@ def plot_layout(layout: Layout, *, ax: Axes | None = None) -> Figure:
         else f"{n_in} inlet{'s' * (n_in > 1)}, {n_out} outlet{'s' * (n_out > 1)}"
     )
     free = 100.0 * float(layout.free.mean())
-    _style_map_axes(
-        a, f"{layout.name}: {W_m:g} x {H_m:g} m, {openings}, {free:.0f} % free", W_m, H_m
-    )
+    _style_map_axes(a, f"{layout.name}: {W_m:g} x {H_m:g} m, {openings}, {free:.0f} % free", W_m, H_m)
     _add_legend(fig, a, _layout_handles(with_source=False), own)
     return fig
 

@@ -204,9 +204,7 @@ def _float_key(
     try:
         v = float(meta[key])
     except (TypeError, ValueError):
-        raise InputDataError(
-            f"map YAML {path}: {key!r} must be a number, got {meta[key]!r}"
-        ) from None
+        raise InputDataError(f"map YAML {path}: {key!r} must be a number, got {meta[key]!r}") from None
     if not math.isfinite(v) or (lo is not None and v < lo) or (hi is not None and v > hi):
         raise InputDataError(f"map YAML {path}: {key!r} = {v} is out of range [{lo}, {hi}]")
     return v
@@ -279,9 +277,7 @@ def load_ros_map(
     try:
         ox, oy, *rest = (float(v) for v in origin)
     except (TypeError, ValueError):
-        raise InputDataError(
-            f"map YAML {path}: 'origin' must be [x, y, yaw] in m, got {origin!r}"
-        ) from None
+        raise InputDataError(f"map YAML {path}: 'origin' must be [x, y, yaw] in m, got {origin!r}") from None
     if len(rest) > 1 or not all(math.isfinite(v) for v in (ox, oy, *rest)):
         raise InputDataError(f"map YAML {path}: 'origin' must be [x, y, yaw] in m, got {origin!r}")
     if rest and abs(rest[0]) > 1e-9:
@@ -295,9 +291,7 @@ def load_ros_map(
     occ_th = _float_key(meta, "occupied_thresh", path, 0.65, 0.0, 1.0)
     free_th = _float_key(meta, "free_thresh", path, 0.196, 0.0, 1.0)
     if free_th > occ_th:
-        raise InputDataError(
-            f"map YAML {path}: free_thresh {free_th} is above occupied_thresh {occ_th}"
-        )
+        raise InputDataError(f"map YAML {path}: free_thresh {free_th} is above occupied_thresh {occ_th}")
     mode = str(meta.get("mode", "trinary")).lower()
     if mode not in _ROS_MODES:
         raise InputDataError(
@@ -400,9 +394,7 @@ def occupancy_rectangles(occupancy: np.ndarray) -> list[tuple[int, int, int, int
         runs: set[tuple[int, int]] = set()
         if i < H:
             d = np.diff(np.concatenate([[0], occ[i].astype(np.int8), [0]]))
-            runs = set(
-                zip(np.nonzero(d == 1)[0].tolist(), np.nonzero(d == -1)[0].tolist(), strict=True)
-            )
+            runs = set(zip(np.nonzero(d == 1)[0].tolist(), np.nonzero(d == -1)[0].tolist(), strict=True))
         for run in [r for r in active if r not in runs]:
             out.append((active.pop(run), i, run[0], run[1]))
         for run in runs:

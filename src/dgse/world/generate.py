@@ -99,9 +99,7 @@ def _cells_range(lo_m: float, hi_m: float, res: float, what: str) -> tuple[int, 
     lo = max(1, math.ceil(lo_m / res - _EPS))
     hi = math.floor(hi_m / res + _EPS)
     if hi < lo:
-        raise InputDataError(
-            f"{what} range ({lo_m}, {hi_m}) m holds no whole number of {res} m cells"
-        )
+        raise InputDataError(f"{what} range ({lo_m}, {hi_m}) m holds no whole number of {res} m cells")
     return lo, hi
 
 
@@ -734,9 +732,7 @@ def random_sources(
     return [((float(p[0]), float(p[1])), float(q)) for p, q in zip(xy, rates, strict=True)]
 
 
-def random_inlet_velocity(
-    rng: RngLike = None, velocity_range: tuple[float, float] = (0.5, 5.0)
-) -> float:
+def random_inlet_velocity(rng: RngLike = None, velocity_range: tuple[float, float] = (0.5, 5.0)) -> float:
     """Inlet speed ``v_in ~ U[velocity_range]`` in m/s (normal into the domain)."""
     lo, hi = _check_range(velocity_range, "velocity_range")
     return float(as_generator(rng).uniform(lo, hi))

@@ -44,9 +44,7 @@ def save_layout(layout: Layout, path: str | Path) -> Path:
     meta = {"kind": "layout", "name": layout.name, **layout.meta()}
     tmp = path.with_name(path.name + ".part")
     with open(tmp, "wb") as fh:
-        np.savez_compressed(
-            fh, occupancy=layout.occupancy.astype(np.uint8), meta=np.array(json.dumps(meta))
-        )
+        np.savez_compressed(fh, occupancy=layout.occupancy.astype(np.uint8), meta=np.array(json.dumps(meta)))
     tmp.replace(path)
     return path
 
@@ -124,9 +122,7 @@ def load_layout(path: str | Path) -> Layout:
             except (TypeError, ValueError):
                 ok = False
             if not ok:
-                raise InputDataError(
-                    f"{path}: meta {key}={meta[key]!r} does not match {n} cells of {res} m"
-                )
+                raise InputDataError(f"{path}: meta {key}={meta[key]!r} does not match {n} cells of {res} m")
     name = str(meta.get("layout") or meta.get("name") or path.stem)
     try:
         inlets = _openings(meta, "inlet")

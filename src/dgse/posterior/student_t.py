@@ -1,6 +1,6 @@
 """``log P(lo <= T <= hi)`` of a Student-t, for many intervals of one ``nu`` at once.
 
-The adjoint evidence (:mod:`dgse.localization.adjoint`) needs it for every candidate
+The adjoint evidence (:mod:`dgse.posterior.adjoint`) needs it for every candidate
 source, for five noise weights, every search step: SciPy's ``stdtr`` (an incomplete
 beta function per value) was most of the evidence's time.  All candidates of a step
 share ``nu``, so :func:`log_interval` interpolates ``log T_nu`` from a table made once

@@ -1,7 +1,7 @@
 """Planners: where the robot measures next, and when the search stops.
 
 A :class:`Planner` is asked once per search step, after the estimator has
-turned all readings so far into a :class:`~dgse.estimators.belief.Belief`:
+turned all readings so far into a :class:`~dgse.belief.belief.Belief`:
 
 1. ``should_stop(belief, history)``: the planner's termination test (for
    :class:`UtilityPlanner` the paper's entropy test); True ends the search;
@@ -39,7 +39,7 @@ what the paper leaves open:
   space, and in ppm^2 the term would swamp the others by orders of magnitude);
 * of a belief whose variance also holds a model error that readings do not
   shrink (``dgse-phys``), only the part readings can reduce enters
-  (:attr:`~dgse.estimators.belief.Belief.wind_var_reducible`): a variance that
+  (:attr:`~dgse.belief.belief.Belief.wind_var_reducible`): a variance that
   stays however often the robot measures says nothing about where to measure;
 * a belief without a wind or concentration variance (DGSE-O, most baselines)
   contributes 0 for that term;
@@ -73,10 +73,10 @@ from typing import Any, Literal, Protocol, runtime_checkable
 
 import numpy as np
 
+from dgse.belief.belief import Belief
 from dgse.errors import InputDataError, UnsupportedError
-from dgse.estimators.belief import Belief
 from dgse.options import check_options
-from dgse.search.paths import Cell, FreeSpaceGraph
+from dgse.planning.paths import Cell, FreeSpaceGraph
 from dgse.sensing.sensors import Observations
 
 __all__ = [
@@ -256,7 +256,7 @@ class UtilityPlanner:
         max_wind_misfit: None (no such test) or a number: the stop is held while the belief
             states a ``wind_misfit`` above it (``belief.info["wind_misfit"]``: how much of the
             wind readings the best flow hypothesis leaves unexplained, see
-            :func:`~dgse.estimators.phys.relative_wind_misfit`; a belief that states none is
+            :func:`~dgse.posterior.mixture.relative_wind_misfit`; a belief that states none is
             not held).  A posterior drawn on a flow that does not explain the wind can be
             sharp and wrong; the search goes on (the deadline still ends it) until the
             estimator finds a flow that does.
@@ -596,7 +596,7 @@ def stopped_by_deadline(planner: Planner, history: SearchHistory) -> bool:
 def declared_source(planner: Planner, belief: Belief, deadline: bool) -> tuple[float, float]:
     """The source ``(x, y)``, m, a search declares when it ends with ``belief``.
 
-    The belief's posterior mean (:meth:`~dgse.estimators.belief.Belief.source_estimate`),
+    The belief's posterior mean (:meth:`~dgse.belief.belief.Belief.source_estimate`),
     except at a deadline stop (``deadline``) of a :class:`UtilityPlanner` with
     ``deadline_estimate_radius_m``: there the centre of the free cell whose disk of that
     radius holds the most posterior mass, or with ``deadline_estimate="local"`` the

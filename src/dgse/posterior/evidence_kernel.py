@@ -1,6 +1,6 @@
 """Compiled weighted sums of the positive readings' evidence, one pass over the response rows.
 
-The evidence of a candidate source (:func:`dgse.localization.adjoint.adjoint_log_evidence`)
+The evidence of a candidate source (:func:`dgse.posterior.adjoint.adjoint_log_evidence`)
 needs, per noise-weight hypothesis ``kappa``, the sums ``sum_i w a_is^2``, ``sum_i w a_is z_i``,
 ``sum_i w z_i^2`` and ``sum_i log r_is`` over the positive readings ``i`` (``w = 1 / r^2``).
 Done with NumPy, the positive readings' rows are first copied out of the ``(m, N)`` responses,
@@ -18,7 +18,7 @@ keep only the sums:
   row could take them past ``1e250``: a few logarithms per candidate instead of one per reading.
 
 Pure functions of arrays; compiled on first use and cached on disk, like
-:mod:`dgse.localization.censored_kernel`.
+:mod:`dgse.posterior.censored_kernel`.
 """
 
 from __future__ import annotations

@@ -55,7 +55,14 @@ import numpy as np
 from dgse.errors import InputDataError
 from dgse.world.grid import Grid
 
-__all__ = ["CONC_SPACES", "Belief", "normalize_source_probs"]
+__all__ = [
+    "CONC_SPACES",
+    "Belief",
+    "log_moments_from_ppm",
+    "normalize_source_probs",
+    "probs_from_log",
+    "uniform_probs",
+]
 
 #: Tolerance on ``sum(source_probs) == 1``.
 PROB_TOL = 1e-6
@@ -312,3 +319,35 @@ class Belief:
         """``entropy() / max_entropy`` in [0, 1] (0 for a single candidate cell); the paper's ``eta`` test."""
         m = self.max_entropy
         return self.entropy() / m if m > 0 else 0.0
+
+
+def uniform_probs(occupancy: np.ndarray) -> np.ndarray:
+    """The uniform posterior over the free cells, ``float64 (H, W)``."""
+    occ = np.asarray(occupancy)
+    return normalize_source_probs((occ == 0).astype(np.float64), occ)
+
+
+def probs_from_log(log_p: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """``exp(log_p - max)`` normalized over ``free`` cells (``-inf`` allowed), 0 elsewhere."""
+    lp = np.where(free, np.asarray(log_p, dtype=np.float64), -np.inf)
+    top = lp.max()
+    if not np.isfinite(top):
+        raise InputDataError("the log posterior has no finite value on a free cell")
+    p = np.exp(lp - top)
+    return p / p.sum()
+
+
+def log_moments_from_ppm(
+    mean_ppm: np.ndarray, var_ppm: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Lognormal moment match of ``1 + c``: ppm mean/variance -> mean/variance of ``log(1 + c)``.
+
+    ``s2 = log(1 + v / (1 + m)^2)``, ``mu = log(1 + m) - s2 / 2`` (the mean is
+    clipped at 0 first), so ``Belief.conc_mean_ppm`` gives back ``m``.
+    """
+    m = np.maximum(np.asarray(mean_ppm, dtype=np.float64), 0.0)
+    if var_ppm is None:
+        return np.log1p(m), None
+    v = np.maximum(np.asarray(var_ppm, dtype=np.float64), 0.0)
+    s2 = np.log1p(v / (1.0 + m) ** 2)
+    return np.log1p(m) - 0.5 * s2, s2

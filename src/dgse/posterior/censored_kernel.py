@@ -1,4 +1,4 @@
-"""Compiled kernel of the censored readings' factor (:func:`dgse.localization.adjoint.censored_correction`).
+"""Compiled kernel of the censored readings' factor (:func:`dgse.posterior.adjoint.censored_correction`).
 
 The factor of each candidate source is a small two-dimensional quadrature (over the
 log noise precision and the release rate) whose nodes depend on the candidate: done

@@ -1,0 +1,372 @@
+r"""Mixing source posteriors over flow hypotheses, and the wind readings' likelihood of a flow.
+
+``p(s | z, w) = sum_h p(h | z, w) p(s | z, h)`` with ``p(h | z, w) ∝ p(w | h) p(z | h)``:
+:func:`mix_posteriors` weighs each hypothesis's adjoint evidence
+(:mod:`dgse.posterior.adjoint`) by its wind likelihood (:func:`wind_log_likelihood`)
+and its gas evidence; :func:`field_error_variance` is the model error added to the
+mixture's predicted fields.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from dgse.errors import InputDataError
+from dgse.posterior.adjoint import CENSORED_TAIL, AdjointResponseModel, FlowModel, censored_correction
+
+__all__ = [
+    "FlowHypothesis",
+    "censor_zeros",
+    "field_error_variance",
+    "fitted_wind_scale",
+    "flattened",
+    "gas_misfit",
+    "log_speed_priors",
+    "logsumexp",
+    "mix_posteriors",
+    "neighbour_correlation",
+    "predictive_sources",
+    "profile_wind_log_likelihood",
+    "relative_wind_misfit",
+    "same_noise_weights",
+    "speed_label",
+    "standardized_residuals",
+    "wind_log_likelihood",
+    "with_given",
+]
+
+
+@dataclass(eq=False)
+class FlowHypothesis:
+    """One flow the readings are explained with.
+
+    Attributes:
+        label: what it is (``"v_in 1.7 m/s"``, ``"given wind"``).
+        flow: the flow and its factorized transport (adjoint rows cached per sensor cell).
+        prior: prior weight (the hypotheses' priors sum to 1).
+    """
+
+    label: str
+    flow: FlowModel
+    prior: float = 1.0
+
+
+def speed_label(v: float) -> str:
+    return f"v_in {v:.3g} m/s"
+
+
+def log_speed_priors(hyps: list[FlowHypothesis]) -> list[FlowHypothesis]:
+    """The hypotheses sorted by inlet speed, with a log-uniform prior over the speed.
+
+    Each speed stands for the stretch of ``log v`` nearer to it than to the others (the
+    end points' stretches reach half as far out as their inner neighbour), so adding
+    speeds refines the quadrature of one prior instead of piling up weight where they
+    were added.
+    """
+    hs = sorted(hyps, key=lambda h: h.flow.inlet_velocity)
+    if len(hs) == 1:
+        return [FlowHypothesis(hs[0].label, hs[0].flow, 1.0)]
+    x = np.log([h.flow.inlet_velocity for h in hs])
+    mid = 0.5 * (x[1:] + x[:-1])
+    edges = np.concatenate([[x[0] - (mid[0] - x[0])], mid, [x[-1] + (x[-1] - mid[-1])]])
+    width = np.diff(edges)
+    width = width / width.sum()
+    return [FlowHypothesis(h.label, h.flow, float(w)) for h, w in zip(hs, width, strict=True)]
+
+
+def with_given(given: FlowHypothesis, prior: float, family: list[FlowHypothesis]) -> list[FlowHypothesis]:
+    """The given field's hypothesis (prior ``prior``) first, then ``family`` with the rest of
+    the prior in proportion to its own."""
+    rest = [FlowHypothesis(h.label, h.flow, (1.0 - prior) * h.prior) for h in family]
+    return [FlowHypothesis(given.label, given.flow, prior), *rest]
+
+
+def logsumexp(x: np.ndarray) -> float:
+    top = float(np.max(x))
+    return top + math.log(float(np.exp(x - top).sum())) if math.isfinite(top) else top
+
+
+def mix_posteriors(
+    log_evidence: Sequence[np.ndarray],
+    log_prior: Sequence[float] | np.ndarray,
+    hypothesis_temperature: float = 1.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(p(s | data), p(h | data))`` of a mixture over hypotheses ``h``.
+
+    Args:
+        log_evidence: per hypothesis, ``(N,)`` ``log p(data | s, h)`` up to one constant
+            shared by all hypotheses.
+        log_prior: ``(H,)`` log prior weights of the hypotheses (any data about ``h``
+            besides the gas, e.g. the wind readings' log likelihood, added in).
+        hypothesis_temperature: the hypotheses' log weights ``log p(data, h)`` are divided
+            by it (``> 1``: approximate hypotheses are compared less sharply).
+
+    With one hypothesis holding all the prior weight the result is that
+    hypothesis's own posterior.
+    """
+    L = [np.asarray(x, dtype=np.float64) for x in log_evidence]
+    if not L:
+        raise InputDataError("no flow hypotheses to mix")
+    n = L[0].size
+    lp = np.asarray(log_prior, dtype=np.float64)
+    if lp.shape != (len(L),):
+        raise InputDataError(f"{len(L)} hypotheses but {lp.size} prior weights")
+    log_z = (np.array([logsumexp(x) - math.log(n) for x in L]) + lp) / hypothesis_temperature
+    hw = np.exp(log_z - logsumexp(log_z))
+    post = np.zeros(n)
+    for w, x in zip(hw, L, strict=True):
+        if w > 0:
+            p = np.exp(x - x.max())
+            post += w * p / p.sum()
+    return post / post.sum(), hw
+
+
+#: A flow whose wind likelihood falls this many nats below the best flow's is not given the gas
+#: evidence (its weight would need the gas readings to favour it by as much; between inlet
+#: speeds of one layout they differ by a few nats, since concentrations scale as ``q / v_in``).
+WIND_HOPELESS_NATS = 30.0
+#: The given field's prior weight at knowledge ``wind`` (``given_wind_prior``); the built-in
+#: RANS flows of its openings share the rest.  Chosen on validation 900-923 (2026-11-29;
+#: ``python benchmarks/phys_robustness.py --seeds 900-923 --counts 50 150 --trials 2 --variants
+#: steady wind_smoothed wind_x2 wind_rotated filament --methods dgse-phys@wind -E
+#: given_wind_prior=P``, 48 estimates a cell, chance calibration error 0.043), 0.5 against 1 (the
+#: given field alone): mean SL error equal or lower in all 10 cells (smoothed field at 150
+#: readings 0.63 against 0.85 m, twice too fast 0.62 against 0.78 m), mean CE lower in 8 (0.02
+#: nats higher with filament readings, the true wind), calibration error with the smoothed field
+#: 0.028 against 0.085 at 50 readings; at 150 readings the perturbed fields' posteriors became
+#: too flat as the true wind's is (the truth's mean credible level 0.39-0.42, calibration error
+#: 0.07-0.10 against 0.055-0.065; the true wind 0.081 against 0.089).
+GIVEN_WIND_PRIOR = 0.5
+#: the noise-weight modes ``noise_weights="mixture"`` averages (the first one's evidence also
+#: gives the predictive fields)
+MIXED_NOISE_WEIGHTS = ("plug-in", "candidate")
+#: A hypothesis whose evidence bound falls this many nats below the best one's evidence is
+#: not corrected for the zero readings (its weight is below ``exp(-HOPELESS)`` either way).
+HOPELESS_NATS = 10.0
+#: The most of its own mass the zeros' correction of a weak hypothesis may leave out (:func:`censor_zeros`).
+CENSORED_TAIL_MAX = 0.5
+
+
+def censor_zeros(
+    log_ev: list[np.ndarray],
+    log_prior: Sequence[float],
+    details: Sequence[dict[str, Any]],
+    temp: float,
+    ranking: str | None = None,
+    tilt: bool = True,
+    hypothesis_temperature: float = 1.0,
+    memos: dict[int, dict[str, Any]] | None = None,
+) -> list[np.ndarray]:
+    """Add the zero readings' factor to each hypothesis's evidence, skipping hopeless ones.
+
+    The factor is at most ``(1/2)`` per zero, so ``evidence + ceiling`` bounds a hypothesis
+    from above; hypotheses are corrected best bound first, and one whose bound lies
+    ``HOPELESS_NATS`` below the best corrected hypothesis is left at its bound.  The others
+    are corrected to the mixture's precision: a hypothesis whose weight is at most ``w`` of
+    the best one's (its bound against the best corrected total, over the hypotheses'
+    temperature) leaves out at most ``CENSORED_TAIL / w`` of its own mass (at most
+    :data:`CENSORED_TAIL_MAX`), which is ``CENSORED_TAIL`` of the mixture's.
+
+    ``memos``: per hypothesis, the correction's memo of an earlier call with the same noise
+    weights (another noise-weight mode's, :func:`~dgse.posterior.adjoint.censored_correction`;
+    the caller checks the weights, :func:`same_noise_weights`): the factors computed there are
+    reused.
+    """
+    out = list(log_ev)
+    pending = [i for i, d in enumerate(details) if "censor" in d]
+    if not pending:
+        return out
+    ceiling = -math.log(2.0) * int(details[pending[0]]["censored"])
+
+    def total(i: int, x: np.ndarray) -> float:
+        return log_prior[i] + logsumexp(x / temp)
+
+    bounds = {i: total(i, log_ev[i] + ceiling) for i in pending}
+    best = -math.inf
+    for i in sorted(pending, key=lambda i: -bounds[i]):
+        if bounds[i] < best - HOPELESS_NATS:
+            out[i] = log_ev[i] + ceiling
+            continue
+        share = math.exp(min((bounds[i] - best) / hypothesis_temperature, 0.0))
+        tail = min(CENSORED_TAIL / share, CENSORED_TAIL_MAX)
+        memo = None if memos is None else memos.setdefault(i, {})
+        out[i] = log_ev[i] + censored_correction(
+            logl=log_ev[i], ranking=ranking, tilt=tilt, tail=tail, memo=memo, **details[i]["censor"]
+        )
+        best = max(best, total(i, out[i]))
+    return out
+
+
+def same_noise_weights(modes: Sequence[Sequence[tuple[Any, dict[str, Any]]]]) -> bool:
+    """Whether several noise-weight modes' evidence (``(rows, details)`` per hypothesis) leaves the
+    zeros' factor of every hypothesis the same noise weights (and so the same factors)."""
+    if len(modes) < 2:
+        return False
+    for per_mode in zip(*modes, strict=True):
+        cs = [d["censor"] for _A, d in per_mode if "censor" in d]
+        if 0 < len(cs) < len(per_mode):
+            return False
+        # the factor's inputs that depend on the weights: the zeros' weights and the positive
+        # readings' weighted sums
+        for c in cs[1:]:
+            pairs = [(c["r"], cs[0]["r"]), *zip(c["sums"], cs[0]["sums"], strict=True)]
+            if any(np.shape(a) != np.shape(b) or not np.array_equal(a, b) for a, b in pairs):
+                return False
+    return True
+
+
+def wind_log_likelihood(
+    predicted: np.ndarray, readings: np.ndarray, levels: Sequence[float], floor: float
+) -> float:
+    """``log p(readings | flow)``: isotropic noise ``sqrt((r |u|)^2 + floor^2)``, averaged over ``r``.
+
+    ``predicted``, ``readings``: ``(m, 2)`` winds at the reading cells, m/s.
+    """
+    u = np.asarray(predicted, dtype=np.float64)
+    w = np.asarray(readings, dtype=np.float64)
+    d2 = ((w - u) ** 2).sum(axis=1)
+    s2u = (u**2).sum(axis=1)
+    vals = []
+    for r in levels:
+        var = (r * r) * s2u + floor * floor
+        vals.append(float((-np.log(2.0 * math.pi * var) - 0.5 * d2 / var).sum()))
+    return logsumexp(np.array(vals)) - math.log(len(vals))
+
+
+def profile_wind_log_likelihood(
+    predicted: np.ndarray, readings: np.ndarray, readings_counted: float
+) -> float:
+    """``log p(readings | flow)`` with the residuals' variance unknown and maximized out, each
+    reading counting ``min(1, readings_counted / m)``: ``-(m' / 2) log(RSS / m)``, ``m' =
+    min(m, readings_counted)``, up to a constant shared by all flows.
+
+    Where no flow reproduces the readings to within the sensor noise (a flow of proposed
+    openings errs by far more), the sensor-noise likelihood (:func:`wind_log_likelihood`)
+    separates two flows that leave 41 % and 42 % of the wind unexplained by tens of nats on
+    hundreds of readings; this one by ``m' log(0.42 / 0.41)``: it tells a good flow from a
+    poor one, not one good flow from another.  ``predicted``, ``readings``: ``(m, 2)`` m/s.
+    """
+    u = np.asarray(predicted, dtype=np.float64)
+    w = np.asarray(readings, dtype=np.float64)
+    m = u.shape[0]
+    rss = float(((w - u) ** 2).sum()) / max(m, 1)
+    counted = min(float(m), float(readings_counted))
+    return -0.5 * counted * math.log(max(rss, 1e-12))
+
+
+def fitted_wind_scale(predicted: np.ndarray, readings: np.ndarray) -> float:
+    """The non-negative factor that best fits a flow's winds to the readings (least squares).
+
+    ``predicted``, ``readings``: ``(m, 2)`` winds at the reading cells, m/s.  1 where the flow
+    is still at every reading (no factor changes it).  At knowledge ``map`` each proposal is
+    solved at one inlet speed and scaled so.
+    """
+    u = np.asarray(predicted, dtype=np.float64)
+    uu = float((u * u).sum())
+    if uu <= 0:
+        return 1.0
+    return max(float((u * np.asarray(readings, dtype=np.float64)).sum()) / uu, 0.0)
+
+
+def relative_wind_misfit(predicted: np.ndarray, readings: np.ndarray) -> float:
+    """How much of the wind readings a flow leaves unexplained: ``sqrt(sum |w - u|^2 / sum |w|^2)``.
+
+    ``predicted``, ``readings``: ``(m, 2)`` winds at the reading cells, m/s.  0: the flow
+    reproduces every reading; 1: no better than a still room; inf: the readings are all zero
+    and the flow is not.
+    """
+    u = np.asarray(predicted, dtype=np.float64)
+    w = np.asarray(readings, dtype=np.float64)
+    num = float(((w - u) ** 2).sum())
+    den = float((w**2).sum())
+    if den > 0:
+        return math.sqrt(num / den)
+    return 0.0 if num == 0 else math.inf
+
+
+def field_error_variance(
+    wind_mean: np.ndarray, log_conc_mean: np.ndarray, params: Sequence[float]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Model-error variances of the predicted fields: ``(wind (H, W) per component, log(1 + c) (H, W))``.
+
+    ``params = (a, b, c, d)``: a wind component errs by ``sqrt((a |u|)^2 + b^2)`` m/s
+    (``|u|`` the predicted speed: a relative part, as a flow of the wrong shape misplaces
+    jets, and a floor), ``log(1 + c)`` by ``sqrt((c L)^2 + d^2)`` (``L`` its predicted
+    value: plumes are misplaced, clean air stays clean).  The spread between flow
+    hypotheses leaves this out: with one flow it is zero however wrong the flow is.
+    """
+    a, b, c, d = (float(v) for v in params)
+    speed2 = (np.asarray(wind_mean, dtype=np.float64) ** 2).sum(axis=0)
+    L = np.asarray(log_conc_mean, dtype=np.float64)
+    return a * a * speed2 + b * b, (c * L) ** 2 + d * d
+
+
+def standardized_residuals(mean: np.ndarray, readings: np.ndarray, model: AdjointResponseModel) -> np.ndarray:
+    """Gas ``readings`` (ppm) minus their predicted ``mean``, over ``model``'s noise
+    (``model.reading_sigma``)."""
+    mu = np.asarray(mean, dtype=np.float64)
+    sig = np.maximum(model.reading_sigma(mu), 1e-12)
+    return (np.asarray(readings, dtype=np.float64) - mu) / sig
+
+
+def gas_misfit(mean: np.ndarray, readings: np.ndarray, model: AdjointResponseModel) -> float:
+    """Mean squared standardized residual of gas ``readings`` (ppm) about their predicted
+    ``mean`` under ``model``'s noise (:func:`standardized_residuals`): about 1 where the
+    physics and the noise model explain the readings, more where they do not."""
+    return float(np.mean(standardized_residuals(mean, readings, model) ** 2))
+
+
+def neighbour_correlation(xy: np.ndarray, residuals: np.ndarray, radius: float) -> float:
+    """How alike the residuals of readings at most ``radius`` apart are: ``mean(r_i r_j)`` over
+    such pairs ``i < j`` (at different places) over ``mean(r^2)``.
+
+    About 0 where the residuals are independent noise, toward 1 where a model error shared
+    by neighbouring places makes them (a plume the physics puts in the wrong place), below
+    0 where neighbours disagree.  ``xy``: ``(m, 2)`` positions, ``radius`` in their unit.
+    0 when no such pair exists or every residual is 0.
+    """
+    p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    r = np.asarray(residuals, dtype=np.float64).reshape(-1)
+    if p.shape[0] != r.size:
+        raise InputDataError(f"{p.shape[0]} positions for {r.size} residuals")
+    scale = float(np.mean(r * r))
+    if r.size < 2 or not scale > 0:
+        return 0.0
+    d2 = ((p[:, None, :] - p[None, :, :]) ** 2).sum(axis=-1)
+    i, j = np.nonzero(np.triu((d2 <= radius * radius) & (d2 > 0), k=1))
+    if i.size == 0:
+        return 0.0
+    return float(np.mean(r[i] * r[j]) / scale)
+
+
+def flattened(probs: np.ndarray, tau: float) -> np.ndarray:
+    """``probs ** (1 / tau)``, normalized (zeros stay zero): the same mode, less sure."""
+    p = np.asarray(probs, dtype=np.float64)
+    lp = np.full(p.shape, -np.inf)
+    pos = p > 0
+    lp[pos] = np.log(p[pos]) / float(tau)
+    q = np.exp(lp - lp.max())
+    return q / q.sum()
+
+
+def predictive_sources(probs: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Up to ``k`` source cells (mesh indices) and weights that stand for the posterior ``probs``.
+
+    Systematic sampling, deterministic: the quantiles ``(i + 1/2) / k`` of the
+    posterior's cumulative sum in cell order; a cell drawn several times gets that
+    many shares.  Every part of the posterior that holds ``1/k`` of the mass is
+    represented, however flat it is, so the predictive's variance is the whole
+    posterior's (the ``k`` most probable cells alone would all sit at the mode and
+    hide a broad second region the planner should go and look at).
+    """
+    p = np.asarray(probs, dtype=np.float64)
+    k = max(1, int(k))
+    cdf = np.cumsum(p)
+    picks = np.searchsorted(cdf, (np.arange(k) + 0.5) / k * cdf[-1])
+    idx, counts = np.unique(np.minimum(picks, p.size - 1), return_counts=True)
+    return idx, counts / counts.sum()
