@@ -169,8 +169,10 @@ def tune(
     min_gain: float = MIN_GAIN,
 ) -> dict[str, Any]:
     """Run the grid search; returns the tuning document (see the module docstring)."""
+    from dgse.estimators.registry import ESTIMATORS
     from dgse.mapping import TUNING_FORMAT
-    from dgse.mapping.register import GDM_ESTIMATORS
+
+    GDM_ESTIMATORS = ESTIMATORS.names(tag="gdm")
 
     unknown = sorted(set(methods) - set(GDM_ESTIMATORS))
     if unknown:

@@ -258,9 +258,17 @@ def test_scenario_writes_cases_figures_and_a_summary(capsys, tmp_path):
     assert "outflux / q" in out and "random-2_src1" in out and "iterations" in out
 
 
+class _FakeFoam:
+    name = "fakefoam"
+
+    @classmethod
+    def unavailable(cls) -> str:
+        return "fakeFoam not on PATH"
+
+
 def test_engines_lists_builtin_and_reasons(capsys, monkeypatch):
-    monkeypatch.setitem(engines_mod._UNAVAILABLE, "fakefoam", "fakeFoam not on PATH")
-    monkeypatch.setattr("dgse.cli.main.KNOWN_ENGINES", ("builtin", "openfoam", "fakefoam"))
+    monkeypatch.setattr(engines_mod.ENGINES, "_entries", dict(engines_mod.ENGINES._entries))
+    engines_mod.ENGINES.register("fakefoam", _FakeFoam)
     code, out, _ = _run(capsys, "engines")
     assert code == 0
     assert "builtin" in out and "available" in out

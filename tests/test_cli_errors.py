@@ -63,7 +63,7 @@ def test_a_bug_prints_one_line_and_logs_the_traceback(capsys, monkeypatch, tmp_p
         raise RuntimeError("boom")
 
     monkeypatch.setenv("DGSE_LOG_DIR", str(tmp_path / "logs"))
-    monkeypatch.setattr(engines_mod, "engine_names", broken)
+    monkeypatch.setattr(engines_mod, "unavailable_engines", broken)
     code, out, err = _run(capsys, "engines")
     assert code == 1
     assert "Traceback" not in out + err

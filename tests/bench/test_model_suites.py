@@ -11,7 +11,7 @@ import pytest
 
 from dgse.bench import SUITES, run_suite
 from dgse.bench.core import load_manifests
-from dgse.errors import InputDataError
+from dgse.errors import UnsupportedError
 
 
 def _manifest(path: Path) -> dict:
@@ -85,6 +85,6 @@ def test_calibration_quick(bench_root: Path) -> None:
 
 
 def test_unknown_suite_is_a_clear_error(tmp_path: Path) -> None:
-    with pytest.raises(InputDataError, match="unknown suite"):
+    with pytest.raises(UnsupportedError, match="unknown suite 'nope'; known suites: variants, gdm"):
         run_suite("nope", tmp_path)
-    assert set(SUITES) == {"variants", "gdm", "gsl", "search", "samples", "calibration"}
+    assert SUITES.names() == ["variants", "gdm", "gsl", "search", "samples", "calibration"]

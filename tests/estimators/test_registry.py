@@ -31,10 +31,10 @@ class CountingEstimator(KnowledgeUser):
 
 @pytest.fixture
 def clean_registry():
-    saved = dict(registry._REGISTRY)
+    saved = dict(registry.ESTIMATORS._entries)
     yield
-    registry._REGISTRY.clear()
-    registry._REGISTRY.update(saved)
+    registry.ESTIMATORS._entries.clear()
+    registry.ESTIMATORS._entries.update(saved)
 
 
 def test_builtin_names_and_unknown_rejected():

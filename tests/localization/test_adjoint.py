@@ -297,7 +297,6 @@ def test_growing_responses_are_the_stacked_rows() -> None:
 
 
 def test_oracle_on_the_case_and_registry() -> None:
-    import dgse.localization.register  # noqa: F401
 
     case = channel_case()
     est = get_estimator("adjoint-oracle", knowledge=Knowledge.from_case(case, "wind"))

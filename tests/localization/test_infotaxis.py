@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 
-import dgse.localization.register  # noqa: F401  (registers infotaxis, entrotaxis)
 from dgse.belief.belief import Belief, normalize_source_probs
 from dgse.errors import InputDataError
 from dgse.localization.infotaxis import (

@@ -45,22 +45,13 @@ def _two_rooms() -> Layout:
     return Layout(occ, (Opening("west", 1.2, 1.8),), (Opening("east", 0.2, 0.8),), name="two_rooms")
 
 
-@pytest.fixture
-def isolated_registry(monkeypatch):
-    """Registry dictionaries that are restored after the test."""
-    monkeypatch.setattr(engines, "_FACTORIES", dict(engines._FACTORIES))
-    monkeypatch.setattr(engines, "_UNAVAILABLE", dict(engines._UNAVAILABLE))
-    # the openfoam module is already imported; do not depend on the other engines here
-    monkeypatch.setattr(engines, "_load_optional", lambda name=None: None)
-
-
 # --------------------------------------------------------------------------------------
-# registration (no OpenFOAM needed)
+# availability (no OpenFOAM needed)
 # --------------------------------------------------------------------------------------
-def test_missing_openfoam_gives_install_hint(monkeypatch, isolated_registry):
+def test_missing_openfoam_gives_install_hint(monkeypatch):
     monkeypatch.setattr(of.shutil, "which", lambda *a, **k: None)
     assert of.find_openfoam() is None
-    assert of.register() is False
+    assert of.OpenFOAMEngine.unavailable() is not None
     assert "openfoam" not in engines.engine_names()
     with pytest.raises(UnsupportedError, match=r"simpleFoam .*not found on PATH") as exc:
         engines.get_engine("openfoam")
@@ -69,13 +60,13 @@ def test_missing_openfoam_gives_install_hint(monkeypatch, isolated_registry):
         of.OpenFOAMEngine()
 
 
-def test_search_path_and_explicit_bin_dir(monkeypatch, tmp_path, isolated_registry):
+def test_search_path_and_explicit_bin_dir(monkeypatch, tmp_path):
     monkeypatch.setenv("PATH", str(tmp_path))
     monkeypatch.delenv(of.BIN_DIR_ENV, raising=False)
     monkeypatch.delenv("FOAM_APPBIN", raising=False)
     monkeypatch.setattr(of, "FALLBACK_BIN_DIRS", ())
     assert of.find_openfoam() is None
-    assert of.register() is False
+    assert of.OpenFOAMEngine.unavailable() is not None
     with pytest.raises(UnsupportedError, match="apt-get install openfoam"):
         engines.get_engine("openfoam")
     # fake executables in a directory named by DGSE_OPENFOAM_BIN
@@ -86,7 +77,7 @@ def test_search_path_and_explicit_bin_dir(monkeypatch, tmp_path, isolated_regist
         exe.chmod(0o755)
     monkeypatch.setenv(of.BIN_DIR_ENV, str(tmp_path / "bin"))
     assert of.find_openfoam() == str(tmp_path / "bin")
-    assert of.register() is True
+    assert of.OpenFOAMEngine.unavailable() is None
     assert "openfoam" in engines.engine_names()
     env = of.openfoam_environment(str(tmp_path / "bin"))
     assert env["PATH"].split(os.pathsep)[0] == str(tmp_path / "bin")

@@ -21,73 +21,83 @@ Suites (paper figure/table labels in brackets):
 
 from __future__ import annotations
 
-import importlib
 import os
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 
 from dgse.bench.core import BenchContext
-from dgse.errors import InputDataError
+from dgse.registry import Entry, Registry
 
-__all__ = ["SUITES", "SuiteInfo", "run_suite", "suite_names"]
-
-
-@dataclass(frozen=True)
-class SuiteInfo:
-    """A suite: its runner (``"module:function"``, imported on use), title and description."""
-
-    target: str
-    title: str
-    description: str
-
-    def runner(self) -> Callable[[BenchContext], None]:
-        mod, fn = self.target.split(":")
-        return getattr(importlib.import_module(mod), fn)
+__all__ = ["SUITES", "run_suite", "suite_names"]
 
 
-SUITES: dict[str, SuiteInfo] = {
-    "variants": SuiteInfo(
-        "dgse.bench.variants:run",
-        "DGSE variants (fig5)",
-        "DGSE-O, DGSE-P and DGSE-S on the test scenarios, 5 to 300 random observations: "
-        "wind and concentration RMSE and NLL, source-localization error and cross-entropy.",
-    ),
-    "gdm": SuiteInfo(
-        "dgse.bench.gdm:run",
-        "Gas distribution mapping (fig7, fig8, fig9)",
-        "DGSE-S against Kernel DM+V/W, G-GMRF, GW-GMRF and GaBP+: concentration RMSE and NLL in ppm "
-        "for 50 to 250 observations, maps for 100 observations, computation time.",
-    ),
-    "gsl": SuiteInfo(
-        "dgse.bench.gsl:run",
-        "Source localization from sparse observations (fig:gsl_only)",
-        "DGSE-S against the estimators of the field and the adjoint physics oracle, 50 random observations.",
-    ),
-    "search": SuiteInfo(
-        "dgse.bench.search:run",
-        "Active search (tab:active_search_results, fig:path_compare, de)",
-        "Closed-loop search with each method's planner on steady and filament readings, and DGSE-S "
-        "in out-of-domain layouts.",
-    ),
-    "samples": SuiteInfo(
-        "dgse.bench.samples:run",
-        "Monte Carlo samples: quality, latency, surrogate objective (App. B, App. C)",
-        "How K and T change DGSE-S's concentration NLL, source cross-entropy and latency, and the "
-        "Monte Carlo estimate of the original objective against the Jensen surrogate.",
-    ),
-    "calibration": SuiteInfo(
-        "dgse.bench.calibration:run",
-        "Calibration of the predicted uncertainty",
-        "Reliability diagrams and 1/2-sigma coverage of the wind and concentration fields, and the "
-        "expected calibration error of the source posterior.",
-    ),
-}
+#: The suites, in the order ``dgse bench all`` runs them; each entry's label is the suite's
+#: title and its description says what it measures.
+SUITES: Registry[Callable[[BenchContext], None]] = Registry(
+    "suite",
+    [
+        Entry(
+            "variants",
+            "dgse.bench.variants:run",
+            "DGSE variants (fig5)",
+            description=(
+                "DGSE-O, DGSE-P and DGSE-S on the test scenarios, 5 to 300 random observations: wind "
+                "and concentration RMSE and NLL, source-localization error and cross-entropy."
+            ),
+        ),
+        Entry(
+            "gdm",
+            "dgse.bench.gdm:run",
+            "Gas distribution mapping (fig7, fig8, fig9)",
+            description=(
+                "DGSE-S against Kernel DM+V/W, G-GMRF, GW-GMRF and GaBP+: concentration RMSE and NLL "
+                "in ppm for 50 to 250 observations, maps for 100 observations, computation time."
+            ),
+        ),
+        Entry(
+            "gsl",
+            "dgse.bench.gsl:run",
+            "Source localization from sparse observations (fig:gsl_only)",
+            description=(
+                "DGSE-S against the estimators of the field and the adjoint physics oracle, 50 random"
+                " observations."
+            ),
+        ),
+        Entry(
+            "search",
+            "dgse.bench.search:run",
+            "Active search (tab:active_search_results, fig:path_compare, de)",
+            description=(
+                "Closed-loop search with each method's planner on steady and filament readings, and "
+                "DGSE-S in out-of-domain layouts."
+            ),
+        ),
+        Entry(
+            "samples",
+            "dgse.bench.samples:run",
+            "Monte Carlo samples: quality, latency, surrogate objective (App. B, App. C)",
+            description=(
+                "How K and T change DGSE-S's concentration NLL, source cross-entropy and latency, and"
+                " the Monte Carlo estimate of the original objective against the Jensen surrogate."
+            ),
+        ),
+        Entry(
+            "calibration",
+            "dgse.bench.calibration:run",
+            "Calibration of the predicted uncertainty",
+            description=(
+                "Reliability diagrams and 1/2-sigma coverage of the wind and concentration fields, "
+                "and the expected calibration error of the source posterior."
+            ),
+        ),
+    ],
+    ordered=True,
+)
 
 
 def suite_names() -> list[str]:
     """The suites in the order ``dgse bench all`` runs them."""
-    return list(SUITES)
+    return SUITES.names()
 
 
 def run_suite(
@@ -106,9 +116,7 @@ def run_suite(
     ``knowledge``: what every method is told besides its readings (methods that do
     not work at that level are left out, and the manifest says so).
     """
-    if name not in SUITES:
-        raise InputDataError(f"unknown suite {name!r}; the suites are: {', '.join(SUITES)}")
-    info = SUITES[name]
+    info = SUITES.entry(name)
     ctx = BenchContext(
         name,
         out,
@@ -118,8 +126,8 @@ def run_suite(
         knowledge=knowledge,
         progress=progress,
         command=command,
-        title=info.title,
+        title=info.display,
         description=info.description,
     )
-    info.runner()(ctx)
+    SUITES.factory(name)(ctx)
     return ctx.finish()

@@ -11,30 +11,18 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 from matplotlib.figure import Figure
 
-__all__ = ["METHOD_STYLE", "curves_vs_observations", "seconds_bars", "style_of"]
-
-#: Colours and markers per method, so every figure shows a method alike.
-METHOD_STYLE: dict[str, dict[str, Any]] = {
-    "dgse-s": {"color": "#d62728", "marker": "o", "label": "DGSE-S"},
-    "dgse-phys": {"color": "#000080", "marker": "p", "label": "DGSE-phys"},
-    "dgse-p": {"color": "#1f77b4", "marker": "s", "label": "DGSE-P"},
-    "dgse-o": {"color": "#2ca02c", "marker": "^", "label": "DGSE-O"},
-    "kdmvw": {"color": "#9467bd", "marker": "v", "label": "KDM+V/W"},
-    "kdmv": {"color": "#c5b0d5", "marker": "v", "label": "KDM+V"},
-    "ggmrf": {"color": "#17a2b8", "marker": "s", "label": "G-GMRF"},
-    "gwgmrf": {"color": "#6b8e23", "marker": "^", "label": "GW-GMRF"},
-    "gabp": {"color": "#ff7f0e", "marker": "D", "label": "GaBP+"},
-    "dualmode": {"color": "#8c564b", "marker": "P", "label": "Dual-mode PF"},
-    "pmfs": {"color": "#e377c2", "marker": "X", "label": "PMFS"},
-    "grgsl": {"color": "#bcbd22", "marker": "h", "label": "GrGSL"},
-    "adjoint": {"color": "#17becf", "marker": "*", "label": "Adjoint (est. wind)"},
-    "adjoint-oracle": {"color": "#7f7f7f", "marker": "*", "label": "Adjoint oracle (true wind)"},
-}
+__all__ = ["curves_vs_observations", "seconds_bars", "style_of"]
 
 
 def style_of(method: str) -> dict[str, Any]:
-    """Plot style of ``method`` (a grey default for methods without one)."""
-    return METHOD_STYLE.get(method, {"color": None, "marker": "x", "label": method})
+    """Colour, marker and label of ``method`` in every figure (its registry entry,
+    :data:`dgse.estimators.registry.ESTIMATORS`; a grey cross for names it does not know)."""
+    from dgse.estimators.registry import ESTIMATORS
+
+    if method not in ESTIMATORS:
+        return {"color": None, "marker": "x", "label": method}
+    e = ESTIMATORS.entry(method)
+    return {"color": e.color, "marker": e.marker, "label": e.display}
 
 
 def curves_vs_observations(

@@ -76,7 +76,9 @@ def bench_cmd(
         torch.set_num_threads(threads)
     for name in names:
         t0 = time.perf_counter()
-        console.print(f"[bold]{escape(name)}[/]: {escape(SUITES[name].title)}{' (quick)' if quick else ''}")
+        console.print(
+            f"[bold]{escape(name)}[/]: {escape(SUITES.entry(name).display)}{' (quick)' if quick else ''}"
+        )
         manifest = run_suite(
             name, out, quick=quick, data=data, seed=seed, knowledge=knowledge, progress=progress
         )

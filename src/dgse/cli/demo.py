@@ -100,7 +100,7 @@ def demo_cmd(
         raise InputDataError(f"--threads must be at least 1, got {threads}")
     import torch
 
-    from dgse.estimators.registry import estimator_accepts, get_estimator
+    from dgse.estimators.registry import ESTIMATORS, get_estimator
     from dgse.physics.scenario import random_cases
     from dgse.planning.planners import get_planner
     from dgse.search.episode import run_episode
@@ -113,11 +113,11 @@ def demo_cmd(
     seed = secrets.randbelow(2**31) if seed is None else seed
     t0 = time.perf_counter()
     kwargs: dict[str, Any] = {}
-    if estimator_accepts(method, "model"):
+    if ESTIMATORS.accepts(method, "model"):
         kwargs["model"] = model
     elif model != "default":
         raise InputDataError(f"--model applies to the DGSE networks, not to {method}")
-    if estimator_accepts(method, "dtype") and estimator_accepts(method, "channels_last"):
+    if ESTIMATORS.accepts(method, "dtype") and ESTIMATORS.accepts(method, "channels_last"):
         # bf16 + channels-last where the CPU has native bf16 (the same estimates as float32 on
         # the reference cases, ~2.5x faster there); float32 elsewhere, where bf16 is emulated
         kwargs.update(dtype="auto", channels_last=True)

@@ -60,8 +60,6 @@ from dgse.world.layout import Layout, Opening
 
 __all__ = ["app", "main"]
 
-#: Engines the CLI reports on even when they are not registered.
-KNOWN_ENGINES = ("builtin", "openfoam")
 app = new_app(
     "dgse",
     "Indoor gas leaks: scenarios, a RANS + gas transport solver, datasets, estimators, search.",
@@ -549,20 +547,18 @@ app.command("scenario", help=_SCENARIO_HELP)(scenario_cmd)
 @app.command("engines")
 def engines_cmd() -> None:
     """List the physics engines and why unavailable ones are missing."""
-    from dgse.physics.engines import engine_names, unavailable_engines
+    from dgse.physics.engines import ENGINES, unavailable_engines
 
-    available = engine_names()
     missing = unavailable_engines()
     table = Table(title="physics engines", title_justify="left", box=box.SIMPLE_HEAD)
     table.add_column("engine", style="bold")
     table.add_column("status")
     table.add_column("notes")
-    for name in sorted(set(available) | set(KNOWN_ENGINES)):
-        if name in available:
-            note = "default" if name == "builtin" else ""
-            table.add_row(name, "[green]available[/]", note)
+    for name in ENGINES.names():
+        if name not in missing:
+            table.add_row(name, "[green]available[/]", escape(ENGINES.entry(name).description))
             continue
-        table.add_row(name, "[red]unavailable[/]", escape(missing.get(name, "")))
+        table.add_row(name, "[red]unavailable[/]", escape(missing[name]))
     console.print(table)
 
 

@@ -89,7 +89,7 @@ def _estimator_kwargs(
     ``model``, ``K``, ``T``, ``device``, ``dtype``); given to one that does not,
     they are an error that names the options it takes.
     """
-    from dgse.estimators.registry import estimator_accepts, estimator_names
+    from dgse.estimators.registry import ESTIMATORS, estimator_names
 
     given = {"--model": ("model", model), "-K": ("K", k), "-T": ("T", t),
              "--device": ("device", device), "--dtype": ("dtype", dtype)}  # fmt: skip
@@ -100,7 +100,7 @@ def _estimator_kwargs(
     for flag, (key, v) in given.items():
         if v is None:
             continue
-        if method in estimator_names() and not estimator_accepts(method, key):
+        if method in estimator_names() and not ESTIMATORS.accepts(method, key):
             raise InputDataError(
                 f"{flag} does not apply to {method} (it takes no {key!r}); "
                 f"give {method}'s options as --param KEY=VALUE"

@@ -1,7 +1,7 @@
 """Source localization baselines: posteriors over the source cell and their planners.
 
 Estimators (each ``estimate(occupancy, resolution, observations) -> Belief``,
-registry names in brackets; :mod:`dgse.localization.register` registers them):
+registry names in brackets, :data:`dgse.estimators.registry.ESTIMATORS`):
 
 =========================  ===================================  ==========================================
 method                     module                               posterior from

@@ -14,7 +14,7 @@ import numpy as np
 
 from dgse.errors import ConvergenceError, InputDataError
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
-from dgse.physics.engines import FlowField, Solution, Source, register_engine
+from dgse.physics.engines import FlowField, Solution, Source
 from dgse.physics.fv import Mesh, build_mesh
 from dgse.physics.rans import FlowSettings, FlowState, face_fluxes, scale_state, solve_flow
 from dgse.physics.transport import TransportSolver
@@ -89,6 +89,11 @@ class BuiltinEngine:
     physics: Physics = DEFAULT_PHYSICS
     name: str = "builtin"
 
+    @classmethod
+    def unavailable(cls) -> str | None:
+        """None: the built-in solver runs wherever DGSE is installed."""
+        return None
+
     def solve(self, layout: Layout, inlet_velocity: float, sources: Sequence[Source]) -> Solution:
         # check the sources before spending time on the flow
         grid = layout.grid
@@ -140,6 +145,3 @@ class BuiltinEngine:
 
 def _fmt(res: dict) -> str:
     return ", ".join(f"{k} {v:.1e}" for k, v in res.items())
-
-
-register_engine("builtin", BuiltinEngine)

@@ -3,19 +3,20 @@
 An engine takes a :class:`~dgse.world.layout.Layout`, an inlet velocity and
 a list of sources, and returns a :class:`Solution`: one steady flow field
 and one steady concentration field per source.  ``builtin`` is always
-there; optional engines (``openfoam``) register themselves when importable
-and usable, and :func:`get_engine` says clearly why one is missing.
+there; an optional one (``openfoam``) says why it cannot run here
+(``Engine.unavailable``), and :func:`get_engine` passes that on.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
 
 from dgse.errors import UnsupportedError
+from dgse.registry import Entry, Registry
 from dgse.world.layout import Layout
 
 
@@ -69,65 +70,56 @@ class Solution:
 
 
 class Engine(Protocol):
-    """A physics engine: ``solve(layout, inlet_velocity, sources) -> Solution``."""
+    """A physics engine: ``solve(layout, inlet_velocity, sources) -> Solution``.
+
+    ``unavailable()``, asked of the class before one is made, is None where the engine
+    can run and otherwise says why not (missing software, with the fix).
+    """
 
     name: str
+
+    @classmethod
+    def unavailable(cls) -> str | None: ...
 
     def solve(self, layout: Layout, inlet_velocity: float, sources: Sequence[Source]) -> Solution: ...
 
 
-_FACTORIES: dict[str, Callable[[], Engine]] = {}
-_UNAVAILABLE: dict[str, str] = {}
-
-
-def register_engine(name: str, factory: Callable[[], Engine]) -> None:
-    """Make ``factory`` available as engine ``name``."""
-    _FACTORIES[name] = factory
-    _UNAVAILABLE.pop(name, None)
-
-
-def mark_unavailable(name: str, reason: str) -> None:
-    """Record why a known engine cannot be used here (shown by :func:`get_engine`);
-    drops a registration made earlier (e.g. before the software went missing)."""
-    _FACTORIES.pop(name, None)
-    _UNAVAILABLE[name] = reason
+#: Every engine; packages add theirs through the ``dgse.engines`` entry-point group
+#: (:mod:`dgse.registry`).  Each module is imported only when its engine is asked for, so a
+#: process that solves with OpenFOAM never imports numba or the built-in solver.
+ENGINES: Registry[Engine] = Registry(
+    "engine",
+    [
+        Entry("builtin", "dgse.physics.builtin:BuiltinEngine", description="default"),
+        Entry("openfoam", "dgse.physics.openfoam:OpenFOAMEngine", description="OpenFOAM v1912"),
+    ],
+    group="dgse.engines",
+)
 
 
 def unavailable_engines() -> dict[str, str]:
-    """Known engines that cannot be used here, with the reason for each."""
-    _load_optional()
-    return dict(_UNAVAILABLE)
-
-
-#: the module that registers each built-in engine (imported on first use: a process that
-#: solves with one engine does not import the others)
-_MODULES = {"builtin": "dgse.physics.builtin", "openfoam": "dgse.physics.openfoam"}
-
-
-def _load_optional(name: str | None = None) -> None:
-    # Engines register themselves on import; optional ones mark themselves
-    # unavailable (with the reason) when their software is missing.
-    import importlib
-
-    for engine, module in _MODULES.items():
-        if name is None or name == engine:
-            importlib.import_module(module)
+    """Registered engines that cannot be used here, with the reason for each."""
+    out = {}
+    for name in ENGINES.names():
+        try:
+            reason = ENGINES.factory(name).unavailable()
+        except UnsupportedError as e:  # a plugin whose module cannot be imported
+            reason = str(e)
+        if reason:
+            out[name] = reason
+    return out
 
 
 def engine_names() -> list[str]:
     """Names of the engines usable on this machine."""
-    _load_optional()
-    return sorted(_FACTORIES)
+    missing = unavailable_engines()
+    return [n for n in ENGINES.names() if n not in missing]
 
 
 def get_engine(name: str = "builtin", **options) -> Engine:
     """The engine ``name``; raises :class:`UnsupportedError` saying why when unusable."""
-    if name not in _FACTORIES:
-        _load_optional(name if name in _MODULES else None)
-    if name in _FACTORIES:
-        return _FACTORIES[name](**options)
-    if name in _UNAVAILABLE:
-        raise UnsupportedError(f"engine {name!r} is not available: {_UNAVAILABLE[name]}")
-    raise UnsupportedError(
-        f"unknown engine {name!r}; known engines: {', '.join(sorted(_FACTORIES) + sorted(_UNAVAILABLE))}"
-    )
+    factory = ENGINES.factory(name)
+    reason = factory.unavailable()
+    if reason:
+        raise UnsupportedError(f"engine {name!r} is not available: {reason}")
+    return factory(**options)

@@ -32,9 +32,9 @@ convection terms use the cell-limited gradient (``grad(U)`` of the
 ``dev2`` stress term stays ``Gauss linear``; limiting it too moves the wind
 by 4-6 %), and the gas equation is not under-relaxed.
 
-Importing this module is cheap: it only looks for the executables
-(:func:`find_openfoam`, ``shutil.which``) and registers engine ``"openfoam"``,
-or records why it cannot (:func:`register`).
+Importing this module is cheap; :meth:`OpenFOAMEngine.unavailable` looks for the
+executables (:func:`find_openfoam`, ``shutil.which``) and says why the engine cannot
+run where they are missing.
 """
 
 from __future__ import annotations
@@ -53,7 +53,6 @@ from pathlib import Path
 import numpy as np
 
 from dgse.errors import ConvergenceError, DGSEError, InputDataError, UnsupportedError
-from dgse.physics import engines as _engines
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
 from dgse.physics.engines import FlowField, Solution, Source
 from dgse.world.layout import INWARD_NORMAL, Layout, Opening
@@ -67,7 +66,6 @@ __all__ = [
     "OpenFOAMTimeoutError",
     "find_openfoam",
     "openfoam_environment",
-    "register",
     "unavailable_reason",
 ]
 
@@ -182,20 +180,6 @@ def unavailable_reason() -> str:
         f"simpleFoam (with {others}) not found on PATH; {INSTALL_HINT}, "
         f"or set {BIN_DIR_ENV} to the directory of the OpenFOAM v1912 executables"
     )
-
-
-def register() -> bool:
-    """Register engine ``"openfoam"`` if the executables are found, else say why not.
-
-    Called once on import; call it again (e.g. after changing ``PATH``) to
-    re-evaluate.  Returns whether the engine is available.
-    """
-    bin_dir = find_openfoam()
-    if bin_dir is not None:
-        _engines.register_engine(ENGINE_NAME, OpenFOAMEngine)
-        return True
-    _engines.mark_unavailable(ENGINE_NAME, unavailable_reason())
-    return False
 
 
 # --------------------------------------------------------------------------------------
@@ -868,6 +852,11 @@ class OpenFOAMEngine:
 
     name = ENGINE_NAME
 
+    @classmethod
+    def unavailable(cls) -> str | None:
+        """None where the OpenFOAM executables are found, else why not and how to fix it."""
+        return None if find_openfoam() is not None else unavailable_reason()
+
     def __init__(
         self,
         n_procs: int = 1,
@@ -1245,6 +1234,3 @@ class OpenFOAMEngine:
         return Solution(
             flow=flow, sources=sources, concentrations=concentrations, outlet_flux_ratio=ratios, info=info
         )
-
-
-register()

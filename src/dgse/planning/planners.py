@@ -64,9 +64,7 @@ what the paper leaves open:
 
 from __future__ import annotations
 
-import importlib
 import math
-import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol, runtime_checkable
@@ -74,9 +72,9 @@ from typing import Any, Literal, Protocol, runtime_checkable
 import numpy as np
 
 from dgse.belief.belief import Belief
-from dgse.errors import InputDataError, UnsupportedError
-from dgse.options import check_options
+from dgse.errors import InputDataError
 from dgse.planning.paths import Cell, FreeSpaceGraph
+from dgse.registry import Entry, Registry
 from dgse.sensing.sensors import Observations
 
 __all__ = [
@@ -656,42 +654,30 @@ def point_estimates(belief: Belief) -> dict[str, tuple[float, float]]:
 # -- registry -------------------------------------------------------------------------
 PlannerFactory = Callable[..., Planner]
 
-_NAME = re.compile(r"^[a-z0-9][a-z0-9_.+-]*$")
-_REGISTRY: dict[str, PlannerFactory | str] = {
-    "utility": UtilityPlanner,
-    # the baselines' planners (dgse.localization)
-    "infotaxis": "dgse.localization.infotaxis:make_infotaxis",
-    "entrotaxis": "dgse.localization.infotaxis:make_entrotaxis",
-    "dualmode": "dgse.localization.particle_filter:DualModePlanner",
-    "pmfs": "dgse.localization.pmfs:PMFSPlanner",
-}
+#: Every planner: the paper's utility planner and the baselines' own (:mod:`dgse.localization`);
+#: packages add theirs through the ``dgse.planners`` entry-point group (:mod:`dgse.registry`).
+PLANNERS: Registry[Planner] = Registry(
+    "planner",
+    [
+        Entry("utility", UtilityPlanner),
+        Entry("infotaxis", "dgse.localization.infotaxis:make_infotaxis"),
+        Entry("entrotaxis", "dgse.localization.infotaxis:make_entrotaxis"),
+        Entry("dualmode", "dgse.localization.particle_filter:DualModePlanner"),
+        Entry("pmfs", "dgse.localization.pmfs:PMFSPlanner"),
+    ],
+    group="dgse.planners",
+)
 
 
-def register_planner(name: str, factory: PlannerFactory | str, *, replace: bool = False) -> None:
-    """Register ``factory`` under ``name``.
-
-    ``factory`` is a callable ``factory(**kwargs) -> Planner`` or a lazy
-    ``"module:function"`` (imported on first use).
-
-    Names are lower case (``[a-z0-9][a-z0-9_.+-]*``); a taken name raises
-    :class:`InputDataError` unless ``replace`` (re-registering the same factory is a no-op).
-    """
-    if not isinstance(name, str) or not _NAME.match(name):
-        raise InputDataError(f"invalid planner name {name!r} (lower case letters, digits, _ . + -)")
-    if isinstance(factory, str):
-        if ":" not in factory:
-            raise InputDataError(f"lazy factory must be 'module:function', got {factory!r}")
-    elif not callable(factory):
-        raise InputDataError(f"planner factory for {name!r} is not callable")
-    old = _REGISTRY.get(name)
-    if old is not None and old is not factory and old != factory and not replace:
-        raise InputDataError(f"planner {name!r} is already registered (pass replace=True)")
-    _REGISTRY[name] = factory
+def register_planner(name: str, factory: PlannerFactory | str, *, replace: bool = False, **meta: Any) -> None:
+    """Register ``factory`` (a callable ``factory(**kwargs) -> Planner`` or a lazy
+    ``"module:function"``) under ``name`` (:meth:`dgse.registry.Registry.register`)."""
+    PLANNERS.register(name, factory, replace=replace, **meta)
 
 
 def planner_names() -> list[str]:
-    """The registered planner names, sorted."""
-    return sorted(_REGISTRY)
+    """The registered planner names, sorted (plugins included)."""
+    return PLANNERS.names()
 
 
 def get_planner(name: str, **kwargs: Any) -> Planner:
@@ -702,17 +688,4 @@ def get_planner(name: str, **kwargs: Any) -> Planner:
             a planner whose module cannot be imported here.
         InputDataError: keyword arguments the planner does not take.
     """
-    if name not in _REGISTRY:
-        raise UnsupportedError(f"unknown planner {name!r}; known planners: {', '.join(planner_names())}")
-    entry = _REGISTRY[name]
-    if isinstance(entry, str):
-        module, _, attr = entry.partition(":")
-        try:
-            factory = getattr(importlib.import_module(module), attr)
-        except ImportError as e:
-            raise UnsupportedError(f"planner {name!r} cannot be loaded here: {e}") from e
-        if _REGISTRY.get(name) == entry:
-            _REGISTRY[name] = factory
-    else:
-        factory = entry
-    return factory(**check_options(f"planner {name!r}", factory, kwargs))
+    return PLANNERS.create(name, **kwargs)

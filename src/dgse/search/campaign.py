@@ -129,12 +129,12 @@ def estimator_options(
     that takes a ``seed`` option (the DGSE networks' sampling, PMFS's
     simulations).  ``options`` come first (they win over both).
     """
-    from dgse.estimators.registry import estimator_accepts
+    from dgse.estimators.registry import ESTIMATORS
 
     kw = dict(options or {})
     if model is not None:
         kw.setdefault("model", model)
-    if estimator_accepts(method, "seed"):
+    if ESTIMATORS.accepts(method, "seed"):
         kw.setdefault("seed", seed)
     return kw
 
