@@ -3,8 +3,8 @@
 Each scenario is a random office floor (:func:`dgse.world.building.random_office_floor`:
 corridors, rooms with doors, 2-4 inlets and outlets), a random inlet speed of the
 training range and one random source, solved with the built-in RANS and transport.
-The utility planner with ``search_planner("openings")`` and dgse-phys with
-``search_estimator("openings")`` (the settings chosen on the paper-size validation
+The utility planner with dgse-phys's search preset (``dgse.presets``) and dgse-phys with
+dgse-phys's search preset (``dgse.presets``) (the settings chosen on the paper-size validation
 scenarios; nothing was tuned on these floors) search each one with the openings known.
 Reported: success, error, search time (ST), distance (TD), and the computation per step
 against the map's size (the first estimate, which solves the flows, and the median step).
@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 from phys_search import write_result
 
-from dgse.estimators.phys import search_estimator, search_planner
+from dgse.presets import PRESETS
 from dgse.search.campaign import run_trials
 
 FIRST_SEED = 3000
@@ -114,8 +114,8 @@ def main() -> None:
     cases = make_cases(args.out, args.cases, args.resolution, tuple(args.size))
     stem = f"building{args.cases}_{args.resolution:g}m_dgse-phys_openings"
     stem += f"_{args.tag}" if args.tag else ""
-    planner = {"min_observations": 5, **search_planner("openings")}
-    estimator = search_estimator("openings")
+    planner = {"min_observations": 5, **PRESETS["dgse-phys"].planner_options_at("openings")}
+    estimator = PRESETS["dgse-phys"].estimator_options_at("openings", search=True)
     settings = {
         "cases_dir": str(cases),
         "resolution_m": args.resolution,

@@ -32,8 +32,8 @@ import numpy as np
 from phys_search import cases_dir, record_calls
 from scipy import special
 
-from dgse.estimators.phys import search_estimator
 from dgse.posterior import adjoint, censored_kernel
+from dgse.presets import PRESETS
 
 WAYS = {"gauss-hermite": math.inf, "default": adjoint.CENSORED_SCAN_MARGIN, "scan": -math.inf}
 
@@ -83,7 +83,9 @@ def main() -> None:
         help="episodes with the searches' estimator options (SEARCH_ESTIMATOR), not dgse-phys's defaults",
     )
     args = ap.parse_args()
-    options = search_estimator("openings") if args.search_estimator else {}
+    options = (
+        PRESETS["dgse-phys"].estimator_options_at("openings", search=True) if args.search_estimator else {}
+    )
     d = cases_dir(args.out / "phys_search", "test", args.cases)
     report = []
     rng = np.random.default_rng(0)

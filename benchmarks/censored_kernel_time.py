@@ -28,8 +28,8 @@ from typing import Any
 import numpy as np
 from phys_search import cases_dir, record_calls
 
-from dgse.estimators.phys import search_estimator
 from dgse.posterior import censored_kernel
+from dgse.presets import PRESETS
 
 
 def _replay(kernel: ModuleType, calls: list[tuple], repeats: int) -> tuple[float, list[np.ndarray]]:
@@ -76,7 +76,7 @@ def main() -> None:
     args = ap.parse_args()
     d = cases_dir(args.out / "phys_search", "test")
     path = d / f"test{args.case}_src0.npz"
-    options = search_estimator("openings")
+    options = PRESETS["dgse-phys"].estimator_options_at("openings", search=True)
     kept = record_calls(censored_kernel, "censored_log_factor", path, args.every, options)
     calls = [a for a, _ in kept]
     n = sum(c[0].shape[0] for c in calls)

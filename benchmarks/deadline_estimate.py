@@ -2,7 +2,7 @@
 
 For every episode of searches journaled with ``--steps`` (``benchmarks/phys_search.py``) that
 ended at its deadline, the final belief is rebuilt from the recorded readings (dgse-phys at
-``map`` with ``search_estimator("map")``, its opening proposals made from the readings' last power of
+``map`` with its search preset, its opening proposals made from the readings' last power of
 two, as in the search) and scored with several point estimates: the posterior mean (the
 paper's ``s_hat``, what searches declared), the mode, and the centre of the free cell whose
 disk of 0.5, 1 or 2 m holds the most posterior mass
@@ -25,8 +25,8 @@ from pathlib import Path
 import numpy as np
 from phys_search import journal_episodes, map_estimator_at_end, step_observations  # this folder's
 
-from dgse.estimators.phys import search_estimator
 from dgse.planning.planners import UtilityPlanner, declared_source
+from dgse.presets import PRESETS
 from dgse.world.case import Case
 
 RADII = (0.5, 1.0, 2.0)
@@ -35,7 +35,7 @@ SUCCESS_M = 2.0
 
 def episode_row(case: Case, row: dict) -> dict:
     obs = step_observations(row["steps"])
-    est = map_estimator_at_end(case, obs, **search_estimator("map"))
+    est = map_estimator_at_end(case, obs, **PRESETS["dgse-phys"].estimator_options_at("map", search=True))
     belief = est.estimate(case.occupancy, case.resolution, obs)
     sx, sy = (float(v) for v in case.source)
 

@@ -2,7 +2,7 @@
 
 For every episode of searches journaled with ``--steps`` (``benchmarks/phys_search.py``) that
 ended with a mass stop, the belief the stop saw is rebuilt from the recorded readings
-(dgse-phys at ``map`` with ``search_estimator("map")`` and the opening proposals the search held,
+(dgse-phys at ``map`` with its search preset and the opening proposals the search held,
 as ``benchmarks/deadline_estimate.py`` does; the rebuilt posterior mean must equal the
 journal's, checked) and the statistics a stop rule could hold on are recorded beside the
 stop's error:
@@ -39,9 +39,9 @@ from typing import Any
 import numpy as np
 from phys_search import journal_episodes, map_estimator_at_end, step_observations  # this folder's
 
-from dgse.estimators.phys import search_estimator
 from dgse.estimators.registry import get_estimator
 from dgse.planning.planners import mass_around, mass_within
+from dgse.presets import PRESETS
 from dgse.world.case import Case
 from dgse.world.grid import Grid
 
@@ -56,7 +56,7 @@ WEIGHTY = 0.01
 def stop_row(case: Case, row: dict[str, Any], network: Any) -> dict[str, Any]:
     """The statistics of the module doc for one episode's stop."""
     obs = step_observations(row["steps"])
-    est = map_estimator_at_end(case, obs, **search_estimator("map"))
+    est = map_estimator_at_end(case, obs, **PRESETS["dgse-phys"].estimator_options_at("map", search=True))
     belief = est.estimate(case.occupancy, case.resolution, obs)
     mx, my = belief.source_estimate()
     sx, sy = (float(v) for v in case.source)

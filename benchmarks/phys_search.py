@@ -63,7 +63,7 @@ from typing import Any
 from phys_robustness import VARIANTS as ROBUSTNESS_VARIANTS  # this folder's
 from phys_robustness import perturbed_wind
 
-from dgse.estimators.phys import SEARCH_PLANNER, SEARCH_PLANNER_AT_LEVEL, search_estimator
+from dgse.presets import PRESETS
 from dgse.search.campaign import json_safe, run_trials
 
 SETS = {
@@ -229,7 +229,7 @@ def record_calls(
     try:
         run_trials(
             path, "dgse-phys", "utility", trials=1, knowledge="openings",
-            planner_options={"min_observations": 5, **SEARCH_PLANNER},
+            planner_options={"min_observations": 5, **PRESETS["dgse-phys"].planner_options},
             estimator_options=estimator_options,
         )  # fmt: skip
     finally:
@@ -444,7 +444,11 @@ def main() -> None:
         cases = cases_dir(args.out, args.set, args.cases)
     stem = f"{set_name}_{args.method}_{args.knowledge}_{args.rule}" + (f"_{args.tag}" if args.tag else "")
     # dgse-phys searches as dgse demo runs them, unless -E says otherwise
-    est_opts = search_estimator(args.knowledge) if args.method == "dgse-phys" else {}
+    est_opts = (
+        PRESETS["dgse-phys"].estimator_options_at(args.knowledge, search=True)
+        if args.method == "dgse-phys"
+        else {}
+    )
     for item in args.estimator_option:
         key, sep, value = item.partition("=")
         if not sep:
@@ -458,7 +462,7 @@ def main() -> None:
         planner_opts[key] = json.loads(value)
     missing = {
         k: v
-        for k, v in SEARCH_PLANNER_AT_LEVEL.get(args.knowledge, {}).items()
+        for k, v in PRESETS["dgse-phys"].at_level.get(args.knowledge, {}).get("planner", {}).items()
         if args.method == "dgse-phys" and k not in planner_opts
     }
     if missing:  # kept out of the defaults: the recorded runs' commands must mean what they meant

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 from phys_search import cases_dir
 
-from dgse.estimators.phys import search_estimator, search_planner
+from dgse.presets import PRESETS
 from dgse.search.campaign import run_trials
 
 
@@ -39,8 +39,11 @@ def main() -> None:
             "dgse-phys",
             "utility",
             trials=1,
-            planner_options={"min_observations": 5, **search_planner(args.knowledge)},
-            estimator_options=search_estimator(args.knowledge),
+            planner_options={
+                "min_observations": 5,
+                **PRESETS["dgse-phys"].planner_options_at(args.knowledge),
+            },
+            estimator_options=PRESETS["dgse-phys"].estimator_options_at(args.knowledge, search=True),
             knowledge=args.knowledge,
             steps=True,
         )
@@ -61,7 +64,7 @@ def main() -> None:
     out = {
         "cores": os.cpu_count(),
         "load_average_at_end": os.getloadavg(),
-        "estimator_options": search_estimator(args.knowledge),
+        "estimator_options": PRESETS["dgse-phys"].estimator_options_at(args.knowledge, search=True),
         "knowledge": args.knowledge,
         "episodes": rows,
         # every step after each episode's first, pooled over the episodes

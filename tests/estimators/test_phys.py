@@ -14,10 +14,7 @@ from dgse.estimators.phys import (
     DEFAULT_EFFECTIVE_READINGS,
     LEARNED_FLOOR,
     MAP_TEMPERING,
-    SEARCH_ESTIMATOR,
     PhysicsGuidedEstimator,
-    search_estimator,
-    search_planner,
 )
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.evaluate import draw_observations
@@ -36,8 +33,20 @@ from dgse.posterior.mixture import (
     standardized_residuals,
     wind_log_likelihood,
 )
+from dgse.presets import PRESETS
 from dgse.sensing.sensors import Observations
 from tests.conftest import two_rooms
+
+PHYS = PRESETS["dgse-phys"]
+SEARCH_ESTIMATOR = dict(PHYS.search_estimator_options)
+
+
+def search_estimator(level: str) -> dict:
+    return PHYS.estimator_options_at(level, search=True)
+
+
+def search_planner(level: str) -> dict:
+    return PHYS.planner_options_at(level)
 
 
 @pytest.fixture(scope="module")

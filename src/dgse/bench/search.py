@@ -18,13 +18,11 @@ Methods (estimator + planner, registry names):
   5th reading on (``min_observations``: the networks never saw fewer);
 * **DGSE-phys** (``dgse-phys`` + ``utility``): the physics-guided estimator at the run's
   knowledge level with the planner settings chosen for it on the validation split
-  (:data:`dgse.estimators.phys.SEARCH_PLANNER`: a stop on 90 % of the posterior within 1 m
+  (its preset, :data:`dgse.presets.PRESETS`: a stop on 90 % of the posterior within 1 m
   instead of the entropy test, held until gas above the noise floor was read within 1 m of
-  the mode, a deadline stop, revisit damping; at ``map`` also
-  :data:`~dgse.estimators.phys.SEARCH_PLANNER_AT_LEVEL`: stops held while no flow explains the
+  the mode, a deadline stop, revisit damping; at ``map`` also stops held while no flow explains the
   wind, a deadline stop declaring the heaviest 1 m disk) and the estimator options
-  chosen with them (:data:`dgse.estimators.phys.SEARCH_ESTIMATOR`, at ``map`` also
-  :data:`~dgse.estimators.phys.SEARCH_ESTIMATOR_AT_LEVEL`: the gas evidence tempered as those
+  chosen with them (at ``map`` also the gas evidence tempered as those
   searches were measured);
 * **Dual-mode** (``dualmode`` + ``dualmode``): particle filter and the
   local/global information planner;
@@ -69,7 +67,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -77,19 +75,14 @@ import numpy as np
 
 from dgse.bench.core import BenchContext
 from dgse.bench.plots import plt
-from dgse.estimators.phys import (
-    SEARCH_ESTIMATOR,
-    SEARCH_ESTIMATOR_AT_LEVEL,
-    SEARCH_PLANNER,
-    SEARCH_PLANNER_AT_LEVEL,
-)
+from dgse.presets import DGSE_S_ETA, PRESETS, Preset
 from dgse.search.metrics import format_mean_std
 from dgse.sensing.sensors import MIN_SENSORS
 
-__all__ = ["ETA_OOD", "ETA_OOD_PAPER", "ETA_TUNED", "METHODS", "Method", "run"]
+__all__ = ["ETA_OOD", "ETA_OOD_PAPER", "ETA_TUNED", "METHODS", "run"]
 
-#: Entropy threshold of the shipped DGSE-S model (tuned on the validation split; src/dgse/cli/demo.py).
-ETA_TUNED = 0.78
+#: Entropy threshold of the shipped DGSE-S model (its preset's).
+ETA_TUNED = DGSE_S_ETA
 #: Out of domain: the tuned value + 0.1, as the paper raises its 0.65 to 0.75 (App. D).
 ETA_OOD = round(ETA_TUNED + 0.1, 2)
 #: The paper's out-of-domain value (its in-domain 0.65 + 0.1), also run.
@@ -102,58 +95,11 @@ PMFS_FULL = {"n_record": 50, "max_warmup": 100, "leaf_cells": 20}
 PMFS_QUICK = {"n_record": 10, "max_warmup": 20, "leaf_cells": 30}
 
 
-@dataclass(frozen=True)
-class Method:
-    """One compared method: an estimator and a planner with their options."""
-
-    key: str
-    label: str
-    estimator: str
-    planner: str
-    estimator_options: Mapping[str, Any] = field(default_factory=dict)
-    planner_options: Mapping[str, Any] = field(default_factory=dict)
-    color: str = "black"
-    #: what the planner adds at a knowledge level (``SEARCH_PLANNER_AT_LEVEL`` for dgse-phys)
-    level_planner_options: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
-    #: what the estimator adds at a knowledge level (``SEARCH_ESTIMATOR_AT_LEVEL`` for dgse-phys)
-    level_estimator_options: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
-
-    def planner_options_at(self, level: str) -> dict[str, Any]:
-        """The planner's options in a run at knowledge ``level``."""
-        return {**self.planner_options, **self.level_planner_options.get(level, {})}
-
-    def estimator_options_at(self, level: str) -> dict[str, Any]:
-        """The estimator's options in a run at knowledge ``level``."""
-        return {**self.estimator_options, **self.level_estimator_options.get(level, {})}
-
-
-#: The compared methods, in table order.
-METHODS: tuple[Method, ...] = (
-    Method(
-        "dgse-s",
-        "DGSE-S",
-        "dgse-s",
-        "utility",
-        {"model": "default", "dtype": "auto", "channels_last": True},
-        {"eta": ETA_TUNED, "min_observations": MIN_SENSORS},
-        "#d62728",
-    ),
-    Method(
-        "dgse-phys",
-        "DGSE-phys",
-        "dgse-phys",
-        "utility",
-        dict(SEARCH_ESTIMATOR),
-        {"min_observations": MIN_SENSORS, **SEARCH_PLANNER},
-        "#000080",
-        SEARCH_PLANNER_AT_LEVEL,
-        SEARCH_ESTIMATOR_AT_LEVEL,
-    ),
-    Method("dualmode", "Dual-mode", "dualmode", "dualmode", color="#8c564b"),
-    Method("grgsl", "GrGSL", "grgsl", "infotaxis", color="#2ca02c"),
-    Method("pmfs", "PMFS", "pmfs", "pmfs", color="#e377c2"),
-    Method("pf-infotaxis", "Infotaxis (PF)", "dualmode", "infotaxis", color="#1f77b4"),
+#: The compared methods (:data:`dgse.presets.PRESETS`), in table order.
+METHODS: tuple[Preset, ...] = tuple(
+    PRESETS[k] for k in ("dgse-s", "dgse-phys", "dualmode", "grgsl", "pmfs", "pf-infotaxis")
 )
+
 
 #: Scenario kinds of the in-domain comparison and their names in the tables.
 KINDS = (("test", "steady"), ("filament", "filament"))
@@ -232,7 +178,7 @@ def _read_piece(path: Path) -> Any | None:
 
 def _run_method(
     ctx: BenchContext,
-    method: Method,
+    method: Preset,
     kind: str,
     cases: list[tuple[Path, Any]],
     *,
@@ -260,10 +206,10 @@ def _run_method(
     est_kw = estimator_options(
         method.estimator,
         seed=ctx.seed,
-        options={**method.estimator_options_at(ctx.knowledge), **extra_options},
+        options={**method.estimator_options_at(ctx.knowledge, search=True), **extra_options},
     )
     base = {
-        "method": method.key,
+        "method": method.name,
         "trials": trials,
         "time_limit_s": time_limit,
         "seed": ctx.seed,
@@ -276,7 +222,7 @@ def _run_method(
     paths: dict[str, Any] = {}
     settings: dict[str, Any] = {}
     for i, (path, case) in enumerate(cases):
-        piece = ctx.out / "runs" / f"{method.key}_{kind}_{path.stem}.json"
+        piece = ctx.out / "runs" / f"{method.name}_{kind}_{path.stem}.json"
         plan = _jsonable({**base, "case": path.stem, "keep_path": i < keep_paths})
         got = _read_piece(piece)
         fresh = got is None or stored_plan(got) != plan
@@ -309,7 +255,7 @@ def _run_method(
                     time_limit=time_limit,
                     use_frames=use_frames,
                     record_first=keep_record is not None and i == 0,
-                    progress=_progress(ctx, f"{method.label} {kind}"),
+                    progress=_progress(ctx, f"{method.display} {kind}"),
                     on_episode=keep,
                     knowledge=ctx.knowledge,
                 )
@@ -335,7 +281,7 @@ def _run_method(
         "per_case": per_case,
         "paths": paths,
     }
-    ctx.save_json(f"run_{method.key}_{kind}", data)
+    ctx.save_json(f"run_{method.name}_{kind}", data)
     return _jsonable(data)
 
 
@@ -408,7 +354,7 @@ def _draw_map(ax: Any, case: Any) -> None:
 
 
 def _path_figure(
-    cases: Sequence[tuple[Path, Any]], runs: Mapping[str, Mapping[str, Any]], methods: Sequence[Method]
+    cases: Sequence[tuple[Path, Any]], runs: Mapping[str, Mapping[str, Any]], methods: Sequence[Preset]
 ) -> Any:
     from dgse.viz.case import SOURCE_STYLE
 
@@ -423,10 +369,10 @@ def _path_figure(
         for c, m in enumerate(methods):
             ax = axes[r, c]
             _draw_map(ax, case)
-            ep = runs[m.key].get("paths", {}).get(path.stem)
+            ep = runs[m.name].get("paths", {}).get(path.stem)
             if ep is not None and ep["trajectory"]:
                 t = np.asarray(ep["trajectory"], dtype=float)
-                ax.plot((t[:, 1] + 0.5) * res, (t[:, 0] + 0.5) * res, color=m.color, lw=1.2)
+                ax.plot((t[:, 1] + 0.5) * res, (t[:, 0] + 0.5) * res, color=m.colour, lw=1.2)
                 if ep["measurements"]:
                     mc = np.asarray(ep["measurements"], dtype=float)
                     ax.plot((mc[:, 1] + 0.5) * res, (mc[:, 0] + 0.5) * res, "o", ms=2.5, mfc="none",
@@ -435,7 +381,7 @@ def _path_figure(
                 ax.plot((s[1] + 0.5) * res, (s[0] + 0.5) * res, "s", ms=6, mfc="white", mec="black")
                 e = ep["estimate_xy"]
                 ax.plot(e[0], e[1], "X", ms=8, mfc="white", mec="black")
-                trial = runs[m.key]["per_case"]
+                trial = runs[m.name]["per_case"]
                 tr = next((x["trials"][0] for x in trial if Path(x["file"]).stem == path.stem), None)
                 if tr is not None:
                     ok = "success" if tr["metrics"]["success"] else "fail"
@@ -448,7 +394,7 @@ def _path_figure(
                 ax.text(0.5, 0.5, "no path", transform=ax.transAxes, ha="center")
             ax.plot(float(case.source[0]), float(case.source[1]), ls="none", **{**SOURCE_STYLE, "ms": 11})
             if r == 0:
-                ax.set_title(m.label, fontsize=9, color=m.color)
+                ax.set_title(m.display, fontsize=9, color=m.colour)
             if c == 0:
                 ax.set_ylabel(case.meta.get("layout", case.name), fontsize=8)
     from matplotlib.lines import Line2D
@@ -523,8 +469,8 @@ def run(ctx: BenchContext) -> None:
     record: dict[str, Any] = {}
     ledger: dict[str, tuple[str, int]] = {}
 
-    def run_method(m: Method, kind: str, cases: list[tuple[Path, Any]], **kw: Any) -> dict[str, Any]:
-        o = plan.overrides.get(m.key, {})
+    def run_method(m: Preset, kind: str, cases: list[tuple[Path, Any]], **kw: Any) -> dict[str, Any]:
+        o = plan.overrides.get(m.name, {})
         return _run_method(
             ctx,
             m,
@@ -533,10 +479,10 @@ def run(ctx: BenchContext) -> None:
             trials=int(o.get("trials", plan.trials)),
             time_limit=float(o.get("time_limit", plan.time_limit)),
             planner_options=kw.pop("planner_options", m.planner_options_at(ctx.knowledge)),
-            extra_options=plan.extra_options.get(m.key, {}),
+            extra_options=plan.extra_options.get(m.name, {}),
             use_frames=kind == "filament",
             keep_paths=2 if kind == "test" else 0,
-            keep_record=record if (m.key == dgse.key and kind == "test") else None,
+            keep_record=record if (m.name == dgse.name and kind == "test") else None,
             ledger=ledger,
             **kw,
         )
@@ -546,8 +492,8 @@ def run(ctx: BenchContext) -> None:
     runs: dict[str, dict[str, Any]] = {kind: {} for kind, _ in KINDS}  # kind -> method key -> run
     for kind, _ in KINDS:
         for m in methods:
-            n = int(plan.overrides.get(m.key, {}).get("scenarios", plan.n_compare))
-            runs[kind][m.key] = run_method(m, kind, compare[kind][:n])
+            n = int(plan.overrides.get(m.name, {}).get("scenarios", plan.n_compare))
+            runs[kind][m.name] = run_method(m, kind, compare[kind][:n])
     # 2. out of domain
     ood_cases = load_cases(ctx.scenarios(plan.n_ood, "ood"))
     ood_runs = {
@@ -604,7 +550,7 @@ def _caveat(plan: Plan) -> str:
 def _report_comparison(
     ctx: BenchContext,
     plan: Plan,
-    methods: Sequence[Method],
+    methods: Sequence[Preset],
     compare: Mapping[str, list[tuple[Path, Any]]],
     runs: Mapping[str, Mapping[str, Any]],
     summary: dict[str, Any],
@@ -636,15 +582,19 @@ def _report_comparison(
         rows = []
         for i, (path, case) in enumerate(compare[kind]):
             for m in methods:
-                pc = [c for c in runs[kind][m.key]["per_case"] if Path(c["file"]).stem == path.stem]
+                pc = [c for c in runs[kind][m.name]["per_case"] if Path(c["file"]).stem == path.stem]
                 if pc:
                     rows.append(
-                        {"scenario": f"{i + 1}: {_label(case)}", "method": m.label, **_row(pc[0]["metrics"])}
+                        {
+                            "scenario": f"{i + 1}: {_label(case)}",
+                            "method": m.display,
+                            **_row(pc[0]["metrics"]),
+                        }
                     )
         for m in methods:
-            agg = runs[kind][m.key]["aggregate"]
-            summary["comparison"].setdefault(kind, {})[m.key] = agg
-            rows.append({"scenario": "all", "method": m.label, **_row(agg)})
+            agg = runs[kind][m.name]["aggregate"]
+            summary["comparison"].setdefault(kind, {})[m.name] = agg
+            rows.append({"scenario": "all", "method": m.display, **_row(agg)})
         sec.table(
             f"search_{kname}",
             rows,
@@ -658,7 +608,7 @@ def _report_comparison(
 def _report_paths(
     ctx: BenchContext,
     plan: Plan,
-    methods: Sequence[Method],
+    methods: Sequence[Preset],
     cases: list[tuple[Path, Any]],
     runs: Mapping[str, Any],
 ) -> None:
@@ -786,9 +736,8 @@ def _report_process(
 
 
 def _level_extras(level: str) -> str:
-    """The report's words for what ``SEARCH_PLANNER_AT_LEVEL`` and ``SEARCH_ESTIMATOR_AT_LEVEL``
-    add at ``level`` ('' for nothing)."""
-    extra = {**SEARCH_ESTIMATOR_AT_LEVEL.get(level, {}), **SEARCH_PLANNER_AT_LEVEL.get(level, {})}
+    """The report's words for what dgse-phys's preset adds at ``level`` ('' for nothing)."""
+    extra = {k: v for part in PRESETS["dgse-phys"].at_level.get(level, {}).values() for k, v in part.items()}
     words = []
     if "effective_readings" in extra:
         words.append(f"the gas evidence counts at most {extra['effective_readings']:g} readings")
@@ -819,7 +768,9 @@ def _rerun_first(ctx: BenchContext, first: tuple[Path, Any], plan: Plan) -> tupl
     path, case = first
     est = get_estimator(
         m.estimator,
-        **estimator_options(m.estimator, seed=ctx.seed, options=m.estimator_options_at(ctx.knowledge)),
+        **estimator_options(
+            m.estimator, seed=ctx.seed, options=m.estimator_options_at(ctx.knowledge, search=True)
+        ),
     )
     result = run_episode(
         case,

@@ -3,7 +3,7 @@
 1. draw a random multi-room scenario of the training distribution and solve
    its flow and one gas release with the built-in solver;
 2. run one active search (paper Algorithm 1) with the method for the
-   knowledge given (``--knowledge``; :data:`DEMO_METHODS`: ``dgse-phys`` at
+   knowledge given (``--knowledge``; :data:`dgse.presets.DEFAULT_METHOD`: ``dgse-phys`` at
    every level) and the utility planner (its search settings for dgse-phys,
    the entropy test from the 5th reading on for a DGSE network given with
    ``--method``), the robot starting at least 2 m from the source, showing
@@ -18,7 +18,7 @@ import math
 import secrets
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.markup import escape
@@ -31,14 +31,7 @@ from dgse.errors import InputDataError
 if TYPE_CHECKING:
     from dgse.search.episode import StepRecord
 
-__all__ = ["DEMO_METHODS", "demo_cmd", "register", "step_text"]
-
-#: The demo's method per knowledge level: the one that found the most sources in searches on
-#: validation scenarios at that level (``python benchmarks/phys_search.py --set validation``; at
-#: ``map`` dgse-phys found 6 of 8, DGSE-S with its tuned entropy stop 4 of 8).
-DEMO_METHODS = {"map": "dgse-phys", "openings": "dgse-phys", "wind": "dgse-phys"}
-#: Entropy threshold of the shipped DGSE-S, tuned on the validation split (benchmarks/tune_eta.py).
-DGSE_S_ETA = 0.78
+__all__ = ["demo_cmd", "register", "step_text"]
 
 
 def _told(level: str) -> str:
@@ -88,12 +81,9 @@ def demo_cmd(
 ) -> None:
     """Solve a random scenario and find its gas source with the method for the knowledge given."""
     level = check_level(knowledge)
-    method = DEMO_METHODS[level] if method is None else method
     check_output_dir(out)
     if not (math.isfinite(time_limit) and time_limit > 0):
         raise InputDataError(f"--time-limit must be a positive number of seconds, got {time_limit:g}")
-    if eta is None:
-        eta = DGSE_S_ETA if method == "dgse-s" else None
     if eta is not None and not (math.isfinite(eta) and 0 < eta <= 1):
         raise InputDataError(f"--eta must be in (0, 1], got {eta:g}")
     if threads < 1:
@@ -103,41 +93,31 @@ def demo_cmd(
     from dgse.estimators.registry import ESTIMATORS, get_estimator
     from dgse.physics.scenario import random_cases
     from dgse.planning.planners import get_planner
+    from dgse.presets import resolve
     from dgse.search.episode import run_episode
     from dgse.search.metrics import episode_metrics
-    from dgse.sensing.sensors import MIN_SENSORS
     from dgse.viz.case import plot_case
     from dgse.viz.search import animate_episode, plot_search_step
 
     torch.set_num_threads(max(1, threads))
     seed = secrets.randbelow(2**31) if seed is None else seed
     t0 = time.perf_counter()
-    kwargs: dict[str, Any] = {}
-    if ESTIMATORS.accepts(method, "model"):
+    run = resolve(method, level, search=True, planner_options={} if eta is None else {"eta": eta})
+    kwargs = dict(run.estimator_options)
+    if ESTIMATORS.accepts(run.estimator, "model"):
         kwargs["model"] = model
     elif model != "default":
         raise InputDataError(f"--model applies to the DGSE networks, not to {method}")
-    if ESTIMATORS.accepts(method, "dtype") and ESTIMATORS.accepts(method, "channels_last"):
-        # bf16 + channels-last where the CPU has native bf16 (the same estimates as float32 on
-        # the reference cases, ~2.5x faster there); float32 elsewhere, where bf16 is emulated
-        kwargs.update(dtype="auto", channels_last=True)
-    search_settings = eta is None and method == "dgse-phys"  # the estimator and stop chosen for search
-    if search_settings:
-        from dgse.estimators.phys import search_estimator, search_planner
-
-        kwargs.update(search_estimator(level))
-    estimator = get_estimator(method, **kwargs)
+    estimator = get_estimator(run.estimator, **kwargs)
     require_level(estimator, method, level)
-    if search_settings:
-        planner = get_planner("utility", min_observations=MIN_SENSORS, **search_planner(level))
-        stop_at: float | str = (
-            f"{planner.mass_level:.0%} of the source posterior lies "
-            f"within {planner.mass_radius_m:g} m of its mode"
-        )
-    else:
-        options = {} if eta is None else {"eta": eta}
-        planner = get_planner("utility", min_observations=MIN_SENSORS, **options)
-        stop_at = float(planner.eta)
+    planner = get_planner(run.planner, **run.planner_options)
+    opts = run.planner_options
+    stop_at: float | str = (
+        f"{opts.get('mass_level', 0.9):.0%} of the source posterior lies within {opts['mass_radius_m']:g} m "
+        "of its mode"
+        if "mass_radius_m" in opts
+        else float(opts.get("eta", 0.65))
+    )
     with console.status("solving a random multi-room scenario (built-in RANS + gas transport)"):
         case = random_cases(seed, n_sources=1)[0]
     t_solve = time.perf_counter() - t0

@@ -145,17 +145,28 @@ def search_cmd(
         Path,
         typer.Argument(metavar="CASES_DIR_OR_CASE", help="A case file or a directory of case files."),
     ],
-    method: Annotated[str, typer.Option("--method", "-m", help="Estimator (registered name).")] = "dgse-s",
+    method: Annotated[
+        str | None,
+        typer.Option(
+            "--method",
+            "-m",
+            help="Method: a preset of dgse.presets or a registered estimator (default: dgse-phys). "
+            "A preset runs its estimator and planner with the options it was measured with.",
+        ),
+    ] = None,
     model: Annotated[
         str | None,
         typer.Option("--model", help="Network checkpoint, or 'default' (DGSE methods' default)."),
     ] = None,
-    planner: Annotated[str, typer.Option("--planner", help="Planner (registered name).")] = "utility",
+    planner: Annotated[
+        str | None,
+        typer.Option("--planner", help="Planner (registered name; default: the method's, with its options)."),
+    ] = None,
     trials: Annotated[int, typer.Option("--trials", "-r", help="Episodes per case.")] = 20,
     seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of the start cells and noise.")] = 0,
     eta: Annotated[
         float | None,
-        typer.Option("--eta", help="Entropy termination threshold (planner default: 0.65)."),
+        typer.Option("--eta", help="Entropy termination threshold of the utility planner (-P eta=...)."),
     ] = None,
     time_limit: Annotated[float, typer.Option("--time-limit", help="Time limit per episode, s.")] = 2000.0,
     frames: Annotated[
@@ -224,7 +235,8 @@ def search_cmd(
     """
     from dgse.estimators.registry import get_estimator
     from dgse.planning.planners import get_planner
-    from dgse.search.campaign import estimator_options, load_cases, run_trials
+    from dgse.presets import resolve
+    from dgse.search.campaign import estimator_options, json_safe, load_cases, run_trials
 
     level = check_level(knowledge)
     if trials < 1:
@@ -242,12 +254,17 @@ def search_cmd(
         torch.set_num_threads(threads)
 
     cases = load_cases(cases_path)
-    options = parse_params([*(option or []), *(param or [])], "--param")
-    est_kwargs = estimator_options(method, model=model, seed=seed, options=options)
-    plan_kwargs = parse_params(planner_option, "--planner-option")
+    user_est = parse_params([*(option or []), *(param or [])], "--param")
+    user_plan = parse_params(planner_option, "--planner-option")
     if eta is not None:
-        plan_kwargs["eta"] = eta
-    estimator = get_estimator(method, **est_kwargs)  # run_trials checks the knowledge level first
+        user_plan["eta"] = eta
+    run = resolve(method, level, search=True, planner=planner, planner_options=user_plan)
+    method, planner = run.method, run.planner
+    est_kwargs = estimator_options(
+        run.estimator, model=model, seed=seed, options={**run.estimator_options, **user_est}
+    )
+    plan_kwargs = run.planner_options
+    estimator = get_estimator(run.estimator, **est_kwargs)  # run_trials checks the knowledge level first
     plan = get_planner(planner, **plan_kwargs)
     names = (method, planner) if level == DEFAULT_LEVEL else (method, planner, level)
     out = json_out if json_out is not None else default_output("search", *names)
@@ -326,6 +343,7 @@ def search_cmd(
     except KeyboardInterrupt:
         report_interrupt(count_records(journal), "episode", journal, resume_command(ctx))
         raise typer.Exit(EXIT_INTERRUPTED) from None
+    data["resolved"] = {**run.to_json(), "estimator_options": json_safe(est_kwargs)}
     table_rows = [(Path(c["file"]).stem, c["metrics"]) for c in data["per_case"]]
     table_rows.append(("all", data["aggregate"]))
     console.print(_table(table_rows, f"active search: {escape(method)} + {escape(planner)}"))

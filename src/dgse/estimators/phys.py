@@ -126,14 +126,8 @@ __all__ = [
     "LEARNED_FLOOR",
     "MISFIT_TEMPERATURE",
     "MISFIT_THRESHOLD",
-    "SEARCH_ESTIMATOR",
-    "SEARCH_ESTIMATOR_AT_LEVEL",
-    "SEARCH_PLANNER",
-    "SEARCH_PLANNER_AT_LEVEL",
     "PhysicsGuidedEstimator",
     "make_dgse_phys",
-    "search_estimator",
-    "search_planner",
 ]
 
 #: Candidate inlet speeds at knowledge ``openings``, m/s (log-spaced over the training range).
@@ -224,121 +218,6 @@ LEARNED_FLOOR: dict[str, float] = {"map": 0.05, "wind": 0.02, "openings": 0.02}
 #: test scenarios it was worse, +0.09 and +0.17 m, which is what prompted that check: see the
 #: random-readings results of ``docs/dgse-phys.md``.)
 CENSORED_TILT: dict[str, bool] = {"map": False}
-#: The utility planner's settings for searches with dgse-phys (``dgse demo``, the search
-#: benchmarks), chosen on validation scenarios (``python benchmarks/phys_search.py --set
-#: validation --rule R``):
-#:
-#: * the stop: 90 % of the source posterior within 1 m of its mode, instead of the entropy
-#:   test, whose stops landed 3-5 m off with this posterior (rule ``mass1m90`` against ``paper``);
-#: * the source term: the posterior mass within 1 m of a cell, not the cell's own probability
-#:   (rule ``mass1m90-disk1m``: 8 of 8 found against 5 of 8, whose 3 timeouts had the robot
-#:   measuring beside its mode while the posterior lay thinly over a room it never entered);
-#: * a deadline: with less than 60 s of the time limit left, the search stops with its estimate
-#:   (rule ``mass1m90-disk1m-deadline60s``, validation seed 1: 8 of 8 against 6 of 8, whose two
-#:   timeouts had their estimates 0.4 and 0.9 m from the source);
-#: * measured neighbourhoods lose their variance pull (``revisit_radius_m=0.5``, rule
-#:   ``...-revisit0.5m``): on validation 910 the robot had measured cell after cell along a plume
-#:   edge the flows cannot place, whose predicted variance never fell, until the deadline
-#:   (3.1 m off); with the discount it found that source and the one of 917, but stopped 3.1 m
-#:   off on 918 (same success on seeds 900-923; the searches end sooner).
-#:
-#: * gas near the mode: a mass stop needs one reading within 1 m of the mode above twice the
-#:   noise floor (``confirm_radius_m=1``, ``confirm_readings=1``, ``confirm_sigmas=2``; rule
-#:   ``...-revisit0.5m-gas1m``).  Six zeros in clean air had made a posterior sharp on a spot
-#:   no plume of theirs reaches (test 2014, trial seed 1: a stop 2.76 m off after 6 readings,
-#:   in every run since the zeros' factor was fixed); held, the search measured there and found
-#:   the source (0.16 m).  On the validation searches (900-923, trial seeds 0 and 1) it held no
-#:   stop: it changes nothing where the stops were right.
-#:
-#: Not adopted: the mass test at two readings in a row (``stop_readings=2``, rule ``...-twice``):
-#: on validation 924-963 the same 31 of 38, its two wrong stops (945, 963) one reading later.
-SEARCH_PLANNER: dict[str, float] = {
-    "mass_radius_m": 1.0,
-    "mass_level": 0.9,
-    "source_radius_m": 1.0,
-    "deadline_margin_s": 60.0,
-    "revisit_radius_m": 0.5,
-    "confirm_radius_m": 1.0,
-    "confirm_readings": 1,
-    "confirm_sigmas": 2.0,
-}
-#: What a search at a knowledge level adds to ``SEARCH_PLANNER`` (:func:`search_planner`):
-#:
-#: * ``map``: the stop waits for a flow that explains the wind (``max_wind_misfit=0.7``: the
-#:   best opening proposal leaves at most 70 % of the wind readings' RMS unexplained;
-#:   ``benchmarks/phys_search.py --rule ...-gas1m -P max_wind_misfit=0.7``).  On validation
-#:   924-963 (trial seed 0) the two wrong mass stops had misfits 0.82 and 0.77 there, the 11
-#:   right ones 0.17-0.56 but one (951: 1.00; ``python benchmarks/map_proposal_misfit.py``).
-#:   Held, 925 stopped 1.52 m off (was 2.67 m) once renewed proposals fitted, 951 ended at the
-#:   deadline 0.44 m off (was a stop 1.57 m off), 960 stopped 5.72 m off later (was 5.66 m):
-#:   31 of 39 found, against 30.  At ``openings`` the true openings' flows left up to 0.72 of
-#:   the wind unexplained on the same readings (951, from 32 readings; a scratch measurement,
-#:   not kept as a command), so that level does not use it;
-#: * ``map``: a deadline stop declares the centre of the 1 m disk holding the most posterior
-#:   mass, not the posterior mean (``deadline_estimate_radius_m=1``): on the 27 deadline stops
-#:   of those validation searches, rebuilt from their readings, 23 within 2 m against 20 for
-#:   the mean (mean error 1.26 against 1.58 m; 0.5 m disks 21, 2 m disks 20, the mode 16;
-#:   ``python benchmarks/deadline_estimate.py``).  A search that never passed its stop test
-#:   often ends split between two places, and the mean lies between them.  At ``openings``
-#:   a deadline stop declares the posterior mean: every episode records what each point
-#:   estimate of its final belief would have declared (``end_errors_m``), and on validation
-#:   924-963 with trial seeds 0 and 1 (78 searches, 22 deadline stops, 2026-11-28;
-#:   ``benchmarks/phys_search.py --set validation3 ... --tag end-s0`` / ``end-s1``) the mean
-#:   put 13 of them within 2 m at a mean error of 1.90 m, the mean within the heaviest 1 m
-#:   disk also 13 at 2.19 m, that disk's centre 15 at 2.23 m, the mode 10.  (Seed 0 alone had
-#:   favoured the disk's mean, 9 of 10 against 7.)  ``wind`` is not measured.
-#:
-#: Not adopted at ``map`` (2026-11-29; validation 924-963, trial seeds 0 and 1, every step
-#: journaled: ``validation3_*-gas1m_fit0.7-disk1-s{0,1}-steps``, 18 mass stops, 3 of them more
-#: than 2 m off; ``python benchmarks/map_stop_diagnostics.py``):
-#:
-#: * a stop held while DGSE-S's own source belief puts little near the mode
-#:   (``min_learned_mass`` with ``learned_opinion=True``): within 1 m of the mode it put 0.015,
-#:   0.096 and 0.50 at the wrong stops, 0.004-0.94 at the right ones (953: 0.004, 0.21 m off),
-#:   so no threshold holds a wrong stop without holding a right one;
-#: * ``max_wind_misfit=0.6`` (the wrong stops' misfits 0.51, 0.62, 0.70; the right ones at most
-#:   0.56): re-run on the three wrong episodes (``--tag fit0.6-disk1-sS-steps``), 934 was held 3
-#:   times and stopped 3.11 m off (was 2.73 m), 960 held to its deadline 5.51 m off, 924 as before
-#:   (7.56 m): no find more, and a held wrong flow keeps its wrong mode.  On validation 908-923
-#:   (seed 0, ``--set validation2``) two right stops had misfits 0.64 and 0.70, and DGSE-S put
-#:   0.029 near the wrong stop's mode (908, 5.51 m off) and 0.004 near a right one's (910).
-SEARCH_PLANNER_AT_LEVEL: dict[str, dict[str, float]] = {
-    "map": {"max_wind_misfit": 0.7, "deadline_estimate_radius_m": 1.0},
-}
-
-
-def search_planner(level: str) -> dict[str, float]:
-    """The utility planner's settings for a dgse-phys search at knowledge ``level``:
-    ``SEARCH_PLANNER`` and ``SEARCH_PLANNER_AT_LEVEL[level]``."""
-    return {**SEARCH_PLANNER, **SEARCH_PLANNER_AT_LEVEL.get(level, {})}
-
-
-#: dgse-phys's options in an active search (``dgse demo``, ``dgse bench search`` and
-#: ``benchmarks/phys_search.py``): the source posterior is the equal-weight mixture of the
-#: plug-in and candidate noise weights (``noise_weights="mixture"``).  The candidate weights
-#: alone end a search about twice as soon but stop on a wrong spot more often where the flow
-#: hypothesis is wrong; in the mixture the planner follows the sharper of the two and the mass
-#: stop needs both.  On the 86 validation searches (openings, ``SEARCH_PLANNER``; seeds 900-923
-#: with trial seeds 0 and 1, 924-963 with 0) it found 78 of 86 sources, and 66 of its 67 mass
-#: stops were within 2 m, against 75 and 64 of 67 with the plug-in weights, 73 and 70 of 80
-#: with the candidate weights, 76 and 68 of 73 with ``"larger"``
-#: (``benchmarks/results/phys_search/validation*-mix.json``).  It costs a second evidence
-#: and zeros' factor per step.  Since 2026-11-28 c it is also the estimator's default
-#: (:data:`NOISE_WEIGHTS_CHOICE`); the searches name it all the same.  They keep DGSE-S's weight
-#: at ``map`` fading to 0 by 50 readings (``learned_floor=0``, :data:`LEARNED_FLOOR`): measured so.
-SEARCH_ESTIMATOR: dict[str, Any] = {"noise_weights": "mixture", "learned_floor": 0.0}
-#: What a search at a knowledge level adds to ``SEARCH_ESTIMATOR`` (:func:`search_estimator`):
-#: at ``map`` the gas evidence counts at most 30 readings (``effective_readings=30``), as every
-#: ``map`` search was measured (before 2026-11-28 g the level's default; now :data:`MAP_TEMPERING`).
-SEARCH_ESTIMATOR_AT_LEVEL: dict[str, dict[str, Any]] = {"map": {"effective_readings": 30.0}}
-
-
-def search_estimator(level: str) -> dict[str, Any]:
-    """dgse-phys's options in a search at knowledge ``level``: ``SEARCH_ESTIMATOR`` and
-    ``SEARCH_ESTIMATOR_AT_LEVEL[level]``."""
-    return {**SEARCH_ESTIMATOR, **SEARCH_ESTIMATOR_AT_LEVEL.get(level, {})}
-
-
 #: Why ``noise_weights`` defaults to ``"mixture"`` for estimates from given readings too:
 #: on validation scenarios 900-923 (Table I noise; ``python benchmarks/phys_robustness.py
 #: --seeds 900-923 --counts 50 150 --trials 5 --variants steady filament --methods
