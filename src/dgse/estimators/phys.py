@@ -160,7 +160,7 @@ DEFAULT_EFFECTIVE_READINGS = 100.0
 #: filament readings, at the same error (1.13 against 1.13 m, 1.27 against 1.29 m).  The
 #: square-root law keeps 50 readings' temperature (5/3) and lets more readings count more.
 #: Filament readings at 150: ``m / 30`` 1.12 / 0.13 / 6.33, ``m / 100`` 1.06 / 0.09 / 6.37,
-#: ``sqrt(m / 18)`` 1.10 / 0.08 / 6.26.  Searches keep ``m / 30`` (:data:`SEARCH_ESTIMATOR_AT_LEVEL`).
+#: ``sqrt(m / 18)`` 1.10 / 0.08 / 6.26.  Searches keep ``m / 30`` (the search preset, :data:`dgse.presets.PRESETS`).
 MAP_TEMPERING = (18.0, 0.5)
 #: DGSE-S's weight in the source posterior at ``map``: ``0.9 (1 - m / 50)`` for ``m`` readings,
 #: chosen on validation scenarios (``python benchmarks/tune_phys_learned.py``).
@@ -203,7 +203,7 @@ LEARNED_READINGS = 50.0
 #:   the filament ones at 150 0.015 and 0.013 above (the grid of 2026-11-28, before the
 #:   rate nodes followed the zeros, said the same: ``benchmarks/results/phys_fusion_tuning/``).
 #:
-#: Searches keep no floor (:data:`SEARCH_ESTIMATOR`): they were measured without it.
+#: Searches keep no floor (the search preset, :data:`dgse.presets.PRESETS`): they were measured without it.
 LEARNED_FLOOR: dict[str, float] = {"map": 0.05, "wind": 0.02, "openings": 0.02}
 #: Whether the zeros' factor lets the rate's nodes follow the zeros (``censored_tilt``), per
 #: knowledge level; a level not named here has it on.  It was made for the searches at
@@ -363,7 +363,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             stays where the start left it: on test 2005 the two flows' ``nu_t`` differ by
             71 % (median over free cells) and the estimate from 150 readings is 3.2 m off
             warm, 0.17 m cold (``python benchmarks/phys_diagnostics.py``).  Validation searches
-            favour the warm start (900-907 and 908-913, openings, ``SEARCH_PLANNER``: 14 of
+            favour the warm start (900-907 and 908-913, openings, the search preset: 14 of
             14 found warm, 12 of 14 cold; test 2005 failed both ways), and it is the faster,
             so it is the default.
         misfit_threshold, misfit_temperature: when the gas readings' mean squared

@@ -788,7 +788,7 @@ CENSORED_FAINT = 1e-3
 #: How :func:`censored_correction` ranks the candidates for its cut.  ``"plug-in"`` is an
 #: approximation (it can leave out most of the mass after few readings) but every recorded
 #: search was made with it.  With ``"bound"`` (exact to ``tail``) the validation searches
-#: (openings, ``SEARCH_PLANNER``, seed 0) found 22 of 24 sources against 23 of 24, with
+#: (openings, the search preset, seed 0) found 22 of 24 sources against 23 of 24, with
 #: a new stop 5.6 m off on scenario 917 (and 903 stopping 1.75 m off where it had run to
 #: the deadline 1.07 m off); both re-run with only the ranking changed gave the same.
 #: After few readings the exact zeros say little under the broad noise posterior; the
