@@ -160,7 +160,7 @@ DEFAULT_EFFECTIVE_READINGS = 100.0
 #: filament readings, at the same error (1.13 against 1.13 m, 1.27 against 1.29 m).  The
 #: square-root law keeps 50 readings' temperature (5/3) and lets more readings count more.
 #: Filament readings at 150: ``m / 30`` 1.12 / 0.13 / 6.33, ``m / 100`` 1.06 / 0.09 / 6.37,
-#: ``sqrt(m / 18)`` 1.10 / 0.08 / 6.26.  Searches keep ``m / 30`` (the search preset, :data:`dgse.presets.PRESETS`).
+#: ``sqrt(m / 18)`` 1.10 / 0.08 / 6.26.  Searches keep ``m / 30`` (their preset).
 MAP_TEMPERING = (18.0, 0.5)
 #: DGSE-S's weight in the source posterior at ``map``: ``0.9 (1 - m / 50)`` for ``m`` readings,
 #: chosen on validation scenarios (``python benchmarks/tune_phys_learned.py``).
