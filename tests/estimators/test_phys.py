@@ -136,8 +136,13 @@ def test_noise_weight_mixture_averages_the_two_posteriors(case):
     assert np.allclose(b["mixture"].source_probs, mean)
     w = [[h["weight"] for h in b[m].info["hypotheses"]] for m in ("plug-in", "candidate", "mixture")]
     assert np.allclose(w[2], (np.array(w[0]) + np.array(w[1])) / 2)
-    # the fields come from the plug-in's evidence
-    assert np.allclose(b["mixture"].log_conc_mean, b["plug-in"].log_conc_mean, rtol=0.2, atol=0.2)
+    # the fields come from the plug-in's evidence, mixed with the mixture's hypothesis weights;
+    # here one flow carries all the weight in every mode, so they are the plug-in's to the bit
+    # and not the candidate's
+    assert w[2] == w[0]
+    for field in ("log_conc_mean", "log_conc_var", "wind_mean", "wind_var"):
+        np.testing.assert_array_equal(getattr(b["mixture"], field), getattr(b["plug-in"], field))
+    assert not np.allclose(b["mixture"].log_conc_mean, b["candidate"].log_conc_mean)
     with pytest.raises(InputDataError, match="noise_weights"):
         get_estimator("dgse-phys", noise_weights="both")
 
@@ -509,7 +514,9 @@ def test_predictive_sources_stand_for_the_whole_posterior():
     p[200:] = 0.7 / 800  # a broad region, 70 %
     idx, w = predictive_sources(p, 20)
     assert w.sum() == pytest.approx(1.0)
-    assert w[idx >= 200].sum() == pytest.approx(0.7, abs=0.05)
+    # the quantiles 0.025, 0.075, ..., 0.975: 6 of 20 fall in the peak's 30 %, 14 in the rest
+    assert w[idx < 10].sum() == pytest.approx(0.3)
+    assert w[idx >= 200].sum() == pytest.approx(0.7)
     idx2, w2 = predictive_sources(p, 20)
     assert np.array_equal(idx, idx2) and np.array_equal(w, w2)  # deterministic
     one = np.zeros(50)
