@@ -63,14 +63,14 @@ def test_search_suite_quick(bench_root, tmp_path):
     for name in ("search_steady.csv", "search_filament.csv"):
         t = tables[name]
         cols = t["columns"]
-        assert {r[cols.index("method")] for r in t["rows"]} == {mm.label for mm in METHODS}
+        assert {r[cols.index("method")] for r in t["rows"]} == {mm.display for mm in METHODS}
         assert len(t["rows"]) == 3 * len(METHODS)  # two scenarios and "all"
         for r in t["rows"]:
             assert 0.0 <= r[cols.index("SR [%]")] <= 100.0
     res = json.loads((out / "search_results.json").read_text())
     for kind in ("test", "filament"):
         for mm in METHODS:
-            agg = res["comparison"][kind][mm.key]
+            agg = res["comparison"][kind][mm.name]
             assert agg["n_trials"] == 2 and 0.0 <= agg["success_rate"] <= 1.0
         assert res["dgse_s"][kind]["n_trials"] == 2
     assert {"ood_eta075.csv", "ood_eta088.csv"} <= set(tables)
@@ -113,7 +113,7 @@ def test_dgse_phys_plans_per_knowledge_level():
     """The suite's DGSE-phys adds the map level's planner options there only, and says so."""
     from dgse.bench.search import _level_extras
 
-    phys = next(m for m in METHODS if m.key == "dgse-phys")
+    phys = next(m for m in METHODS if m.name == "dgse-phys")
     at_map = phys.planner_options_at("map")
     assert at_map["max_wind_misfit"] == 0.7 and at_map["deadline_estimate_radius_m"] == 1.0
     at_openings = phys.planner_options_at("openings")

@@ -581,16 +581,16 @@ def test_speed_flows_are_warm_started_unless_told_otherwise(case):
 
 
 def test_censored_ranking_reaches_the_zeros_correction(case, monkeypatch):
-    import dgse.estimators.phys as phys
+    from dgse.posterior import mixture
 
     seen: list[str | None] = []
-    original = phys.censored_correction
+    original = mixture.censored_correction
 
     def spy(**kw):
         seen.append(kw["ranking"])
         return original(**kw)
 
-    monkeypatch.setattr(phys, "censored_correction", spy)
+    monkeypatch.setattr(mixture, "censored_correction", spy)
     k = Knowledge.from_case(case, "openings")
     obs = draw_observations(case, 30, seed=1)
     assert (obs.gas <= 0).any()  # zeros to correct for
@@ -696,7 +696,7 @@ def test_a_weak_hypothesis_is_corrected_for_the_zeros_to_the_mixtures_precision(
     """The zeros' correction of a hypothesis with a small share of the weight may leave out more
     of its own mass (``CENSORED_TAIL / share``): it integrates fewer candidates, and the mixture
     posterior stays where the full correction puts it."""
-    from dgse.estimators import phys
+    from dgse.posterior import mixture as phys
 
     rng = np.random.default_rng(12)
     m, n = 40, 3000
