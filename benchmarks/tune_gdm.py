@@ -184,8 +184,7 @@ def tune(
     decisions: dict[str, dict[str, Any]] = {}
     search: dict[str, list[dict[str, Any]]] = {}
     for method in methods:
-        module, _, cls_name = GDM_ESTIMATORS[method].partition(":")
-        cls = getattr(__import__(module, fromlist=[cls_name]), cls_name)
+        cls = ESTIMATORS.factory(method)
         settings = _settings(grids[method])
         default = _default_setting(cls, list(grids[method]))
         if not any(_same(default, st) for st in settings):

@@ -87,8 +87,8 @@ def test_demo_out_file_fails_within_seconds(capsys, tmp_path):
 @pytest.mark.parametrize(
     ("args", "fragments"),
     [
-        (["-p", "foo=1"], ["unknown estimator 'dgse-s' option(s) foo"]),
-        (["-O", "K=abc"], ["option K='abc' must be an integer"]),
+        (["--method", "dgse-s", "-p", "foo=1"], ["unknown estimator 'dgse-s' option(s) foo"]),
+        (["--method", "dgse-s", "-O", "K=abc"], ["option K='abc' must be an integer"]),
         (["-P", "bogus=1"], ["unknown planner 'utility' option(s) bogus"]),
         (["--method", "adjoint", "-p", "q_max=lots"], ["q_max='lots' must be a number or None"]),
         (["--method", "dgse-s", "-p", "device=gpu"], ["unknown device 'gpu'"]),

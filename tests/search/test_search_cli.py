@@ -73,7 +73,7 @@ def test_search_writes_json_and_gif(setup, capsys):
         assert im.format == "GIF" and im.size[0] > 200
     # seeded: the same starts again (and a different seed gives other starts)
     code, _, _ = _run(
-        capsys, cases / "two_rooms_src0.npz", "--model", model, "--trials", 2, "--seed", 3,
+        capsys, cases / "two_rooms_src0.npz", "--method", "dgse-s", "--model", model, "--trials", 2, "--seed", 3,
         "--time-limit", 5, "--min-start-distance", 1.0, "--json", d / "again.json", "--no-progress", *fast,
     )  # fmt: skip
     assert code == 0
@@ -103,7 +103,7 @@ def test_user_errors_are_one_red_line(setup, capsys, args, fragment):
     _, cases, model = setup
     args = [a.format(cases=cases, layout=cases / "a_layout.npz") for a in args]
     if "--method" not in args:
-        args += ["--model", str(model)]
+        args += ["--method", "dgse-s", "--model", str(model)]
     code, out, err = _run(capsys, *args, "--no-progress")
     assert code == 2, (out, err)
     line = err.strip()
@@ -115,18 +115,18 @@ def test_user_errors_are_one_red_line(setup, capsys, args, fragment):
 @pytest.fixture
 def peak(tmp_path, monkeypatch):
     """Two corridor case files; ``--method peak`` builds a PeakEstimator (its arguments recorded)."""
-    import dgse.estimators.registry as registry
+    from dgse.estimators.registry import ESTIMATORS
+    from dgse.options import options_from
 
     built: list[dict] = []
-    real = registry.get_estimator
 
-    def get_estimator(name, **kwargs):
-        if name != "peak":
-            return real(name, **kwargs)
+    @options_from(PeakEstimator)
+    def make_peak(**kwargs):
         built.append(kwargs)
         return PeakEstimator(**kwargs)
 
-    monkeypatch.setattr(registry, "get_estimator", get_estimator)
+    monkeypatch.setattr(ESTIMATORS, "_entries", dict(ESTIMATORS._entries))
+    ESTIMATORS.register("peak", make_peak)
     cases = tmp_path / "cases"
     cases.mkdir()
     corridor_case().save(cases / "a.npz")

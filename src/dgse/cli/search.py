@@ -260,8 +260,9 @@ def search_cmd(
         user_plan["eta"] = eta
     run = resolve(method, level, search=True, planner=planner, planner_options=user_plan)
     method, planner = run.method, run.planner
+    chosen_model = {} if model is None else {"model": model}
     est_kwargs = estimator_options(
-        run.estimator, model=model, seed=seed, options={**run.estimator_options, **user_est}
+        run.estimator, seed=seed, options={**run.estimator_options, **chosen_model, **user_est}
     )
     plan_kwargs = run.planner_options
     estimator = get_estimator(run.estimator, **est_kwargs)  # run_trials checks the knowledge level first
