@@ -73,8 +73,9 @@ def test_search_writes_json_and_gif(setup, capsys):
         assert im.format == "GIF" and im.size[0] > 200
     # seeded: the same starts again (and a different seed gives other starts)
     code, _, _ = _run(
-        capsys, cases / "two_rooms_src0.npz", "--method", "dgse-s", "--model", model, "--trials", 2, "--seed", 3,
-        "--time-limit", 5, "--min-start-distance", 1.0, "--json", d / "again.json", "--no-progress", *fast,
+        capsys, cases / "two_rooms_src0.npz", "--method", "dgse-s", "--model", model, "--trials", 2,
+        "--seed", 3, "--time-limit", 5, "--min-start-distance", 1.0, "--json", d / "again.json",
+        "--no-progress", *fast,
     )  # fmt: skip
     assert code == 0
     again = json.loads((d / "again.json").read_text())["per_case"][0]["trials"]
