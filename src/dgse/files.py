@@ -24,7 +24,6 @@ import contextlib
 import json
 import os
 import re
-import secrets
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import IO, Any
@@ -53,7 +52,7 @@ def temporary_name(path: str | os.PathLike[str]) -> Path:
     base = target.name
     if len(base.encode()) > _MAX_NAME_BYTES:  # keep the whole name under the 255-byte limit
         base = base.encode()[:_MAX_NAME_BYTES].decode(errors="ignore")
-    return target.with_name(f".{base}.tmp-{secrets.token_hex(4)}{target.suffix}")
+    return target.with_name(f".{base}.tmp-{os.urandom(4).hex()}{target.suffix}")
 
 
 def is_temporary(path: str | os.PathLike[str]) -> bool:
