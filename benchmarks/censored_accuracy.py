@@ -33,6 +33,7 @@ from phys_search import cases_dir, record_calls
 from scipy import special
 
 from dgse.estimators.phys import search_estimator
+from dgse.files import write_text
 from dgse.posterior import adjoint, censored_kernel
 
 WAYS = {"gauss-hermite": math.inf, "default": adjoint.CENSORED_SCAN_MARGIN, "scan": -math.inf}
@@ -138,7 +139,7 @@ def main() -> None:
         print(json.dumps({k: v for k, v in row.items() if k != "sample"}), flush=True)
     out = args.out / ("censored_accuracy_search.json" if args.search_estimator else "censored_accuracy.json")
     body = {"scan_margin": adjoint.CENSORED_SCAN_MARGIN, "estimator_options": options, "episodes": report}
-    out.write_text(json.dumps(body, indent=1))
+    write_text(out, json.dumps(body, indent=1))
     print("wrote", out)
 
 

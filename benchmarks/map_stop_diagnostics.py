@@ -41,6 +41,7 @@ from phys_search import journal_episodes, map_estimator_at_end, step_observation
 
 from dgse.estimators.phys import search_estimator
 from dgse.estimators.registry import get_estimator
+from dgse.files import write_text
 from dgse.planning.planners import mass_around, mass_within
 from dgse.world.case import Case
 from dgse.world.grid import Grid
@@ -129,7 +130,7 @@ def main() -> None:
             else None,
             "wrong": sorted(float(r[key]) for r in wrong),
         }
-    args.out.write_text(json.dumps({"summary": summary, "stops": rows}, indent=1) + "\n")
+    write_text(args.out, json.dumps({"summary": summary, "stops": rows}, indent=1) + "\n")
     print(json.dumps(summary))
 
 

@@ -22,6 +22,7 @@ import numpy as np
 from phys_search import cases_dir
 
 from dgse.estimators.phys import search_estimator, search_planner
+from dgse.files import write_text
 from dgse.search.campaign import run_trials
 
 
@@ -69,7 +70,7 @@ def main() -> None:
     }
     name = "step_time.json" if args.knowledge == "openings" else f"step_time_{args.knowledge}.json"
     path = args.out / name
-    path.write_text(json.dumps(out, indent=1))
+    write_text(path, json.dumps(out, indent=1))
     print(f"wrote {path}")
 
 
