@@ -110,7 +110,7 @@ def test_no_cycle_between_packages() -> None:
         stack.append(node)
         for nxt in sorted(graph.get(node, ())):
             if state.get(nxt) == 1:
-                cycle = stack[stack.index(nxt) :] + [nxt]
+                cycle = [*stack[stack.index(nxt) :], nxt]
                 pytest.fail("import cycle between packages: " + " -> ".join(cycle))
             if nxt not in state:
                 visit(nxt)
@@ -125,5 +125,7 @@ def test_no_cycle_between_packages() -> None:
 def test_the_checker_sees_an_upward_import(tmp_path: Path) -> None:
     """The import walker finds lazy imports inside functions and `from dgse import x` forms."""
     f = tmp_path / "m.py"
-    f.write_text("def f():\n    from dgse.cli.main import main\n    import dgse.bench\nfrom dgse import errors\n")
+    f.write_text(
+        "def f():\n    from dgse.cli.main import main\n    import dgse.bench\nfrom dgse import errors\n"
+    )
     assert {m for _, m in imports_of(f)} == {"dgse.cli.main", "dgse.bench", "dgse.errors"}
