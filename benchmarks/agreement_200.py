@@ -23,6 +23,8 @@ SCENARIO = "rooms:11:20:6"
 
 
 def main() -> None:
+    from dgse.files import write_text
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", default=SCENARIO, help="a scenario of solver_speed.py (rooms:SEED:SIDE:N)")
     scenario = ap.parse_args().scenario
@@ -50,7 +52,7 @@ def main() -> None:
         "agreement_200.json" if scenario == SCENARIO else f"agreement_200_{scenario.replace(':', '_')}.json"
     )
     path = REPO / "benchmarks" / "results" / name
-    path.write_text(json.dumps(row, indent=1, default=float))
+    write_text(path, json.dumps(row, indent=1, default=float))
     print(json.dumps(row, indent=1, default=float))
 
 

@@ -28,6 +28,7 @@ import numpy as np
 from phys_robustness import journal_rows  # this folder's
 
 from dgse.evaluation.calibration import calibration_difference
+from dgse.files import write_text
 
 Key = tuple[str, str, int, int]
 
@@ -103,7 +104,7 @@ def main() -> None:
     old = json.loads(args.out.read_text()) if args.out.exists() else []
     same = ("a", "b", "b_variant")
     kept = [e for e in old if any(e.get(f) != entry[f] for f in same)]
-    args.out.write_text(json.dumps([*kept, entry], indent=1) + "\n")
+    write_text(args.out, json.dumps([*kept, entry], indent=1) + "\n")
     print(f"wrote {args.out}")
 
 

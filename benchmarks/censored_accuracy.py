@@ -32,6 +32,7 @@ import numpy as np
 from phys_search import cases_dir, record_calls
 from scipy import special
 
+from dgse.files import write_text
 from dgse.posterior import adjoint, censored_kernel
 from dgse.presets import PRESETS
 
@@ -140,7 +141,7 @@ def main() -> None:
         print(json.dumps({k: v for k, v in row.items() if k != "sample"}), flush=True)
     out = args.out / ("censored_accuracy_search.json" if args.search_estimator else "censored_accuracy.json")
     body = {"scan_margin": adjoint.CENSORED_SCAN_MARGIN, "estimator_options": options, "episodes": report}
-    out.write_text(json.dumps(body, indent=1))
+    write_text(out, json.dumps(body, indent=1))
     print("wrote", out)
 
 

@@ -24,6 +24,7 @@ import numpy as np
 from phys_search import cases_dir, record_calls
 
 import dgse.estimators.phys as phys
+from dgse.files import write_text
 from dgse.posterior import adjoint
 
 
@@ -78,12 +79,13 @@ def main() -> None:
     out = args.out / "censored_cut.json"
     summary = {k: max(r[k]["total_variation"] for r in rows) if rows else None for k in ("plug-in", "bound")}
     print("largest TV:", summary)
-    out.write_text(
+    write_text(
+        out,
         json.dumps(
             {"case": args.case, "tail": adjoint.CENSORED_TAIL, "ranking": adjoint.CENSORED_RANKING,
              "largest_total_variation": summary, "calls": rows},
             indent=1,
-        )
+        ),
     )  # fmt: skip
     print("wrote", out)
 

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 from phys_search import cases_dir, record_calls
 
+from dgse.files import write_text
 from dgse.posterior import censored_kernel
 from dgse.presets import PRESETS
 
@@ -97,7 +98,7 @@ def main() -> None:
         row["max_abs_difference_nats"] = float(max(diffs))
     print(json.dumps({k: v for k, v in row.items() if k != "zeros_per_call"}), flush=True)
     out = args.out / "censored_kernel_time.json"
-    out.write_text(json.dumps(row, indent=1))
+    write_text(out, json.dumps(row, indent=1))
     print(f"wrote {out}")
 
 

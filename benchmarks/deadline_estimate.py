@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 from phys_search import journal_episodes, map_estimator_at_end, step_observations  # this folder's
 
+from dgse.files import write_text
 from dgse.planning.planners import UtilityPlanner, declared_source
 from dgse.presets import PRESETS
 from dgse.world.case import Case
@@ -77,7 +78,7 @@ def main() -> None:
         for k in keys
     }
     summary["deadline_episodes"] = len(rows)
-    args.out.write_text(json.dumps({"summary": summary, "episodes": rows}, indent=1))
+    write_text(args.out, json.dumps({"summary": summary, "episodes": rows}, indent=1))
     print(json.dumps(summary))
 
 

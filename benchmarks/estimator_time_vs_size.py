@@ -32,6 +32,7 @@ from dgse.belief.knowledge import Knowledge
 from dgse.errors import DGSEError
 from dgse.estimators.registry import estimator_names, get_estimator
 from dgse.evaluation.evaluate import draw_observations
+from dgse.files import write_text
 from dgse.world.case import Case
 
 REPO = Path(__file__).resolve().parents[1]
@@ -106,7 +107,7 @@ def main() -> None:
         "rows": rows,
     }
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "estimator_time_vs_size.json").write_text(json.dumps(result, indent=1))
+    write_text(args.out / "estimator_time_vs_size.json", json.dumps(result, indent=1))
     cases = list(dict.fromkeys((r["case"], r["free_cells"], r["cell_m"]) for r in rows))
 
     def cell(r: dict | None, key: str) -> str:
@@ -136,7 +137,7 @@ def main() -> None:
     errors = sorted({f"{r['estimator']}: {r['error']}" for r in rows if "error" in r})
     if errors:
         md += ["", "Errors (the estimator refused the map):", ""] + [f"* {e}" for e in errors]
-    (args.out / "estimator_time_vs_size.md").write_text("\n".join(md) + "\n")
+    write_text(args.out / "estimator_time_vs_size.md", "\n".join(md) + "\n")
     print("\n".join(md))
 
 

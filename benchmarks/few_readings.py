@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from dgse.estimators.registry import get_estimator
+from dgse.files import write_text
 from dgse.sensing.sensors import random_observations
 from dgse.world.case import Case
 
@@ -84,7 +85,7 @@ def main() -> None:
         "per_case": per_case,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(out, indent=1))
+    write_text(args.out, json.dumps(out, indent=1))
     print(f"wrote {args.out}")
 
 

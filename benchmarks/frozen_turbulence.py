@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 from phys_robustness import parse_seeds  # this folder's
 
+from dgse.files import write_text
 from dgse.physics.constants import DEFAULT_PHYSICS
 from dgse.physics.fv import build_mesh
 from dgse.physics.rans import FlowSettings, solve_flow, solve_turbulence
@@ -74,7 +75,7 @@ def main() -> None:
             ),
             flush=True,
         )
-    args.out.write_text(json.dumps({"tolerances": TOLERANCES, "rows": rows}, indent=1))
+    write_text(args.out, json.dumps({"tolerances": TOLERANCES, "rows": rows}, indent=1))
 
 
 if __name__ == "__main__":

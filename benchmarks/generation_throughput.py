@@ -70,6 +70,8 @@ def run(n_layouts: int, workers: int, seed: int, directory: Path) -> dict:
 
 
 def main() -> None:
+    from dgse.files import write_text
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--layouts", type=int, default=12)
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
@@ -102,7 +104,7 @@ def main() -> None:
         "results": results,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(doc, indent=1) + "\n")
+    write_text(args.out, json.dumps(doc, indent=1) + "\n")
     print(f"wrote {args.out}")
 
 

@@ -46,6 +46,7 @@ import torch
 from dgse.bench.core import cpu_model
 from dgse.data.rasterize import rasterize
 from dgse.estimators.dgse import DGSEEstimator
+from dgse.files import write_text
 from dgse.models.inference import native_bf16
 from dgse.models.networks import DGSEModel, count_parameters, create_model
 from dgse.sensing.sensors import Observations
@@ -215,7 +216,7 @@ def write_markdown(result: dict[str, Any], path: Path) -> None:
         f"Total benchmark time {result['seconds_total']:.0f} s.",
         "",
     ]
-    path.write_text("\n".join(lines))
+    write_text(path, "\n".join(lines))
 
 
 def main() -> None:
@@ -277,7 +278,7 @@ def main() -> None:
     result["machine"]["load_after"] = _load()
     result["seconds_total"] = time.perf_counter() - t_start
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "latency.json").write_text(json.dumps(result, indent=1) + "\n")
+    write_text(args.out / "latency.json", json.dumps(result, indent=1) + "\n")
     write_markdown(result, args.out / "latency.md")
     print(f"wrote {args.out / 'latency.json'} and latency.md in {result['seconds_total']:.0f} s")
 

@@ -26,6 +26,7 @@ from opening_proposals import _near
 from phys_search import journal_episodes, map_estimator_at_end, step_observations
 
 from dgse.cli.common import parse_params
+from dgse.files import write_text
 from dgse.world.layout import Opening
 
 
@@ -101,7 +102,7 @@ def main() -> None:
     print(json.dumps(summary))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     result = {"journals": [str(j) for j in args.journals], "options": options, "at": args.at}
-    args.out.write_text(json.dumps({**result, "summary": summary, "episodes": rows}, indent=1))
+    write_text(args.out, json.dumps({**result, "summary": summary, "episodes": rows}, indent=1))
 
 
 if __name__ == "__main__":

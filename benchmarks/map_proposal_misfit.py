@@ -23,6 +23,7 @@ from phys_search import journal_episodes, map_estimator_at_end, step_observation
 
 from dgse.belief.knowledge import Knowledge
 from dgse.estimators.registry import get_estimator
+from dgse.files import write_text
 from dgse.physics.openings import potential_flow_proposals
 from dgse.posterior.mixture import fitted_wind_scale, relative_wind_misfit
 from dgse.world.case import Case
@@ -103,7 +104,7 @@ def main() -> None:
             "true_pair_proposed": sum(r["true_pair_proposed"] for r in group),
             "best_misfit_median": float(np.median([r["best_misfit"] for r in group])) if group else None,
         }
-    args.out.write_text(json.dumps({"readings": READINGS, "summary": summary, "episodes": rows}, indent=1))
+    write_text(args.out, json.dumps({"readings": READINGS, "summary": summary, "episodes": rows}, indent=1))
     print(json.dumps(summary))
 
 

@@ -40,6 +40,7 @@ import numpy as np
 from phys_search import journal_episodes, map_estimator_at_end, step_observations  # this folder's
 
 from dgse.estimators.registry import get_estimator
+from dgse.files import write_text
 from dgse.planning.planners import mass_around, mass_within
 from dgse.presets import PRESETS
 from dgse.world.case import Case
@@ -129,7 +130,7 @@ def main() -> None:
             else None,
             "wrong": sorted(float(r[key]) for r in wrong),
         }
-    args.out.write_text(json.dumps({"summary": summary, "stops": rows}, indent=1) + "\n")
+    write_text(args.out, json.dumps({"summary": summary, "stops": rows}, indent=1) + "\n")
     print(json.dumps(summary))
 
 

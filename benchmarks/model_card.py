@@ -18,6 +18,7 @@ import os
 import platform
 from pathlib import Path
 
+from dgse.files import write_text
 from dgse.models.checkpoint import load_model, read_checkpoint_info
 from dgse.models.networks import count_parameters
 
@@ -101,7 +102,7 @@ def main() -> None:
         "3,000 layouts with 30 configurations per environment. It is a working default, not the paper's "
         "accuracy; `configs/train/` and `dgse train --resume` continue from here on better hardware.",
     ]
-    args.out.write_text("\n".join(x for x in lines if x is not None) + "\n")
+    write_text(args.out, "\n".join(x for x in lines if x is not None) + "\n")
     print(args.out.read_text())
 
 

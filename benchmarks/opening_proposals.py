@@ -23,6 +23,7 @@ from pathlib import Path
 
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.evaluate import draw_observations
+from dgse.files import write_text
 from dgse.physics.openings import potential_flow_proposals, wind_field_proposals
 from dgse.physics.scenario import random_cases
 
@@ -75,7 +76,8 @@ def main() -> None:
         print(name, ", ".join(f"{n} readings: {k} of {len(SEEDS)}" for n, k in by_n.items()))
         print("  among the best 5:", ", ".join(f"{n} readings: {k}" for n, k in top5[name].items()))
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(
+    write_text(
+        args.out,
         json.dumps(
             {
                 "seeds": list(SEEDS),
@@ -86,7 +88,7 @@ def main() -> None:
                 "true_pair_rank": ranks,
             },
             indent=1,
-        )
+        ),
     )
     print(f"wrote {args.out}")
 

@@ -31,6 +31,7 @@ from phys_search import cases_dir
 from dgse.belief.knowledge import Knowledge
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.evaluate import draw_observations
+from dgse.files import write_text
 from dgse.posterior.adjoint import flow_model
 from dgse.world.case import Case
 
@@ -112,7 +113,7 @@ def main() -> None:
     }
     print(json.dumps(row["undershoot"]))
     print(json.dumps(row["warm_start"]))
-    args.out.write_text(json.dumps(row, indent=1))
+    write_text(args.out, json.dumps(row, indent=1))
     print(f"wrote {args.out}")
 
 

@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from dgse.evaluation.evaluate import evaluate, write_json
+from dgse.files import write_text
 from dgse.journal import journal_path
 
 COUNTS = [5, 20, 50, 150, 300]
@@ -105,9 +106,7 @@ def _join(journal: Path, parts: list[Path]) -> int:
             entries.setdefault((r.get("case"), r.get("n_obs"), r.get("trial")), e)
     if header is None:
         return 0
-    tmp = journal.with_suffix(".tmp")
-    tmp.write_text("".join(json.dumps(x) + "\n" for x in [header, *entries.values()]))
-    os.replace(tmp, journal)
+    write_text(journal, "".join(json.dumps(x) + "\n" for x in [header, *entries.values()]))
     for path in parts:
         path.unlink(missing_ok=True)
     return len(entries)
@@ -153,7 +152,7 @@ def run_parallel(
                                 for x in lines[1:]
                                 if (x["record"]["case"], x["record"]["n_obs"]) == (f.stem, n)
                             ]
-                            part.write_text("".join(json.dumps(x) + "\n" for x in [lines[0], *mine]))
+                            write_text(part, "".join(json.dumps(x) + "\n" for x in [lines[0], *mine]))
                         tasks.append((str(f), n, method, level, upto, str(part)))
                         parts.setdefault(journal, []).append(part)
         if not tasks:
@@ -348,8 +347,8 @@ def main() -> None:
             lines.append(f"| {key} | {by_n['trials']} | " + " | ".join(cells) + " |")
         lines.append("")
     lines += _comparisons(per_estimate)
-    (args.out / "summary.md").write_text("\n".join(lines))
-    (args.out / "summary.json").write_text(json.dumps(table, indent=1))
+    write_text(args.out / "summary.md", "\n".join(lines))
+    write_text(args.out / "summary.json", json.dumps(table, indent=1))
     print("\n".join(lines))
 
 

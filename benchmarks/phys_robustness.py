@@ -58,6 +58,7 @@ from dgse.evaluation.calibration import (
 )
 from dgse.evaluation.evaluate import draw_observations, summarize
 from dgse.evaluation.metrics import source_cross_entropy, source_localization_error
+from dgse.files import write_text
 from dgse.world.case import Case
 
 SEEDS = range(2000, 2008)
@@ -175,8 +176,8 @@ def write_summary(out: Path, trials: int) -> None:
         + ", ".join(f"{v:.2f} on {k}" for k, v in chance.items())
         + " estimates (sampling noise alone, `chance_calibration_error`)."
     )
-    (out / "summary.json").write_text(json.dumps(summary, indent=1))
-    (out / "summary.md").write_text("\n".join(lines))
+    write_text(out / "summary.json", json.dumps(summary, indent=1))
+    write_text(out / "summary.md", "\n".join(lines))
     print("\n".join(lines))
 
 
@@ -229,7 +230,7 @@ def paired_summary(out: Path, against: Path) -> str:
             f"{d_sl.mean():+.3f} +- {se_sl:.3f} | {d_ce.mean():+.2f} +- {se_ce:.2f} |"
         )
     text = "\n".join(lines) + "\n"
-    (out / "paired.md").write_text(text)
+    write_text(out / "paired.md", text)
     return text
 
 

@@ -63,6 +63,7 @@ from typing import Any
 from phys_robustness import VARIANTS as ROBUSTNESS_VARIANTS  # this folder's
 from phys_robustness import perturbed_wind
 
+from dgse.files import write_text
 from dgse.presets import PRESETS
 from dgse.search.campaign import json_safe, run_trials
 
@@ -182,7 +183,7 @@ def cases_dir(out: Path, name: str, limit: int | None = None) -> Path:
         try:
             random_cases(seed, n_sources=1)[0].save(path)
         except ConvergenceError as e:  # left out, as the dataset leaves such layouts out
-            skip.write_text(f"{e}\n")
+            write_text(skip, f"{e}\n")
             print(f"seed {seed} left out: {e}", flush=True)
     return d
 
@@ -291,7 +292,7 @@ def stop_quality(result: dict[str, Any]) -> dict[str, Any]:
 
 def write_result(path: Path, result: dict[str, Any], label: str, extra: str = "") -> None:
     """Write ``result`` as JSON and print its one-line summary (success, error, ST, TD, step)."""
-    path.write_text(json.dumps(json_safe(result), indent=1))
+    write_text(path, json.dumps(json_safe(result), indent=1))
     agg = result["aggregate"]
     print(
         f"{label} ({agg['n_trials']} episodes): success {agg['success_rate']:.2f}, error mean "

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 from phys_search import cases_dir
 
+from dgse.files import write_text
 from dgse.presets import PRESETS
 from dgse.search.campaign import run_trials
 
@@ -72,7 +73,7 @@ def main() -> None:
     }
     name = "step_time.json" if args.knowledge == "openings" else f"step_time_{args.knowledge}.json"
     path = args.out / name
-    path.write_text(json.dumps(out, indent=1))
+    write_text(path, json.dumps(out, indent=1))
     print(f"wrote {path}")
 
 

@@ -70,6 +70,8 @@ def building_episodes(d: dict) -> list[dict]:
 
 
 def main() -> None:
+    from dgse.files import write_text
+
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--step-time", type=Path, default=RESULTS / "phys_search" / "step_time.json")
     building = RESULTS / "building_search" / "building10_0.2m_dgse-phys_openings_2026-11-29.json"
@@ -101,7 +103,7 @@ def main() -> None:
                 }
             )
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "phys_time_vs_size.json").write_text(json.dumps({"bins": bins, "episodes": rows}, indent=1))
+    write_text(args.out / "phys_time_vs_size.json", json.dumps({"bins": bins, "episodes": rows}, indent=1))
     md = [
         "dgse-phys with the openings known, one search per scenario: the first estimate (flows of the "
         "inlet-speed candidates solved) and the median of the other steps' computation, against the "
@@ -123,7 +125,7 @@ def main() -> None:
         f"{r['first_estimate_s']:.1f} | {r['median_step_s']:.2f} | {r['steps']} |"
         for r in rows
     ]
-    (args.out / "phys_time_vs_size.md").write_text("\n".join(md) + "\n")
+    write_text(args.out / "phys_time_vs_size.md", "\n".join(md) + "\n")
     print("\n".join(md[:12]))
 
 

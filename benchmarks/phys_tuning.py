@@ -17,6 +17,7 @@ import numpy as np
 from dgse.belief.knowledge import Knowledge
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.evaluate import draw_observations
+from dgse.files import write_text
 from dgse.physics.scenario import random_cases
 
 
@@ -84,6 +85,6 @@ def write_rows(
             )
         )
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({**header, "rows": rows}, indent=1))
+    write_text(out, json.dumps({**header, "rows": rows}, indent=1))
     print(f"wrote {out}")
     return rows

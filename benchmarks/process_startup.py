@@ -103,6 +103,8 @@ def run_once(scenario_file: Path, setting: str) -> dict:
 
 
 def main() -> None:
+    from dgse.files import write_text
+
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--setting", default=SETTINGS[0], choices=SETTINGS, help=argparse.SUPPRESS)
@@ -138,7 +140,7 @@ def main() -> None:
         "runs": runs,
     }
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "process_startup.json").write_text(json.dumps(result, indent=1))
+    write_text(args.out / "process_startup.json", json.dumps(result, indent=1))
     where = "a virtual environment" if result["virtual_env"] else "a system interpreter"
     md = [
         f"One built-in solve of `{args.scenario}` (flow and four gas sources) per fresh process, "
@@ -161,7 +163,7 @@ def main() -> None:
         "The flow's seconds include numba's first compiled call (loading the cached kernels), "
         "which sets up numba's typing and lowering context once.",
     ]
-    (args.out / "process_startup.md").write_text("\n".join(md) + "\n")
+    write_text(args.out / "process_startup.md", "\n".join(md) + "\n")
     print("\n".join(md))
 
 

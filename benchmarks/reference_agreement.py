@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dgse.files import write_text
 from dgse.world.case import Case
 
 REPO = Path(__file__).resolve().parents[1]
@@ -60,8 +61,9 @@ def main() -> None:
     ok = all(r[k] <= v for r in rows for k, v in LIMITS.items())
     res = REPO / "benchmarks" / "results"
     res.mkdir(parents=True, exist_ok=True)
-    (res / "reference_agreement.json").write_text(
-        json.dumps({"limits": LIMITS, "all_within": ok, "cases": rows}, indent=1)
+    write_text(
+        res / "reference_agreement.json",
+        json.dumps({"limits": LIMITS, "all_within": ok, "cases": rows}, indent=1),
     )
     lines = [
         "| case | cells | velocity rel. L2 | log(1+ppm) RMSE | outlet flux / q | flow iterations | "
@@ -74,7 +76,7 @@ def main() -> None:
             f"{r['outlet_flux_ratio']:.4f} | {r['flow_iterations']} | {r['dgse_solve_wall_s']:.1f} |"
         )
     lines.append(f"\nLimits (issue): velocity <= 0.15, RMSE <= 0.3, outflow within 2 %. All within: {ok}.")
-    (res / "reference_agreement.md").write_text("\n".join(lines) + "\n")
+    write_text(res / "reference_agreement.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
 
 

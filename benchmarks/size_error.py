@@ -31,6 +31,7 @@ import numpy as np
 from dgse.errors import ConvergenceError
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.evaluate import draw_observations
+from dgse.files import atomic_path, write_text
 from dgse.physics.scenario import random_cases
 from dgse.world.case import Case
 
@@ -59,7 +60,7 @@ def bin_cases(out: Path, b: int, lo: float, hi: float, n: int) -> list[tuple[str
             try:
                 case = random_cases(seed, n_sources=1, width_range=(lo, hi), height_range=(lo, hi))[0]
             except ConvergenceError as e:
-                failed.write_text(str(e))
+                write_text(failed, str(e))
                 print(f"  skipped seed {seed}: {e}")
                 continue
             case.save(path)
@@ -159,7 +160,7 @@ def main() -> None:
 def write_report(result: dict, out: Path) -> None:
     """``OUT/size_error.{json,md,png}`` of one run's ``result`` (main's dictionary)."""
     models, settings, summary = result["models"], result["settings"], result["mean_error_m"]
-    (out / "size_error.json").write_text(json.dumps(result, indent=1))
+    write_text(out / "size_error.json", json.dumps(result, indent=1))
     lines = [
         "# DGSE-S error against map size",
         "",
@@ -186,7 +187,7 @@ def write_report(result: dict, out: Path) -> None:
                 if all(f"{k}_s" in r for r in result["rows"] if r["bin"] == name for k in times)
             ),
         ]
-    (out / "size_error.md").write_text("\n".join(lines) + "\n")
+    write_text(out / "size_error.md", "\n".join(lines) + "\n")
     _plot(summary, out / "size_error.png")
     print("\n".join(lines))
     print(f"wrote {out}/size_error.{{json,md,png}}")
@@ -234,7 +235,8 @@ def _plot(summary: dict[str, dict[str, float]], path: Path) -> None:
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
 
 
 if __name__ == "__main__":

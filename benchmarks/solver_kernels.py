@@ -25,6 +25,7 @@ import numpy as np
 import pyamg
 from solver_speed import _scenario  # this folder's
 
+from dgse.files import write_text
 from dgse.physics.fv import StencilMatrix, build_mesh, gauss_seidel
 from dgse.physics.rans import FlowSettings, GalerkinMap, solve_flow
 
@@ -123,7 +124,7 @@ def main() -> None:
     result["flows"] = flows(args.repeats)
     print(json.dumps(result, indent=1))
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=1))
+    write_text(args.out, json.dumps(result, indent=1))
 
 
 if __name__ == "__main__":

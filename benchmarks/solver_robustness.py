@@ -24,6 +24,7 @@ import json
 import sys
 from pathlib import Path
 
+from dgse.files import write_text
 from dgse.physics.builtin import flow_and_transport
 from dgse.world.generate import as_generator, random_inlet_velocity, random_layout
 
@@ -80,7 +81,7 @@ def main() -> None:
     }
     out = REPO / "benchmarks" / "results"
     out.mkdir(parents=True, exist_ok=True)
-    (out / "solver_robustness.json").write_text(json.dumps({"summary": summary, "runs": rows}, indent=1))
+    write_text(out / "solver_robustness.json", json.dumps({"summary": summary, "runs": rows}, indent=1))
     md = [
         f"Seeds {args.start}-{args.start + args.count - 1}: {n_ok} of {len(rows)} flows converged "
         f"({summary['retried']} after a second attempt with stronger relaxation); "
@@ -104,7 +105,7 @@ def main() -> None:
             f"| {r['seed']} | {r['shape'][1]}x{r['shape'][0]} | {r['inlet_velocity']:.2f} | "
             f"{r['iterations']} | {r['attempts']} | {r['converged']} | {end} |"
         )
-    (out / "solver_robustness.md").write_text("\n".join(md) + "\n")
+    write_text(out / "solver_robustness.md", "\n".join(md) + "\n")
     print(md[0])
 
 
@@ -184,7 +185,7 @@ def compare(start: int, count: int, variants: list[str], name: str, command: str
         )
     out = REPO / "benchmarks" / "results"
     out.mkdir(parents=True, exist_ok=True)
-    (out / f"{name}.json").write_text(json.dumps({"summary": summary, "runs": rows}, indent=1))
+    write_text(out / f"{name}.json", json.dumps({"summary": summary, "runs": rows}, indent=1))
     md = [
         f"Seeds {start}-{start + count - 1} (training-distribution layouts, all under 12k free cells), "
         f"each solved with every settings variant back to back (`{command}`); CPU seconds of the "
@@ -201,7 +202,7 @@ def compare(start: int, count: int, variants: list[str], name: str, command: str
             f"{r['median_cpu_s']:.2f} | {r['total_cpu_s']:.1f} | {r['more_iterations_than_first']} | "
             f"{r['median_wind_rel_diff']:.1e} / {r['max_wind_rel_diff']:.1e} |"
         )
-    (out / f"{name}.md").write_text("\n".join(md) + "\n")
+    write_text(out / f"{name}.md", "\n".join(md) + "\n")
     print("\n".join(md))
 
 

@@ -252,6 +252,8 @@ def errors(wind, conc, ref_wind, ref_conc, free) -> dict:
 
 
 def main() -> None:
+    from dgse.files import write_text
+
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--engine", default="builtin")
@@ -371,8 +373,8 @@ def main() -> None:
         print(json.dumps(results["non_converging"], default=float), flush=True)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "solver_speed.json").write_text(json.dumps(results, indent=1, default=float))
-    (out / "solver_speed.md").write_text(markdown(results))
+    write_text(out / "solver_speed.json", json.dumps(results, indent=1, default=float))
+    write_text(out / "solver_speed.md", markdown(results))
     print(markdown(results))
 
 

@@ -24,6 +24,7 @@ import numpy as np
 
 from dgse.data.stats import dataset_stats
 from dgse.data.store import DatasetStore
+from dgse.files import write_text
 
 #: Per-layout quantities that the draws alone decide, and those the solver decides too.
 DRAWN = ("width_m", "height_m", "inlet_velocity")
@@ -58,7 +59,7 @@ def main() -> None:
             "ratio_min": float(ratio.min()),
             "ratio_max": float(ratio.max()),
         }
-    args.out.write_text(json.dumps(report, indent=1) + "\n")
+    write_text(args.out, json.dumps(report, indent=1) + "\n")
     print(json.dumps(report, indent=1))
 
 

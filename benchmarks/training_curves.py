@@ -28,6 +28,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
 from dgse.bench.plots import style_of
+from dgse.files import atomic_open, atomic_path
 
 
 def _read(path: Path) -> list[dict[str, str]]:
@@ -66,8 +67,9 @@ def main() -> None:
     axes[0].legend()
     fig.tight_layout()
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(args.out, dpi=110)
-    with args.out.with_suffix(".csv").open("w", newline="") as f:
+    with atomic_path(args.out) as tmp:
+        fig.savefig(tmp, dpi=110)
+    with atomic_open(args.out.with_suffix(".csv"), "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=["method", "epoch", "global_step", *(k for k, _ in panels)])
         w.writeheader()
         w.writerows(table)

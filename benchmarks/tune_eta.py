@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from dgse.evaluation.evaluate import evaluate
+from dgse.files import write_text
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -61,7 +62,8 @@ def main() -> None:
         }
         print(n, json.dumps(table[str(n)]))
     out = REPO / "benchmarks" / "results" / "eta_validation.json"
-    out.write_text(
+    write_text(
+        out,
         json.dumps(
             {
                 "store": args.store,
@@ -71,7 +73,7 @@ def main() -> None:
                 "by_observations": table,
             },
             indent=1,
-        )
+        ),
     )
     print(f"wrote {out}")
 

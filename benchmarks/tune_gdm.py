@@ -254,6 +254,8 @@ def tune(
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    from dgse.files import write_text
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("store", type=Path, help="dataset store (.h5); only its 'val' split is read")
     ap.add_argument("--out", type=Path, default=DEFAULT_OUT)
@@ -295,9 +297,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         min_gain=args.min_gain,
     )
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = args.out.with_name(args.out.name + ".tmp")
-    tmp.write_text(json.dumps(doc, indent=1) + "\n")
-    tmp.replace(args.out)
+    write_text(args.out, json.dumps(doc, indent=1) + "\n")
     print(f"wrote {args.out}")
     return 0
 

@@ -32,6 +32,7 @@ from dgse.estimators.registry import get_estimator
 from dgse.evaluation.calibration import (
     chance_calibration_error,
 )
+from dgse.files import write_text
 from dgse.posterior.mixture import flattened, neighbour_correlation, standardized_residuals
 from dgse.world.grid import Grid
 
@@ -130,8 +131,8 @@ def write_summary(out: Path) -> None:
             texts.append(text)
         summary["rules"][name] = cells
         lines.append(f"| {name} | " + " | ".join(texts) + " |")
-    (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
-    (out / "summary.md").write_text("\n".join(lines) + "\n")
+    write_text(out / "summary.json", json.dumps(summary, indent=1) + "\n")
+    write_text(out / "summary.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
 
 

@@ -30,6 +30,7 @@ import numpy as np
 from dgse.belief.knowledge import Knowledge
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.evaluate import draw_observations
+from dgse.files import write_text
 from dgse.physics.scenario import random_cases
 from dgse.posterior.mixture import field_error_variance
 
@@ -130,7 +131,7 @@ def main() -> None:
                 f"{cov['wind_with_error']}; log-conc {cov['conc_spread_only']} -> {cov['conc_with_error']}"
             )
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(result, indent=1))  # after each level: nothing lost
+        write_text(args.out, json.dumps(result, indent=1))  # after each level: nothing lost
     print(f"wrote {args.out}")
 
 

@@ -33,6 +33,7 @@ from dgse.estimators.registry import get_estimator
 from dgse.evaluation.calibration import (
     chance_calibration_error,
 )
+from dgse.files import write_text
 
 #: The network's weights in the mixture ``(1 - w) physics + w network`` that are scored.
 WEIGHTS = (0.0, 0.01, 0.02, 0.05, 0.1, 0.2, 0.3, 0.5, 1.0)
@@ -64,8 +65,8 @@ def write_summary(out: Path) -> None:
         cell["chance_calibration_error"] = chance
         summary["cells"].append(cell)
         lines.append(f"| {level} | {variant} | {n} | {len(rr)} | " + " | ".join(texts) + f" | {chance:.3f} |")
-    (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
-    (out / "summary.md").write_text("\n".join(lines) + "\n")
+    write_text(out / "summary.json", json.dumps(summary, indent=1) + "\n")
+    write_text(out / "summary.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
 
 

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dgse.files import write_text
 from dgse.physics.projection import TURBULENCE_TOLERANCE, project_wind, transport_from_wind
 from dgse.physics.scenario import random_cases
 
@@ -78,7 +79,7 @@ def main() -> None:
             flush=True,
         )
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"seeds": list(VALIDATION_SEEDS), "rows": rows}, indent=1))
+    write_text(args.out, json.dumps({"seeds": list(VALIDATION_SEEDS), "rows": rows}, indent=1))
     print(f"wrote {args.out}")
 
 

@@ -20,7 +20,7 @@ raises :class:`~dgse.errors.InputDataError` naming the settings that differ
 Robustness: every line is written with one ``write`` and flushed, so a kill
 loses at most the line being written; a torn or unreadable line is dropped
 when the journal is read (its piece is simply done again), and the file is
-then rewritten without it (a temporary file and ``os.replace``).  The file is
+then rewritten without it (atomically, :func:`dgse.files.write_text`).  The file is
 not synced to disk after every line: a power loss may lose the last lines.
 Nothing is written before the first piece finishes (a run that fails
 early leaves no file behind); ``restart=True`` empties the journal at once.
@@ -38,6 +38,7 @@ from typing import IO, Any
 import numpy as np
 
 from dgse.errors import InputDataError
+from dgse.files import write_text
 from dgse.world.case import Case
 
 __all__ = [
@@ -222,9 +223,7 @@ class Journal:
         }
         lines = [json.dumps(header, allow_nan=False)]
         lines += [json.dumps(r, allow_nan=False) for r in self.records]
-        tmp = self.path.with_name(self.path.name + ".tmp")
-        tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
-        os.replace(tmp, self.path)
+        write_text(self.path, "\n".join(lines) + "\n")
         self._rewrite = False
 
     def append(self, record: Mapping[str, Any]) -> None:

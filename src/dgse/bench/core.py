@@ -51,6 +51,15 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from dgse.errors import ConvergenceError, InputDataError
+from dgse.files import (
+    atomic_open,
+    atomic_path,
+    is_temporary,
+    update_json,
+    write_bytes,
+    write_json,
+    write_text,
+)
 from dgse.world.case import Case
 
 if TYPE_CHECKING:
@@ -158,7 +167,8 @@ class Section:
         import matplotlib.pyplot as plt
 
         path = self._dir / f"{_check_name(name)}.png"
-        fig.savefig(path, dpi=110, bbox_inches="tight")
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=110, bbox_inches="tight")
         plt.close(fig)
         self.figures.append({"file": path.name, "caption": caption})
         return path
@@ -173,7 +183,7 @@ class Section:
         """Write ``rows`` as ``<name>.csv`` and list them (with ``columns`` in order) in this section."""
         cols = list(columns) if columns is not None else list(dict.fromkeys(k for r in rows for k in r))
         path = self._dir / f"{_check_name(name)}.csv"
-        with path.open("w", newline="") as f:
+        with atomic_open(path, "w", newline="") as f:
             w = csv.writer(f)
             w.writerow(cols)
             for r in rows:
@@ -263,11 +273,7 @@ class BenchContext:
 
     def save_json(self, name: str, data: Any) -> Path:
         """Write ``data`` as ``<name>.json`` in the suite's directory (atomically)."""
-        path = self.out / f"{_check_name(name)}.json"
-        tmp = path.with_suffix(".json.tmp")
-        tmp.write_text(json.dumps(jsonable(data), indent=1))
-        tmp.replace(path)
-        return path
+        return write_json(self.out / f"{_check_name(name)}.json", jsonable(data), indent=1)
 
     def load_json(self, name: str) -> Any | None:
         """A result written by :meth:`save_json` in an earlier (interrupted) run, or None."""
@@ -297,10 +303,8 @@ class BenchContext:
         self.reused.append(f"{name} of {str(created)[:10]}" if created else name)
 
     def _record_seconds(self, name: str, seconds: float) -> None:
-        path = self.out / TIMINGS
-        timings = json.loads(path.read_text()) if path.is_file() else {}
-        timings[name] = round(float(seconds), 2)
-        path.write_text(json.dumps(timings, indent=1))
+        # under a lock: two runs into one directory may record times at once
+        update_json(self.out / TIMINGS, lambda t: {**t, name: round(float(seconds), 2)}, default={}, indent=1)
 
     def compute_seconds(self) -> float:
         """Seconds spent computing this suite's results, over all (resumed) runs.
@@ -313,7 +317,7 @@ class BenchContext:
         timings = json.loads(path.read_text()) if path.is_file() else {}
         total = sum(float(v) for v in timings.values())
         for f in self.out.glob("*.json"):
-            if f.stem in timings or f.name in (MANIFEST, TIMINGS):
+            if f.stem in timings or f.name in (MANIFEST, TIMINGS) or is_temporary(f):
                 continue
             try:
                 v = json.loads(f.read_text())
@@ -377,9 +381,7 @@ class BenchContext:
             "notes": self.notes,
             "sections": [s.to_dict() for s in self.sections],
         }
-        path = self.out / MANIFEST
-        path.write_text(json.dumps(jsonable(manifest), indent=1))
-        return path
+        return write_json(self.out / MANIFEST, jsonable(manifest), indent=1)
 
     # -- scenarios -----------------------------------------------------------------------
     def scenario_dir(self, kind: str) -> Path:
@@ -411,7 +413,7 @@ class BenchContext:
                 try:
                     link.symlink_to(os.path.relpath(f, sel))
                 except OSError:
-                    link.write_bytes(f.read_bytes())
+                    write_bytes(link, f.read_bytes())
         return sel
 
     def _test_scenarios(self, n: int) -> list[Path]:
@@ -472,7 +474,7 @@ class BenchContext:
                 try:
                     solve_cases(layout, v, src, "builtin")[0].save(path)
                 except ConvergenceError as e:
-                    skip.write_text(str(e))
+                    write_text(skip, str(e))
                     failed += 1
                     continue
             out.append(path)

@@ -39,6 +39,7 @@ from typing import Any
 
 from dgse.bench.core import MANIFEST, load_manifests
 from dgse.errors import InputDataError
+from dgse.files import write_text
 
 __all__ = ["format_value", "markdown_to_html", "write_report"]
 
@@ -725,7 +726,5 @@ def write_report(directory: str | os.PathLike[str], output: str | os.PathLike[st
         ]
     )
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.name + ".tmp")
-    tmp.write_text(page, encoding="utf-8")
-    tmp.replace(out)
+    write_text(out, page)
     return out

@@ -148,14 +148,11 @@ def _episode_path(result: Any) -> dict[str, Any]:
 
 
 def _write_piece(path: Path, data: Any) -> None:
-    import json
-
     from dgse.bench.core import jsonable
+    from dgse.files import write_json
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(jsonable(data)))
-    tmp.replace(path)
+    write_json(path, jsonable(data))
 
 
 def stored_plan(piece: Mapping[str, Any]) -> dict[str, Any] | None:

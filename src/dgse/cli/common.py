@@ -32,6 +32,7 @@ from rich.markup import escape
 from rich.text import Text
 
 from dgse.errors import DGSEError, InputDataError
+from dgse.files import write_text
 
 #: Exit status of every user-caused error.
 EXIT_USER_ERROR = 2
@@ -83,7 +84,7 @@ def write_crash_log(exc: BaseException, argv: list[str] | None = None) -> Path:
         try:
             d.mkdir(parents=True, exist_ok=True)
             path = d / f"crash-{stamp}-{os.getpid()}.log"
-            path.write_text(text, encoding="utf-8")
+            write_text(path, text)
             return path
         except OSError:
             continue

@@ -11,7 +11,6 @@ status 2.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -29,6 +28,7 @@ from dgse.cli.common import (
     user_errors,
 )
 from dgse.errors import InputDataError
+from dgse.files import atomic_path, write_json
 
 __all__ = [
     "export_cmd",
@@ -219,12 +219,15 @@ def stats_cmd(
     console.print(table)
     if json_out is not None:
         json_out.parent.mkdir(parents=True, exist_ok=True)
-        json_out.write_text(json.dumps(st, indent=1, allow_nan=True))
+        write_json(json_out, st, indent=1, allow_nan=True)
         console.print(f"wrote statistics [cyan]{path_text(json_out)}[/]")
     if plot is not None:
         plot.parent.mkdir(parents=True, exist_ok=True)
         try:
-            plot_stats(st).savefig(plot, dpi=120)
+            # savefig names a figure without a suffix NAME.png; the temporary name has a suffix
+            target = plot if plot.suffix else plot.with_name(plot.name + ".png")
+            with atomic_path(target) as tmp:
+                plot_stats(st).savefig(tmp, dpi=120)
         except ValueError as e:  # unknown image format
             raise InputDataError(f"cannot save figure {plot}: {e}") from None
         console.print(f"wrote figure [cyan]{path_text(plot)}[/]")

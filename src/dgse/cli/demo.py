@@ -27,6 +27,7 @@ from rich.table import Table
 from dgse.belief.knowledge import DEFAULT_LEVEL, check_level, require_level
 from dgse.cli.common import KnowledgeOption, check_output_dir, console, path_text, user_errors
 from dgse.errors import InputDataError
+from dgse.files import atomic_path
 
 if TYPE_CHECKING:
     from dgse.search.episode import StepRecord
@@ -152,9 +153,11 @@ def demo_cmd(
     out.mkdir(parents=True, exist_ok=True)
     written = [case.save(out / f"{case.name}.npz")]
     fig = plot_case(case)
-    fig.savefig(out / f"{case.name}.png", dpi=110)
+    with atomic_path(out / f"{case.name}.png") as tmp:
+        fig.savefig(tmp, dpi=110)
     written.append(out / f"{case.name}.png")
-    plot_search_step(result, case, -1).savefig(out / "search_final.png", dpi=110)
+    with atomic_path(out / "search_final.png") as tmp:
+        plot_search_step(result, case, -1).savefig(tmp, dpi=110)
     written.append(out / "search_final.png")
     if animate:
         with console.status("writing the animation"):

@@ -55,6 +55,7 @@ from dgse.cli.common import (
     report_bug,
 )
 from dgse.errors import DGSEError, InputDataError
+from dgse.files import atomic_path
 from dgse.world.case import Case
 from dgse.world.layout import Layout, Opening
 
@@ -128,7 +129,8 @@ def _save_figure(fig, path: Path, dpi: int) -> Path:
     """Save a figure; the format follows the suffix (png, pdf, svg, ...)."""
     _check_figure_out(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi)
     return path
 
 

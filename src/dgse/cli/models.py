@@ -47,6 +47,7 @@ from dgse.cli.common import (
     user_errors,
 )
 from dgse.errors import InputDataError
+from dgse.files import atomic_path
 
 __all__ = [
     "estimate_cmd",
@@ -136,7 +137,8 @@ def _check_figure_path(path: Path) -> None:
 def _save_figure(fig: Any, path: Path, dpi: int = 120) -> Path:
     _check_figure_path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi)
     return path
 
 

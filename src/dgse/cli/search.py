@@ -52,7 +52,6 @@ The helpers :func:`default_output`, :func:`kept_note`, :func:`resume_command`,
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from pathlib import Path
@@ -81,6 +80,7 @@ from dgse.cli.common import (
     user_errors,
 )
 from dgse.errors import InputDataError
+from dgse.files import write_json
 from dgse.journal import count_records, journal_path
 
 if TYPE_CHECKING:
@@ -128,10 +128,7 @@ def _write_json(path: Path, data: dict[str, Any]) -> Path:
     from dgse.search.campaign import json_safe
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".part")
-    tmp.write_text(json.dumps(json_safe(data), indent=1, allow_nan=False))
-    tmp.replace(path)
-    return path
+    return write_json(path, json_safe(data), indent=1, allow_nan=False)
 
 
 # -- command -----------------------------------------------------------------------------

@@ -77,6 +77,7 @@ import h5py
 import numpy as np
 
 from dgse.errors import DGSEError, InputDataError
+from dgse.files import atomic_path, is_temporary, write_json
 from dgse.world.case import Case
 
 __all__ = [
@@ -313,14 +314,6 @@ def _draw_env_configs(
 # -- helpers -----------------------------------------------------------------------------------
 def _now() -> str:
     return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
-
-
-def _fsync_file(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
 
 
 def _fsync_dir(path: Path) -> None:
@@ -946,9 +939,7 @@ class DatasetStore:
                 written.append(p)
                 files.append(p.name)
             manifest["layouts"][lid] = {"split": self.split_of(lid), "files": files}
-        tmp = d / "manifest.json.part"
-        tmp.write_text(json.dumps(manifest, indent=1))
-        tmp.replace(d / "manifest.json")
+        write_json(d / "manifest.json", manifest, indent=1)
         return written
 
     def import_cases(self, paths: Iterable[str | Path], split: str = "train") -> list[str]:
@@ -968,7 +959,7 @@ class DatasetStore:
         for p in paths:
             p = Path(p)
             if p.is_dir():
-                files.extend(sorted(p.glob("*.npz")))
+                files.extend(sorted(q for q in p.glob("*.npz") if not is_temporary(q)))
             elif p.exists():
                 files.append(p)
             else:
@@ -1048,11 +1039,8 @@ class Journal:
 
     def _atomic(self, final: Path, write: Callable[[Path], None]) -> Path:
         self.dir.mkdir(parents=True, exist_ok=True)
-        tmp = final.with_name("." + final.name + ".tmp")
-        tmp.unlink(missing_ok=True)
-        write(tmp)
-        _fsync_file(tmp)
-        os.replace(tmp, final)
+        with atomic_path(final) as tmp:
+            write(tmp)
         _fsync_dir(self.dir)
         return final
 
@@ -1093,7 +1081,7 @@ class Journal:
         if not self.dir.is_dir():
             return layouts, failures
         for p in sorted(self.dir.iterdir()):
-            if p.name.startswith(".") and p.name.endswith(".tmp"):
+            if is_temporary(p) or (p.name.startswith(".") and p.name.endswith(".tmp")):
                 p.unlink(missing_ok=True)
             elif p.name.endswith(".failure.json"):
                 try:
@@ -1124,13 +1112,9 @@ def create_store(path: str | Path, generation: Mapping[str, Any] | None = None) 
     if path.exists():
         raise InputDataError(f"{path} already exists")
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name("." + path.name + ".create.tmp")
-    tmp.unlink(missing_ok=True)
-    with DatasetStore(tmp, "w") as s:
+    with atomic_path(path) as tmp, DatasetStore(tmp, "w") as s:
         if generation is not None:
             s.set_generation_info(generation)
-    _fsync_file(tmp)
-    os.replace(tmp, path)
     _fsync_dir(path.parent)
 
 
@@ -1159,9 +1143,7 @@ def commit_pending(
         return 0
     if not store_path.exists():
         raise InputDataError(f"{store_path}: no such dataset store to commit into")
-    tmp = store_path.with_name("." + store_path.name + ".commit.tmp")
-    tmp.unlink(missing_ok=True)
-    try:
+    with atomic_path(store_path) as tmp:
         shutil.copyfile(store_path, tmp)
         with DatasetStore(tmp, "r+", compression=compression) as s:
             for rec, _ in failures:
@@ -1178,11 +1160,7 @@ def commit_pending(
                 s.remove_failure(lid)
             if finalize is not None:
                 finalize(s)
-        _fsync_file(tmp)
-        os.replace(tmp, store_path)
-        _fsync_dir(store_path.parent)
-    finally:
-        tmp.unlink(missing_ok=True)
+    _fsync_dir(store_path.parent)
     for _, path, _ in layouts:
         path.unlink(missing_ok=True)
     for _, path in failures:

@@ -106,6 +106,7 @@ from dgse.belief.knowledge import DEFAULT_LEVEL, Knowledge, check_level, require
 from dgse.errors import DGSEError, InputDataError
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.metrics import METRIC_KEYS, EstimateMetrics, evaluate_belief
+from dgse.files import atomic_open, is_temporary, write_text
 from dgse.sensing.noise import NoiseModel, NoiseParams
 from dgse.sensing.sensors import Observations, random_observations
 from dgse.world.case import Case
@@ -228,7 +229,7 @@ def open_cases(
             if not path.exists():
                 raise InputDataError(f"{path}: no such file or directory")
             if path.is_dir():
-                files = sorted(p for p in path.glob("*.npz") if p.is_file())
+                files = sorted(p for p in path.glob("*.npz") if p.is_file() and not is_temporary(p))
                 if not files:
                     raise InputDataError(f"{path}: no case files (*.npz) in this directory")
                 refs = [CaseRef(p.stem, _case_loader(p)) for p in files]
@@ -697,10 +698,7 @@ def write_json(result: Mapping[str, Any], path: str | os.PathLike[str]) -> Path:
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     text = json.dumps(_jsonable(result), indent=1, allow_nan=False)
-    tmp = p.with_name(p.name + ".part")
-    tmp.write_text(text + "\n", encoding="utf-8")
-    tmp.replace(p)
-    return p
+    return write_text(p, text + "\n")
 
 
 # -- one estimate as a file ---------------------------------------------------------------------
@@ -748,10 +746,8 @@ def save_estimate(
     arrays["metrics"] = np.array(json.dumps(_jsonable(metrics.to_dict() if metrics else {})))
     arrays["extra"] = np.array(json.dumps(_jsonable(dict(extra or {}))))
     p.parent.mkdir(parents=True, exist_ok=True)
-    tmp = p.with_name(p.name + ".part")
-    with open(tmp, "wb") as fh:
+    with atomic_open(p, "wb") as fh:
         np.savez_compressed(fh, **arrays)
-    tmp.replace(p)
     return p
 
 

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from dataclasses import dataclass, field
 from importlib.metadata import PackageNotFoundError
 from importlib.metadata import version as _pkg_version
@@ -39,6 +38,7 @@ from safetensors import safe_open
 from safetensors.torch import save_file
 
 from dgse.errors import InputDataError
+from dgse.files import atomic_path
 from dgse.models.networks import VARIANTS, DGSEModel, ModelConfig, build_model
 
 __all__ = [
@@ -120,14 +120,8 @@ def save_model(
         "torch_version": torch.__version__,
     }
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        save_file(tensors, tmp, metadata=meta)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    with atomic_path(path) as tmp:
+        save_file(tensors, str(tmp), metadata=meta)
     return path
 
 

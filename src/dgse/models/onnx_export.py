@@ -85,6 +85,7 @@ from torch import nn
 
 from dgse.data.rasterize import CH_GAS, CH_OCCUPANCY, CH_VALID, UNOBSERVED_GAS
 from dgse.errors import InputDataError, UnsupportedError
+from dgse.files import atomic_path
 from dgse.models.networks import DGSE_O, DGSE_P, DGSE_S, INPUT_FILL, DGSEModel
 from dgse.models.unet import UNet
 
@@ -472,34 +473,37 @@ def export_onnx(
         path = _stage_path(out_path, spec.suffix)
         inputs = example_inputs(spec, canvas=example_canvas)
         axes = {name: spec.axes[name] for name in (*spec.inputs, *spec.outputs)}
-        with warnings.catch_warnings(), torch.no_grad():
-            warnings.simplefilter("ignore")
-            torch.onnx.export(
-                spec.module,
-                tuple(inputs[n] for n in spec.inputs),
-                str(path),
-                dynamo=False,
-                opset_version=opset,
-                input_names=list(spec.inputs),
-                output_names=list(spec.outputs),
-                dynamic_axes=axes,
-                do_constant_folding=True,
-            )
-        proto = onnx.load(str(path))
-        meta = {
-            "dgse_variant": net.config.variant,
-            "export_variant": v,
-            "stage": spec.stage,
-            "model_config": json.dumps(net.config.to_dict(), sort_keys=True),
-            "stride": str(net.stride),
-            "inputs": ",".join(spec.inputs),
-            "outputs": ",".join(spec.outputs),
-            "dgse_version": _dgse_version(),
-        }
-        onnx.helper.set_model_props(proto, meta)
-        proto.doc_string = f"DGSE {net.config.variant} ({spec.stage}); see dgse.models.onnx_export"
-        onnx.checker.check_model(proto)
-        onnx.save(proto, str(path))
+        # exported, completed with the metadata and checked under a temporary name: an
+        # interrupted export leaves no half-written model
+        with atomic_path(path) as tmp:
+            with warnings.catch_warnings(), torch.no_grad():
+                warnings.simplefilter("ignore")
+                torch.onnx.export(
+                    spec.module,
+                    tuple(inputs[n] for n in spec.inputs),
+                    str(tmp),
+                    dynamo=False,
+                    opset_version=opset,
+                    input_names=list(spec.inputs),
+                    output_names=list(spec.outputs),
+                    dynamic_axes=axes,
+                    do_constant_folding=True,
+                )
+            proto = onnx.load(str(tmp))
+            meta = {
+                "dgse_variant": net.config.variant,
+                "export_variant": v,
+                "stage": spec.stage,
+                "model_config": json.dumps(net.config.to_dict(), sort_keys=True),
+                "stride": str(net.stride),
+                "inputs": ",".join(spec.inputs),
+                "outputs": ",".join(spec.outputs),
+                "dgse_version": _dgse_version(),
+            }
+            onnx.helper.set_model_props(proto, meta)
+            proto.doc_string = f"DGSE {net.config.variant} ({spec.stage}); see dgse.models.onnx_export"
+            onnx.checker.check_model(proto)
+            onnx.save(proto, str(tmp))
         paths.append(path)
     return OnnxExport(
         paths=tuple(paths),

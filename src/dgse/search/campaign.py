@@ -52,6 +52,7 @@ import numpy as np
 from dgse.belief.estimator import Estimator
 from dgse.belief.knowledge import DEFAULT_LEVEL, check_level, require_level
 from dgse.errors import InputDataError
+from dgse.files import is_temporary
 from dgse.planning.planners import Planner
 from dgse.search.episode import DEFAULT_TIME_LIMIT, EpisodeResult, StepRecord
 from dgse.search.robot import DEFAULT_DWELL, DEFAULT_SPEED
@@ -88,7 +89,7 @@ def load_cases(path: str | os.PathLike[str]) -> list[tuple[Path, Case]]:
 
     path = Path(path)
     if path.is_dir():
-        files = sorted(p for p in path.glob("*.npz") if p.is_file())
+        files = sorted(p for p in path.glob("*.npz") if p.is_file() and not is_temporary(p))
         out = [(p, Case.load(p)) for p in files if npz_kind(p) == "case"]
         if not out:
             raise InputDataError(f"{path}: no case files (.npz with wind, concentration, source)")

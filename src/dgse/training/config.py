@@ -34,6 +34,7 @@ from typing import Any
 import yaml
 
 from dgse.errors import InputDataError
+from dgse.files import write_text
 from dgse.models.networks import PRESETS, VARIANTS, ModelConfig, preset_config
 from dgse.models.objectives import LossWeights
 
@@ -381,8 +382,7 @@ class TrainConfig:
         """Write the config as YAML (loadable with :func:`load_config`)."""
         p = Path(path)
         p.parent.mkdir(parents=True, exist_ok=True)
-        p.write_text(yaml.safe_dump(self.to_dict(), sort_keys=False))
-        return p
+        return write_text(p, yaml.safe_dump(self.to_dict(), sort_keys=False))
 
 
 def _loss_weights(m: Mapping[str, Any]) -> LossWeights:

@@ -70,7 +70,6 @@ import math
 import os
 import signal
 import sys
-import tempfile
 import threading
 import time
 import warnings
@@ -93,6 +92,7 @@ from safetensors import safe_open
 from safetensors.torch import save_file
 
 from dgse.errors import InputDataError
+from dgse.files import atomic_path
 from dgse.models.checkpoint import (
     CheckpointError,
     load_checkpoint,
@@ -172,14 +172,8 @@ def _json_default(v: Any) -> Any:
 
 def _atomic_save(tensors: dict[str, torch.Tensor], path: Path, metadata: dict[str, str]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        save_file(tensors, tmp, metadata=metadata)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    with atomic_path(path) as tmp:
+        save_file(tensors, str(tmp), metadata=metadata)
 
 
 # -- the training state file ------------------------------------------------------------------

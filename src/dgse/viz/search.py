@@ -35,6 +35,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from dgse.errors import InputDataError
+from dgse.files import atomic_path
 from dgse.search.episode import EpisodeResult
 from dgse.viz.case import SOLID_IN_FIELD, SOURCE_STYLE
 from dgse.world.case import Case
@@ -249,7 +250,7 @@ def animate_episode(
     path.parent.mkdir(parents=True, exist_ok=True)
     ks = frame_steps(len(result.steps), max_frames)
     writer = PillowWriter(fps=fps)
-    with writer.saving(sf.fig, str(path), dpi):
+    with atomic_path(path) as tmp, writer.saving(sf.fig, str(tmp), dpi):
         for n, k in enumerate(ks):
             sf.draw(k)
             if n == 0:  # lay the figure out once (the frames differ only in data), then freeze it

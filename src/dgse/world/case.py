@@ -9,8 +9,6 @@ shapes, dtypes, units and the source position and raises
 from __future__ import annotations
 
 import json
-import os
-import threading
 import zipfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -18,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from dgse.errors import CaseFileError, InputDataError
+from dgse.files import atomic_open
 from dgse.world.grid import Grid
 from dgse.world.layout import Layout
 
@@ -120,12 +119,10 @@ class Case:
         }
         if self.frames is not None:
             arrays["frames"] = self.frames
-        # a name of this process's own: runs that make the same case set at once each
-        # write a whole file and the last rename wins (the contents are the same)
-        tmp = path.with_name(f"{path.name}.{os.getpid()}.{threading.get_ident()}.part")
-        with open(tmp, "wb") as fh:
+        # each write has a temporary file of its own: runs that make the same case set at
+        # once each write a whole file and the last rename wins (the contents are the same)
+        with atomic_open(path, "wb") as fh:
             np.savez_compressed(fh, **arrays)
-        tmp.replace(path)
         return path
 
     @classmethod

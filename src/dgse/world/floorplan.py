@@ -44,6 +44,7 @@ import numpy as np
 from scipy import ndimage, sparse
 
 from dgse.errors import InputDataError
+from dgse.files import write_bytes
 from dgse.world.grid import DEFAULT_RESOLUTION, Grid
 from dgse.world.layout import Layout, Opening
 
@@ -608,7 +609,5 @@ def export_ros_map(layout: Layout, path: str | Path) -> tuple[Path, Path]:
         (pgm_path, f"P5\n{W} {H}\n255\n".encode("ascii") + pixels.tobytes()),
         (yaml_path, ("\n".join(lines) + "\n").encode("utf-8")),
     ):
-        tmp = target.with_name(target.name + ".part")
-        tmp.write_bytes(data)
-        tmp.replace(target)
+        write_bytes(target, data)
     return yaml_path, pgm_path

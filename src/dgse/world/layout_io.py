@@ -21,6 +21,7 @@ from typing import Literal
 import numpy as np
 
 from dgse.errors import InputDataError
+from dgse.files import atomic_open
 from dgse.world.grid import DEFAULT_RESOLUTION
 from dgse.world.layout import Layout, Opening
 
@@ -42,10 +43,8 @@ def save_layout(layout: Layout, path: str | Path) -> Path:
     path = _npz_path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     meta = {"kind": "layout", "name": layout.name, **layout.meta()}
-    tmp = path.with_name(path.name + ".part")
-    with open(tmp, "wb") as fh:
+    with atomic_open(path, "wb") as fh:
         np.savez_compressed(fh, occupancy=layout.occupancy.astype(np.uint8), meta=np.array(json.dumps(meta)))
-    tmp.replace(path)
     return path
 
 
