@@ -6,7 +6,7 @@ ended at its deadline, the final belief is rebuilt from the recorded readings (d
 two, as in the search) and scored with several point estimates: the posterior mean (the
 paper's ``s_hat``, what searches declared), the mode, and the centre of the free cell whose
 disk of 0.5, 1 or 2 m holds the most posterior mass
-(:func:`dgse.planning.planners.declared_source`).  A later journal's episode replaces an earlier
+(:meth:`dgse.planning.planners.UtilityPlanner.declare`).  A later journal's episode replaces an earlier
 one's of the same case.  The rebuilt mean must equal the journal's error (checked).
 
     python benchmarks/deadline_estimate.py \\
@@ -26,7 +26,7 @@ import numpy as np
 from phys_search import journal_episodes, map_estimator_at_end, step_observations  # this folder's
 
 from dgse.files import write_text
-from dgse.planning.planners import UtilityPlanner, declared_source
+from dgse.planning.planners import UtilityPlanner
 from dgse.presets import PRESETS
 from dgse.world.case import Case
 
@@ -52,7 +52,7 @@ def episode_row(case: Case, row: dict) -> dict:
     }
     for r in RADII:
         planner = UtilityPlanner(deadline_estimate_radius_m=r)
-        out[f"disk{r:g}m"] = error(declared_source(planner, belief, True))
+        out[f"disk{r:g}m"] = error(planner.declare(belief, True))
     if abs(out["mean"] - row["error_m"]) > 1e-6:
         raise SystemExit(f"rebuilt mean {out['mean']:.3f} m off, the search's {row['error_m']:.3f} m")
     return out

@@ -26,6 +26,7 @@ PLUGIN = '''
 import numpy as np
 
 from dgse.belief import Belief, KnowledgeUser, normalize_source_probs
+from dgse.planning.planners import PlannerBase
 from dgse.registry import Entry
 
 
@@ -40,11 +41,8 @@ class Uniform(KnowledgeUser):
         return Belief(occupancy, resolution, p, info={"method": "uniform", "seconds": 0.0})
 
 
-class Nearest:
+class Nearest(PlannerBase):
     name = "nearest"
-
-    def reset(self):
-        pass
 
     def should_stop(self, belief, history):
         return history.step >= 4

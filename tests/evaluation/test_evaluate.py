@@ -299,7 +299,9 @@ def test_cli_evaluate(case_dir, checkpoint, tmp_path, capsys):
     assert "SL error" in stdout and "8 estimates" in stdout
     result = json.loads(out.read_text())
     assert result["observation_counts"] == [5, 10] and set(result["aggregate"]) == {"5", "10"}
-    assert result["estimator_kwargs"]["K"] == 1 and result["estimator"]["checkpoint"] == str(checkpoint)
+    assert result["estimator_kwargs"]["K"] == 1 and result["estimator"]["settings"]["checkpoint"] == str(
+        checkpoint
+    )
     assert math.isfinite(result["aggregate"]["10"]["sl_error_m_mean"])
 
 

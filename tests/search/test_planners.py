@@ -12,9 +12,9 @@ from dgse.errors import InputDataError, UnsupportedError
 from dgse.planning.paths import FreeSpaceGraph
 from dgse.planning.planners import (
     Planner,
+    PlannerBase,
     SearchHistory,
     UtilityPlanner,
-    declared_source,
     disk_estimate,
     get_planner,
     local_mean,
@@ -23,7 +23,6 @@ from dgse.planning.planners import (
     planner_names,
     point_estimates,
     register_planner,
-    stop_held,
 )
 from dgse.sensing.sensors import Observations
 
@@ -191,7 +190,7 @@ def test_a_stop_can_need_gas_above_the_noise_floor_near_the_mode():
     h.observations.gas[:] = [500.0, 0.0, 15.0]  # high far away; near the mode: a zero and 1.5 floors
     assert UtilityPlanner(confirm_radius_m=1.0, confirm_readings=1).should_stop(belief, h)
     assert not planner.should_stop(belief, h)
-    assert planner.stop_held(h) and stop_held(planner, h)
+    assert planner.stop_held(h)
     goal = planner.next_goal(belief, (5, 6), g.distances_from((5, 6)), h)
     assert goal is not None and goal not in ((5, 5), (5, 6))
     assert np.hypot(goal[0] - 5, goal[1] - 5) * 0.5 <= 1.0
@@ -206,7 +205,7 @@ def test_a_stop_can_need_gas_above_the_noise_floor_near_the_mode():
     # a flat belief holds nothing; other planners hold nothing
     flat = _belief(belief.occupancy, np.ones((10, 10)), res=0.5)
     assert not planner.should_stop(flat, h) and not planner.stop_held(h)
-    assert not stop_held(object(), h)
+    assert not PlannerBase().stop_held(h)
     for bad in (-1.0, math.inf, math.nan):
         with pytest.raises(InputDataError, match="confirm_sigmas"):
             UtilityPlanner(confirm_sigmas=bad)
@@ -221,7 +220,7 @@ def test_a_stop_waits_for_a_flow_that_explains_the_wind():
     assert planner.should_stop(belief, h)  # states no misfit: not held
     belief.info["wind_misfit"] = 0.8
     assert not planner.should_stop(belief, h)
-    assert planner.stop_held(h) and stop_held(planner, h)
+    assert planner.stop_held(h)
     assert UtilityPlanner().should_stop(belief, h)  # the option off: the paper's stop
     belief.info["wind_misfit"] = 0.6
     assert planner.should_stop(belief, h) and not planner.stop_held(h)
@@ -248,7 +247,7 @@ def test_a_stop_waits_for_the_network_to_see_a_source_near_the_mode():
     elsewhere[5, 7] = 0.02  # and 1 m away, 0.02 of it
     belief.info["learned_source_probs"] = elsewhere
     assert not planner.should_stop(belief, h)
-    assert planner.stop_held(h) and stop_held(planner, h)
+    assert planner.stop_held(h)
     assert UtilityPlanner(mass_radius_m=1.0).should_stop(belief, h)  # the option off
     assert UtilityPlanner(mass_radius_m=1.0, min_learned_mass=0.02).should_stop(belief, h)
     # a smaller disk leaves the 0.02 out; unnormalized opinions are normalized
@@ -289,12 +288,12 @@ def test_a_deadline_stop_can_declare_the_disk_with_the_most_mass():
     plain = UtilityPlanner()
     disk = UtilityPlanner(deadline_estimate_radius_m=0.15)
     mean = belief.source_estimate()
-    assert declared_source(plain, belief, True) == mean
-    assert declared_source(disk, belief, False) == mean  # a mass stop declares the mean
-    x, y = declared_source(disk, belief, True)
+    assert plain.declare(belief, True) == mean
+    assert disk.declare(belief, False) == mean  # a mass stop declares the mean
+    x, y = disk.declare(belief, True)
     assert (x, y) == pytest.approx((1.75, 1.05))  # the east blob's centre cell
     assert abs(mean[0] - 1.0) < 0.1  # the mean: between the two, where neither is
-    assert declared_source(object(), belief, True) == mean  # other planners: the mean
+    assert PlannerBase().declare(belief, True) == mean  # other planners: the mean
     with pytest.raises(InputDataError, match="deadline_estimate_radius_m"):
         UtilityPlanner(deadline_estimate_radius_m=-1.0)
     # every reading of it at once: the mode is the sharp west cell, 0.5-2 m disks the east blob
@@ -311,8 +310,8 @@ def test_a_deadline_stop_can_declare_the_disk_with_the_most_mass():
     assert local_mean(belief, 2.0) == pytest.approx(mean, abs=1e-6)
     # deadline_estimate="local": a deadline stop declares that mean within the heaviest disk
     local = UtilityPlanner(deadline_estimate_radius_m=0.5, deadline_estimate="local")
-    assert declared_source(local, belief, True) == est["local0.5m"]
-    assert declared_source(local, belief, False) == mean
+    assert local.declare(belief, True) == est["local0.5m"]
+    assert local.declare(belief, False) == mean
     with pytest.raises(InputDataError, match="deadline_estimate"):
         UtilityPlanner(deadline_estimate="median")
 
@@ -435,10 +434,8 @@ def test_registry():
     with pytest.raises(InputDataError, match="eta"):
         UtilityPlanner(eta=1.5)
 
-    class Stay:
+    class Stay(PlannerBase):
         name = "test-stay"
-
-        def reset(self) -> None: ...
 
         def should_stop(self, belief, history) -> bool:
             return False

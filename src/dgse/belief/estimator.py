@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -33,6 +33,12 @@ class Estimator(Protocol):
     """
 
     knowledge_levels: tuple[str, ...]
+    #: the seed of its random draws (None: fresh); set by the loops before each estimate
+    seed: int | None
+
+    def describe(self) -> dict[str, Any]:
+        """The settings that make its estimates what they are (recorded with results)."""
+        ...
 
     def set_knowledge(self, knowledge: Knowledge) -> None:
         """Use ``knowledge`` (its map, and the openings or wind its level includes) from now on."""

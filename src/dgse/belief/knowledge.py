@@ -29,7 +29,7 @@ Example::
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, is_dataclass
 from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
 import numpy as np
@@ -242,6 +242,23 @@ class KnowledgeUser:
     knowledge_levels: ClassVar[tuple[Level, ...]] = LEVELS
     #: The knowledge handed over last (None: the map given to ``estimate`` only).
     knowledge: Knowledge | None = None
+    #: The seed of the estimator's own random draws (None: fresh ones).  The evaluation and
+    #: search loops set it before each estimate so that runs repeat; an estimator that draws
+    #: nothing ignores it.
+    seed: int | None = None
+
+    def describe(self) -> dict[str, Any]:
+        """The settings that make this estimator's estimates what they are, recorded with every
+        result (an evaluation journal with other settings is refused): a dataclass estimator's
+        fields, defaults included, without the knowledge and the seed, which are told per case;
+        other estimators override this."""
+        if not is_dataclass(self):
+            return {}
+        return {
+            f.name: getattr(self, f.name)
+            for f in fields(self)
+            if f.init and not f.name.startswith("_") and f.name not in ("knowledge", "seed")
+        }
 
     def set_knowledge(self, knowledge: Knowledge) -> None:
         """Use ``knowledge`` for the estimates on its map from now on.

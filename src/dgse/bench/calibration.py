@@ -60,8 +60,7 @@ def _collect(ctx: BenchContext, method: str, files: list[Path], counts: list[int
             a = acc[str(n)]
             for t in range(trials):
                 obs = draw_observations(case, n, ctx.seed, case_id=f.stem, trial=t)
-                if hasattr(est, "seed"):
-                    est.seed = estimator_seed(ctx.seed, f.stem, n, t)
+                est.seed = estimator_seed(ctx.seed, f.stem, n, t)
                 b = est.estimate(case.occupancy, case.resolution, obs)
                 if b.wind_mean is not None and b.wind_var is not None:
                     h, k = interval_hits(case.wind, b.wind_mean, b.wind_var, levels, mask=free)

@@ -282,8 +282,7 @@ def _maps(ctx: BenchContext, files: list[Path], n_obs: int) -> tuple[dict[str, A
         beliefs = {}
         for m, est in ests.items():
             est.set_knowledge(Knowledge.from_case(case, ctx.knowledge))
-            if hasattr(est, "seed"):
-                est.seed = estimator_seed(ctx.seed, cid, n_obs, 0)
+            est.seed = estimator_seed(ctx.seed, cid, n_obs, 0)
             beliefs[m] = est.estimate(case.occupancy, case.resolution, obs)
         out[cid] = {"case": case, "obs": obs, "beliefs": beliefs}
         b = beliefs["dgse-s"]

@@ -186,7 +186,7 @@ def estimate_cmd(
     obs = draw_observations(case, observations, seed, case_id, trial=0)
     with console.status(f"loading {escape(method)} ..."):
         est: Any = get_estimator(method, knowledge=Knowledge.from_case(case, level), **kwargs)
-    if hasattr(est, "seed") and "seed" not in kwargs:
+    if "seed" not in kwargs:
         est.seed = estimator_seed(seed, case_id, observations, 0)
     import time
 

@@ -137,6 +137,18 @@ class DGSEEstimator(KnowledgeUser):
         #: the checkpoint file the network came from (set by :meth:`from_checkpoint`)
         self.checkpoint: Path | None = None
 
+    def describe(self) -> dict[str, Any]:
+        """The network, its checkpoint, the samples and where and how it runs."""
+        return {
+            "name": self.name,
+            "K": self.K,
+            "T": self.T,
+            "checkpoint": self.checkpoint,
+            "device": self.device,
+            "dtype": self.dtype,
+            "channels_last": self.channels_last,
+        }
+
     @property
     def name(self) -> str:
         """``"dgse-o"``, ``"dgse-p"`` or ``"dgse-s"``."""
@@ -208,8 +220,8 @@ class DGSEEstimator(KnowledgeUser):
         probs = coarsen(pred.source_probs[0, :H, :W].double().cpu().numpy(), factor, "sum")
         info: dict[str, Any] = {
             "method": self.name,
-            "K": self.K if self.name == "dgse-s" else 1,
-            "T": self.T if self.name == "dgse-s" else 1,
+            "K": pred.K,
+            "T": pred.T,
             "canvas": canvas,
             "n_observations": len(observations),
             "dtype": str(self.dtype).removeprefix("torch."),

@@ -84,7 +84,6 @@ limits reuse what fits.  A case whose contents changed since is refused too.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import datetime as _dt
 import hashlib
 import json
@@ -411,22 +410,11 @@ def _check_counts(observation_counts: int | Sequence[int]) -> list[int]:
     return counts
 
 
-def _estimator_info(est: Any) -> dict[str, Any]:
-    """The estimator's class, name and, for a dataclass estimator, every setting it was built
-    with (defaults included, so that a journal written before a default changed is refused
-    rather than mixed with estimates of the new default; the knowledge and seed are told
-    per case and recorded apart)."""
-    info: dict[str, Any] = {"class": type(est).__name__}
-    for attr in ("name", "K", "T", "checkpoint", "device", "dtype", "channels_last"):
-        if hasattr(est, attr):
-            info[attr] = _jsonable(getattr(est, attr))
-    if dataclasses.is_dataclass(est):
-        info["settings"] = {
-            f.name: _jsonable(getattr(est, f.name))
-            for f in dataclasses.fields(est)
-            if f.init and not f.name.startswith("_") and f.name not in ("knowledge", "seed")
-        }
-    return info
+def _estimator_info(est: Estimator) -> dict[str, Any]:
+    """The estimator's class and settings (:meth:`~dgse.belief.estimator.Estimator.describe`:
+    defaults included, so that a journal written before a default changed is refused rather
+    than mixed with estimates of the new default)."""
+    return {"class": type(est).__name__, "settings": _jsonable(est.describe())}
 
 
 #: ``before(case_id, n_obs, trial, trials)``: the built-in bar's note of the estimate about to run.
@@ -539,8 +527,8 @@ def evaluate(
         est = method
         method_name = str(getattr(method, "name", type(method).__name__))
     require_level(est, method_name, level)
-    reseed = hasattr(est, "seed") and "seed" not in kwargs
-    original_seed = getattr(est, "seed", None)
+    reseed = "seed" not in kwargs
+    original_seed = est.seed
     noise = "Table I" if noise_model is None else _jsonable(vars(noise_model.ranges))
     identity = {
         "method": method_name,

@@ -60,7 +60,7 @@ from dgse.belief.belief import Belief
 from dgse.errors import InputDataError
 from dgse.localization import graph_distances
 from dgse.planning.paths import Cell, FreeSpaceGraph, graph_for
-from dgse.planning.planners import SearchHistory
+from dgse.planning.planners import PlannerBase, SearchHistory
 
 __all__ = [
     "InfotaxisPlanner",
@@ -335,7 +335,7 @@ def mean_wind(belief: Belief, history: SearchHistory | None) -> tuple[float, flo
 
 # -- the planner ------------------------------------------------------------------------------
 @dataclass
-class InfotaxisPlanner:
+class InfotaxisPlanner(PlannerBase):
     """Infotaxis / Entrotaxis planner on any belief (see the module docstring).
 
     Args:

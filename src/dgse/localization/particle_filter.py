@@ -94,7 +94,7 @@ from dgse.localization.infotaxis import (
     select_candidates,
 )
 from dgse.planning.paths import Cell
-from dgse.planning.planners import SearchHistory
+from dgse.planning.planners import PlannerBase, SearchHistory
 from dgse.sensing.sensors import Observations
 
 __all__ = ["DualModePlanner", "ParticleFilterEstimator", "make_dualmode", "make_dualmode_planner"]
@@ -407,7 +407,7 @@ def position_spread(belief: Belief) -> float:
 
 
 @dataclass
-class DualModePlanner:
+class DualModePlanner(PlannerBase):
     """Local information-gain search with a global frontier mode (module docstring).
 
     Args:

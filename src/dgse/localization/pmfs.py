@@ -101,7 +101,7 @@ from dgse.belief.knowledge import Knowledge, KnowledgeUser
 from dgse.errors import InputDataError
 from dgse.options import options_from
 from dgse.planning.paths import Cell
-from dgse.planning.planners import SearchHistory
+from dgse.planning.planners import PlannerBase, SearchHistory
 from dgse.sensing.sensors import Observations
 from dgse.world.layout import Layout
 
@@ -791,7 +791,7 @@ def make_pmfs(**kwargs: Any) -> PMFSEstimator:
 
 # -- the planner ----------------------------------------------------------------------------------
 @dataclass
-class PMFSPlanner:
+class PMFSPlanner(PlannerBase):
     """PMFS's movement strategy (module docstring).
 
     Args:

@@ -329,6 +329,12 @@ class MappingEstimator(KnowledgeUser):
     """
 
     name = "gdm"
+    #: the method's parameter set (a dataclass), set by the subclass's constructor
+    params: Any
+
+    def describe(self) -> dict[str, Any]:
+        """The method's name and its parameter set (defaults and tuning file applied)."""
+        return {"name": self.name, "params": dataclasses.asdict(self.params)}
 
     def map(self, occupancy: np.ndarray, resolution: float, observations: Observations) -> GasMap:
         """The gas distribution map (ppm) given the readings."""

@@ -72,25 +72,23 @@ from typing import Any, Literal, Protocol, runtime_checkable
 import numpy as np
 
 from dgse.belief.belief import Belief
-from dgse.errors import InputDataError
+from dgse.errors import InputDataError, UnsupportedError
 from dgse.planning.paths import Cell, FreeSpaceGraph
 from dgse.registry import Entry, Registry
 from dgse.sensing.sensors import Observations
 
 __all__ = [
     "Planner",
+    "PlannerBase",
     "PlannerFactory",
     "SearchHistory",
     "UtilityPlanner",
-    "declared_source",
     "get_planner",
     "mass_around",
     "mass_near_mode",
     "mass_within",
     "planner_names",
     "register_planner",
-    "stop_held",
-    "stopped_by_deadline",
 ]
 
 
@@ -159,6 +157,42 @@ class Planner(Protocol):
         """
         ...
 
+    def stop_held(self, history: SearchHistory) -> bool:
+        """Whether the last :meth:`should_stop`, at this step, passed its stop test but held the
+        stop (the search goes on; episodes record where that happened)."""
+        ...
+
+    def deadline_reached(self, history: SearchHistory) -> bool:
+        """Whether a stop now is a deadline stop (the time budget is nearly spent), not a
+        confident one; episodes end such a stop with reason ``"deadline"``."""
+        ...
+
+    def declare(self, belief: Belief, deadline: bool) -> tuple[float, float]:
+        """The source ``(x, y)``, m, the search declares when it ends with ``belief``
+        (``deadline``: at a deadline stop)."""
+        ...
+
+
+class PlannerBase:
+    """What a planner without these rules does: no held stops, no deadline stops, and the
+    belief's posterior mean as the declared source.  Planners derive from it and override
+    what they decide otherwise."""
+
+    def reset(self) -> None:
+        """Nothing to forget."""
+
+    def stop_held(self, history: SearchHistory) -> bool:
+        """Never holds a stop."""
+        return False
+
+    def deadline_reached(self, history: SearchHistory) -> bool:
+        """Has no deadline stop."""
+        return False
+
+    def declare(self, belief: Belief, deadline: bool) -> tuple[float, float]:
+        """The posterior mean (:meth:`~dgse.belief.belief.Belief.source_estimate`)."""
+        return belief.source_estimate()
+
 
 def _radius_or_none(name: str, value: float | None) -> float | None:
     """A planner option that is None or a positive, finite number of m."""
@@ -196,7 +230,7 @@ def mass_within(probs: np.ndarray, resolution: float, radius_m: float) -> np.nda
 
 
 @dataclass
-class UtilityPlanner:
+class UtilityPlanner(PlannerBase):
     """The paper's utility planner with entropy termination (see the module docstring).
 
     Args:
@@ -482,6 +516,18 @@ class UtilityPlanner:
         would have stopped without them."""
         return history is not None and self._held_step == int(history.step)
 
+    def declare(self, belief: Belief, deadline: bool) -> tuple[float, float]:
+        """The posterior mean, except at a deadline stop with ``deadline_estimate_radius_m``:
+        there the centre of the free cell whose disk of that radius holds the most posterior
+        mass (:func:`disk_estimate`), or with ``deadline_estimate="local"`` the posterior mean
+        within that disk (:func:`local_mean`)."""
+        radius = self.deadline_estimate_radius_m
+        if radius is None or not deadline:
+            return belief.source_estimate()
+        if self.deadline_estimate == "local":
+            return local_mean(belief, radius)
+        return disk_estimate(belief, radius)
+
     def utility(
         self, belief: Belief, distances: np.ndarray, history: SearchHistory | None = None
     ) -> np.ndarray:
@@ -580,34 +626,6 @@ def _noise_floor(belief: Belief) -> float:
     return 0.0
 
 
-def stop_held(planner: Planner, history: SearchHistory) -> bool:
-    """Whether ``planner``'s last stop test, at this step, held a stop for the confirmation of
-    its mode (:meth:`UtilityPlanner.stop_held`; False for other planners)."""
-    return isinstance(planner, UtilityPlanner) and planner.stop_held(history)
-
-
-def stopped_by_deadline(planner: Planner, history: SearchHistory) -> bool:
-    """Whether ``planner``'s stop now is a deadline stop (``UtilityPlanner.deadline_margin_s``)."""
-    return isinstance(planner, UtilityPlanner) and planner.deadline_reached(history)
-
-
-def declared_source(planner: Planner, belief: Belief, deadline: bool) -> tuple[float, float]:
-    """The source ``(x, y)``, m, a search declares when it ends with ``belief``.
-
-    The belief's posterior mean (:meth:`~dgse.belief.belief.Belief.source_estimate`),
-    except at a deadline stop (``deadline``) of a :class:`UtilityPlanner` with
-    ``deadline_estimate_radius_m``: there the centre of the free cell whose disk of that
-    radius holds the most posterior mass, or with ``deadline_estimate="local"`` the
-    posterior mean within that disk.
-    """
-    radius = getattr(planner, "deadline_estimate_radius_m", None)
-    if radius is None or not deadline:
-        return belief.source_estimate()
-    if getattr(planner, "deadline_estimate", "disk") == "local":
-        return local_mean(belief, radius)
-    return disk_estimate(belief, radius)
-
-
 def disk_estimate(belief: Belief, radius_m: float) -> tuple[float, float]:
     """The centre ``(x, y)``, m, of the free cell whose disk of ``radius_m`` holds the most posterior mass."""
     mass = np.where(belief.free, mass_within(belief.source_probs, belief.resolution, radius_m), -np.inf)
@@ -688,4 +706,10 @@ def get_planner(name: str, **kwargs: Any) -> Planner:
             a planner whose module cannot be imported here.
         InputDataError: keyword arguments the planner does not take.
     """
-    return PLANNERS.create(name, **kwargs)
+    planner = PLANNERS.create(name, **kwargs)
+    if not isinstance(planner, Planner):
+        raise UnsupportedError(
+            f"planner {name!r} does not implement the Planner protocol (derive it from "
+            "dgse.planning.planners.PlannerBase and give it should_stop() and next_goal())"
+        )
+    return planner

@@ -62,10 +62,7 @@ from dgse.planning.paths import Cell, graph_for
 from dgse.planning.planners import (
     Planner,
     SearchHistory,
-    declared_source,
     point_estimates,
-    stop_held,
-    stopped_by_deadline,
 )
 from dgse.search.robot import DEFAULT_DWELL, DEFAULT_SPEED, Robot, random_start_cell
 from dgse.sensing.noise import NoiseModel, NoiseParams
@@ -171,7 +168,7 @@ class EpisodeResult:
         source_cell: the true source cell.
         start_cell: the robot's start cell.
         estimate_xy: the final estimate ``(x, y)``, m: the belief's posterior mean, or what
-            the planner declares at a deadline stop (:func:`~dgse.planning.planners.declared_source`).
+            the planner declares at a deadline stop (:meth:`~dgse.planning.planners.Planner.declare`).
         error_m: localization error of the final estimate, m.
         reason: one of :data:`REASONS`.
         search_time_s: the clock when the search ended (``time_limit_s`` after a timeout), s.
@@ -420,7 +417,7 @@ def run_episode(
             distances = graph.distances_from(robot.cell)
             raw = planner.next_goal(belief, robot.cell, distances, history)
             goal = None if raw is None else graph.check_cell(raw, f"goal of planner {planner.name!r}")
-        held = stop_held(planner, history)
+        held = planner.stop_held(history)
         plan = time.perf_counter() - t3
 
         est = belief.source_estimate()
@@ -453,7 +450,7 @@ def run_episode(
         if include_compute_time:
             robot.wait(rec.compute_s, until=time_limit)
         if stop:
-            reason = "deadline" if stopped_by_deadline(planner, history) else "converged"
+            reason = "deadline" if planner.deadline_reached(history) else "converged"
             break
         if goal is None:
             reason = "planner_stop"
@@ -470,7 +467,7 @@ def run_episode(
     if belief is None:
         estimate = _free_centroid(case)
     else:
-        estimate = declared_source(planner, belief, reason == "deadline")
+        estimate = planner.declare(belief, reason == "deadline")
         for name, (x, y) in point_estimates(belief).items():
             end_errors[name] = math.hypot(x - source_xy[0], y - source_xy[1])
     return EpisodeResult(
