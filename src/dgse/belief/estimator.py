@@ -33,6 +33,8 @@ class Estimator(Protocol):
     """
 
     knowledge_levels: tuple[str, ...]
+    #: its name, as results record it
+    name: str
     #: the seed of its random draws (None: fresh); set by the loops before each estimate
     seed: int | None
 

@@ -39,6 +39,7 @@ from dgse.world.case import WALL_WIND_TOLERANCE, wind_problem
 from dgse.world.layout import Layout, Opening
 
 if TYPE_CHECKING:
+    from dgse.belief.estimator import Estimator
     from dgse.world.case import Case
 
 __all__ = [
@@ -65,12 +66,12 @@ def check_level(level: str) -> Level:
     return level  # type: ignore[return-value]
 
 
-def require_level(estimator: Any, name: str, level: str) -> None:
+def require_level(estimator: Estimator, name: str, level: str) -> None:
     """Raise :class:`UnsupportedError` unless ``estimator`` works at knowledge ``level``.
 
     The message names the levels it works at and the option that gives one.
     """
-    levels = tuple(getattr(estimator, "knowledge_levels", ()))
+    levels = tuple(estimator.knowledge_levels)
     if level in levels:
         return
     if not levels:
@@ -242,6 +243,12 @@ class KnowledgeUser:
     knowledge_levels: ClassVar[tuple[Level, ...]] = LEVELS
     #: The knowledge handed over last (None: the map given to ``estimate`` only).
     knowledge: Knowledge | None = None
+
+    @property
+    def name(self) -> str:
+        """The estimator's name (its class's, unless the estimator says otherwise)."""
+        return type(self).__name__
+
     #: The seed of the estimator's own random draws (None: fresh ones).  The evaluation and
     #: search loops set it before each estimate so that runs repeat; an estimator that draws
     #: nothing ignores it.
@@ -269,7 +276,7 @@ class KnowledgeUser:
         """
         if not isinstance(knowledge, Knowledge):
             raise InputDataError(f"knowledge must be a Knowledge, got {type(knowledge).__name__}")
-        require_level(self, str(getattr(self, "name", type(self).__name__)), knowledge.level)
+        require_level(self, self.name, knowledge.level)
         self._use_knowledge(knowledge)
         self.knowledge = knowledge
 

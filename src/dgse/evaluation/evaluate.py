@@ -522,10 +522,13 @@ def evaluate(
     else:
         if kwargs:
             raise InputDataError("estimator_kwargs apply to a method name, not to an estimator object")
-        if not callable(getattr(method, "estimate", None)):
-            raise InputDataError(f"{type(method).__name__} is not an estimator (no estimate method)")
+        if not isinstance(method, Estimator):
+            raise InputDataError(
+                f"{type(method).__name__} is not an estimator (derive it from dgse.belief.KnowledgeUser "
+                "and give it estimate())"
+            )
         est = method
-        method_name = str(getattr(method, "name", type(method).__name__))
+        method_name = method.name
     require_level(est, method_name, level)
     reseed = "seed" not in kwargs
     original_seed = est.seed

@@ -238,14 +238,13 @@ def run_trials(
         method = method or estimator
     else:
         est = estimator
-        name = getattr(estimator, "name", None)
-        method = method or (name if isinstance(name, str) else type(estimator).__name__)
+        method = method or estimator.name
     if isinstance(planner, str):
         plan = get_planner(planner, **plan_kw)
         planner_name = planner_name or planner
     else:
         plan = planner
-        planner_name = planner_name or str(getattr(planner, "name", type(planner).__name__))
+        planner_name = planner_name or planner.name
     require_level(est, method, level)
     model = est_kw.get("model")
     settings = json_safe(

@@ -295,8 +295,7 @@ def _record_factor(shape: tuple[int, int], max_cells: int) -> int:
 def _estimator_name(estimator: Estimator, belief: Belief | None) -> str:
     if belief is not None and belief.method != "unknown":
         return belief.method
-    name = getattr(estimator, "name", None)
-    return str(name) if isinstance(name, str) else type(estimator).__name__
+    return estimator.name
 
 
 def _free_centroid(case: Case) -> tuple[float, float]:
@@ -473,7 +472,7 @@ def run_episode(
     return EpisodeResult(
         case_name=case.name,
         method=_estimator_name(estimator, belief),
-        planner=str(getattr(planner, "name", type(planner).__name__)),
+        planner=planner.name,
         source_xy=source_xy,
         source_cell=source_cell,
         start_cell=robot.start,
