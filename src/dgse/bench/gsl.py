@@ -194,20 +194,21 @@ def run(ctx: BenchContext) -> None:
     """Evaluate the source estimators on 50 random observations; write fig:gsl_only and its table."""
     import torch
 
+    from dgse.estimators.registry import ESTIMATORS
     from dgse.world.case import Case
 
     threads = torch.get_num_threads()  # now: compiled numba/OpenMP code may change it later
     n_obs = 50
     n_scen = ctx.pick(6, 2)
     trials = ctx.pick(20, 1)
-    # PMFS simulates filaments for every source hypothesis: 5 to 40 s per estimate on this CPU
-    method_trials = {m: trials for m in METHODS}
-    method_trials["pmfs"] = ctx.pick(3, 1)
-    method_limit: dict[str, int | None] = {m: None for m in METHODS}
-    method_limit["pmfs"] = ctx.pick(None, 1)
-    # quick runs: the adjoint's flow solves for the candidate inlet speeds dominate, one scenario
-    method_limit["adjoint"] = ctx.pick(None, 1)
-    method_limit["dgse-phys"] = ctx.pick(None, 1)
+    # the registry's tags size the costly methods: "slow" (seconds per estimate: PMFS simulates
+    # filaments for every source hypothesis) gets fewer trials, and in a quick run "slow" and
+    # "flow-solves" (flow solves per scenario before the first estimate) one scenario
+    tags = {m: ESTIMATORS.entry(m).tags for m in METHODS}
+    method_trials = {m: ctx.pick(3, 1) if "slow" in tags[m] else trials for m in METHODS}
+    method_limit: dict[str, int | None] = {
+        m: ctx.pick(None, 1) if {"slow", "flow-solves"} & set(tags[m]) else None for m in METHODS
+    }
     methods, left_out = ctx.methods_at_level(METHODS)
     cases_dir = ctx.scenarios(n_scen, "test")
     files = sorted(cases_dir.glob("*.npz"))

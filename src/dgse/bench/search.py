@@ -29,7 +29,7 @@ Methods (estimator + planner, registry names):
 * **GrGSL** (``grgsl`` + ``infotaxis``): GrGSL's posterior, Infotaxis moves
   (GrGSL's original planner is Infotaxis-like);
 * **PMFS** (``pmfs`` + ``pmfs``), with cheaper filament simulations
-  (:data:`PMFS_FULL`) and a shorter time limit (300 s): with its published
+  (its preset, :data:`dgse.presets.PMFS_SEARCH`) and a shorter time limit (300 s): with its published
   sizes one estimate takes about 20 CPU-s here (a search of a hundred steps,
   over half an hour);
 * **Infotaxis (PF)** (``dualmode`` + ``infotaxis``): Infotaxis on the particle
@@ -89,10 +89,8 @@ ETA_OOD = round(ETA_TUNED + 0.1, 2)
 ETA_OOD_PAPER = 0.75
 #: The paper's time limit, s.
 TIME_LIMIT = 2000.0
-#: PMFS's simulations, cheaper than the published ones (about 20 CPU-s per estimate on this
-#: machine's cores with those, 0.6 s with these): recorded iterations, warm-up, first quadtree leaf.
-PMFS_FULL = {"n_record": 50, "max_warmup": 100, "leaf_cells": 20}
-PMFS_QUICK = {"n_record": 10, "max_warmup": 20, "leaf_cells": 30}
+#: The time limit of a method tagged ``"slow"`` (seconds per step), s (full / quick).
+SLOW_TIME_LIMIT = (300.0, 10.0)
 
 
 #: The compared methods (:data:`dgse.presets.PRESETS`), in table order.
@@ -115,10 +113,18 @@ class Plan:
     n_ood: int
     trials: int
     time_limit: float
-    #: per method key: ``trials``, ``time_limit``, ``scenarios`` where they differ from the above
+    #: per method: ``trials``, ``time_limit``, ``scenarios`` where they differ from the above
+    #: (methods tagged ``"slow"`` in the estimator registry: a shorter time limit)
     overrides: Mapping[str, Mapping[str, Any]]
-    #: per method key: extra estimator options (quick runs: smaller PMFS simulations)
+    #: per method: extra estimator options (a quick run: the preset's ``quick_options``)
     extra_options: Mapping[str, Mapping[str, Any]]
+
+
+def _slow(m: Preset) -> bool:
+    """Whether the method's estimator takes seconds per estimate (its registry tag)."""
+    from dgse.estimators.registry import ESTIMATORS
+
+    return "slow" in ESTIMATORS.entry(m.estimator).tags
 
 
 def make_plan(ctx: BenchContext) -> Plan:
@@ -130,8 +136,8 @@ def make_plan(ctx: BenchContext) -> Plan:
         n_ood=ctx.pick(6, 1),
         trials=ctx.pick(1, 1),
         time_limit=ctx.pick(TIME_LIMIT, 20.0),
-        overrides={"pmfs": {"time_limit": ctx.pick(300.0, 10.0)}},
-        extra_options={"pmfs": {"params": ctx.pick(PMFS_FULL, PMFS_QUICK)}},
+        overrides={m.name: {"time_limit": ctx.pick(*SLOW_TIME_LIMIT)} for m in METHODS if _slow(m)},
+        extra_options={m.name: dict(m.quick_options) for m in METHODS if ctx.quick and m.quick_options},
     )
 
 
@@ -526,22 +532,22 @@ def run(ctx: BenchContext) -> None:
 
 
 def _caveat(plan: Plan) -> str:
-    parts = []
-    o = plan.overrides.get("pmfs", {})
-    if o:
-        parts.append(
+    """The report's words for how the slow methods were bounded."""
+    out = []
+    for name, o in plan.overrides.items():
+        parts = [
             ", ".join(f"{k.replace('_', ' ')} {v:g}{' s' if k == 'time_limit' else ''}" for k, v in o.items())
+        ]
+        preset = PRESETS[name]
+        params = {**preset.search_estimator_options, **plan.extra_options.get(name, {})}.get("params")
+        if params:
+            parts.append("cheaper simulations (" + ", ".join(f"{k} {v}" for k, v in params.items()) + ")")
+        out.append(
+            f" {preset.display} (seconds per step) ran with "
+            + " and ".join(parts)
+            + " to bound the suite's run time."
         )
-    params = plan.extra_options.get("pmfs", {}).get("params")
-    if params:
-        parts.append("cheaper simulations (" + ", ".join(f"{k} {v}" for k, v in params.items()) + ")")
-    if not parts:
-        return ""
-    return (
-        " PMFS (seconds per step with its published simulation sizes) ran with "
-        + " and ".join(parts)
-        + " to bound the suite's run time."
-    )
+    return "".join(out)
 
 
 def _report_comparison(

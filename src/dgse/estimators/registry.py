@@ -21,12 +21,22 @@ from dgse.registry import Entry, Registry
 __all__ = ["ESTIMATORS", "estimator_names", "get_estimator", "register_estimator"]
 
 #: Every estimator: DGSE's own, the gas distribution mapping baselines (paper Sec. V-B),
-#: the source localization baselines and the physics oracle (Sec. V-C, V-D).
+#: the source localization baselines and the physics oracle (Sec. V-C, V-D).  Tags the
+#: benchmarks size runs by: ``"gdm"`` a mapping method, ``"slow"`` seconds per estimate
+#: (fewer trials and shorter searches), ``"flow-solves"`` flow solves per scenario before
+#: its first estimate (one scenario in a quick run).
 ESTIMATORS: Registry[Estimator] = Registry(
     "estimator",
     [
         Entry("dgse-s", "dgse.estimators.dgse:make_dgse_s", "DGSE-S", "#d62728", "o"),
-        Entry("dgse-phys", "dgse.estimators.phys:make_dgse_phys", "DGSE-phys", "#000080", "p"),
+        Entry(
+            "dgse-phys",
+            "dgse.estimators.phys:make_dgse_phys",
+            "DGSE-phys",
+            "#000080",
+            "p",
+            tags=("flow-solves",),
+        ),
         Entry("dgse-p", "dgse.estimators.dgse:make_dgse_p", "DGSE-P", "#1f77b4", "s"),
         Entry("dgse-o", "dgse.estimators.dgse:make_dgse_o", "DGSE-O", "#2ca02c", "^"),
         Entry("kdmvw", "dgse.mapping.kernel:KernelDMVW", "KDM+V/W", "#9467bd", "v", tags=("gdm",)),
@@ -41,9 +51,16 @@ ESTIMATORS: Registry[Estimator] = Registry(
             "#8c564b",
             "P",
         ),
-        Entry("pmfs", "dgse.localization.pmfs:make_pmfs", "PMFS", "#e377c2", "X"),
+        Entry("pmfs", "dgse.localization.pmfs:make_pmfs", "PMFS", "#e377c2", "X", tags=("slow",)),
         Entry("grgsl", "dgse.localization.grgsl:GrGSLEstimator", "GrGSL", "#bcbd22", "h"),
-        Entry("adjoint", "dgse.localization.adjoint:make_adjoint", "Adjoint (est. wind)", "#17becf", "*"),
+        Entry(
+            "adjoint",
+            "dgse.localization.adjoint:make_adjoint",
+            "Adjoint (est. wind)",
+            "#17becf",
+            "*",
+            tags=("flow-solves",),
+        ),
         Entry(
             "adjoint-oracle",
             "dgse.localization.adjoint:make_adjoint_oracle",
