@@ -411,7 +411,7 @@ def load_gaden(
         )
     if occ[i, j]:
         raise InputDataError(
-            f"GADEN source ({f0.source[0]:g}, {f0.source[1]:g}) m lies in a solid cell ({i}, {j}) "
+            f"GADEN source ({f0.source[0]:g}, {f0.source[1]:g}) m lies in a solid cell "
             f"of the obstacle image {obstacles}"
         )
     stem = paths[0].parent.name if len(paths) > 1 else paths[0].name

@@ -484,6 +484,7 @@ def evaluate(
     journal: str | os.PathLike[str] | None = None,
     restart: bool = False,
     knowledge: str = DEFAULT_LEVEL,
+    on_start: Callable[[int, int], None] | None = None,
 ) -> dict[str, Any]:
     """Evaluate one estimator on a set of cases (see the module docstring for protocol and result).
 
@@ -509,6 +510,8 @@ def evaluate(
         knowledge: what the estimator is told about each case besides the readings
             (:mod:`dgse.belief.knowledge`: ``"map"``, ``"openings"`` or ``"wind"``);
             recorded in the result.
+        on_start: called as ``on_start(kept, total)`` once, after every check and before the
+            first estimate: ``kept`` of the ``total`` estimates come from the journal.
 
     Returns:
         The result dict (JSON-ready; :func:`write_json` writes it).
@@ -523,7 +526,9 @@ def evaluate(
     level = check_level(knowledge)
     counts = _check_counts(observation_counts)
     if isinstance(trials, bool) or not isinstance(trials, (int, np.integer)) or int(trials) < 1:
-        raise InputDataError(f"trials must be a positive integer, got {trials!r}")
+        raise InputDataError(
+            f"{{trials}} must be a positive integer, got {trials!r}", names={"trials": "trials"}
+        )
     trials = int(trials)
     observation_seed(seed, "", 1, 0)  # validates the seed
     kwargs = dict(estimator_kwargs or {})
@@ -565,6 +570,8 @@ def evaluate(
                         kept[(rec.get("case"), rec.get("n_obs"), rec.get("trial"))] = entry
             total = len(refs) * len(counts) * trials
             start = sum((r.id, n, t) in kept for r in refs for n in counts for t in range(trials))
+            if on_start is not None:
+                on_start(start, total)
             callback, before, bar = _make_progress(progress, total, start)
             with bar:
                 for ref in refs:
@@ -644,7 +651,8 @@ def _evaluate_case(
                 if old.get("case_fingerprint") != fingerprint:
                     raise InputDataError(
                         f"case {ref.id!r} differs from the one whose estimates {book.path} keeps "
-                        "(re-solved?): start afresh with --restart (restart=True), or give another path"
+                        "(re-solved?): start afresh with {restart}, or give another path",
+                        names={"restart": "restart=True"},
                     )
                 out.append(dict(old["record"]))
                 continue

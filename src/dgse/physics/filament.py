@@ -938,9 +938,7 @@ def _check_inputs(
     if not (0 <= i < H and 0 <= j < W):
         raise InputDataError(f"source ({src[0]:.3f}, {src[1]:.3f}) m lies outside the map")
     if occ[i, j]:
-        raise InputDataError(
-            f"source ({src[0]:.3f}, {src[1]:.3f}) m lies in a wall: cell ({i}, {j}) is solid"
-        )
+        raise InputDataError(f"source ({src[0]:.3f}, {src[1]:.3f}) m lies in a wall (a solid cell)")
     if outlet_mask is None:
         mask = np.zeros((H, W), dtype=bool)
     else:
