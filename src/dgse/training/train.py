@@ -55,7 +55,8 @@ the same epoch of an uninterrupted run.
 Stopping: the time budget ``max_time`` (per invocation, measured from the
 call of :func:`train`; leave a margin for the final validation and save) and
 a first Ctrl-C (SIGINT) both stop training after the current batch
-(:class:`StopControl`; a second Ctrl-C aborts at once and saves nothing).
+(:class:`StopControl`; a second Ctrl-C aborts at once, saves nothing and
+:func:`train` raises ``KeyboardInterrupt``).
 As with Lightning's ``should_stop``, the stopped epoch is then validated,
 counts as done (its remaining batches are skipped) and is saved, with
 ``partial_epoch = true``; ``--resume`` continues at the next epoch.
@@ -436,6 +437,7 @@ class StopControl(L.Callback):
 
     Attributes:
         reason: None, ``"max_time"`` or ``"interrupted"`` once a stop was requested.
+        aborted: a second Ctrl-C came.
     """
 
     def __init__(
@@ -444,6 +446,7 @@ class StopControl(L.Callback):
         self.max_time_s = max_time_s
         self.handle_sigint = handle_sigint
         self.reason: str | None = None
+        self.aborted = False
         self._sigint = False
         self._t0: float | None = t0
         self._old_handler: Any = None
@@ -451,6 +454,7 @@ class StopControl(L.Callback):
 
     def _on_sigint(self, signum: int, frame: FrameType | None) -> None:
         if self._sigint:
+            self.aborted = True
             raise KeyboardInterrupt
         self._sigint = True
         print(
@@ -496,8 +500,8 @@ class StopControl(L.Callback):
         if decision and not trainer.should_stop:
             self.reason = decision
             trainer.should_stop = True
-            what = "time budget reached" if decision == "max_time" else "interrupted"
-            _note(f"{what}: stopping after epoch {trainer.current_epoch} batch {batch_idx}")
+            if decision == "max_time":  # a Ctrl-C was answered when it came
+                _note(f"time budget reached: stopping after epoch {trainer.current_epoch} batch {batch_idx}")
 
     def teardown(self, trainer: L.Trainer, pl_module: L.LightningModule, stage: str) -> None:
         self.uninstall()
@@ -964,6 +968,10 @@ def train(
                 # Lightning's own use of a deprecated PyTorch pytree API: not ours to act on
                 warnings.filterwarnings("ignore", message=".*LeafSpec.*is deprecated.*")
                 trainer.fit(module, datamodule=dm)
+        except SystemExit:
+            if stop.aborted:  # Lightning exits on the second Ctrl-C; it is the caller's interrupt
+                raise KeyboardInterrupt from None
+            raise
         finally:
             stop.uninstall()
     if config.fast_dev_run:
