@@ -458,7 +458,8 @@ class StopControl(L.Callback):
             raise KeyboardInterrupt
         self._sigint = True
         print(
-            "\nstopping after this batch: validating and saving (Ctrl-C again to abort without saving)",
+            ("\n" if sys.stderr.isatty() else "")  # off the line of a progress bar
+            + "stopping after this batch: validating and saving (Ctrl-C again to abort without saving)",
             file=sys.stderr,
             flush=True,
         )
@@ -962,18 +963,24 @@ def train(
         if trainer.is_global_zero:
             out.mkdir(parents=True, exist_ok=True)
             logger.log_hyperparams(config.to_dict())
+        main_thread = threading.current_thread() is threading.main_thread()
+        sigint = signal.getsignal(signal.SIGINT) if main_thread else None
         try:
             with warnings.catch_warnings():
                 warnings.filterwarnings("ignore", message=".*does not have many workers.*")
                 # Lightning's own use of a deprecated PyTorch pytree API: not ours to act on
                 warnings.filterwarnings("ignore", message=".*LeafSpec.*is deprecated.*")
                 trainer.fit(module, datamodule=dm)
-        except SystemExit:
-            if stop.aborted:  # Lightning exits on the second Ctrl-C; it is the caller's interrupt
+        except SystemExit as e:
+            # Lightning exits on a Ctrl-C it catches (the second, or one before training starts):
+            # it is the caller's interrupt
+            if stop.aborted or isinstance(e.__context__, KeyboardInterrupt):
                 raise KeyboardInterrupt from None
             raise
         finally:
             stop.uninstall()
+            if sigint is not None:  # Lightning leaves Ctrl-C ignored after it caught one
+                signal.signal(signal.SIGINT, sigint)
     if config.fast_dev_run:
         reason = "fast_dev_run"
     elif stop.reason is not None:
