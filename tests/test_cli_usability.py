@@ -139,6 +139,7 @@ def test_floorplan_messages_name_the_option_and_the_opening(capsys, tmp_path):
     code, out, err = _run(capsys, *args)
     _assert_user_error(code, out, err, "the west inlet at 0.5-1.5 m touches no free cell", "give --carve")
     assert "carve_depth_m" not in err and "{" not in err and not (tmp_path / "p.npz").exists()
+    assert out == ""  # the floor plan is not announced before its openings are checked
     # the library's own message names its argument
     with pytest.raises(InputDataError, match="give carve_depth_m"):
         layout_from_floorplan(

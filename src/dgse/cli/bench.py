@@ -46,7 +46,13 @@ def bench_cmd(
     ] = False,
     data: Annotated[
         Path | None,
-        typer.Option("--data", "-d", help="Dataset store whose test split gives the scenarios."),
+        typer.Option(
+            "--data",
+            "-d",
+            exists=True,
+            dir_okay=False,
+            help="Dataset store whose test split gives the scenarios.",
+        ),
     ] = None,
     seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of scenarios and trials.")] = 0,
     threads: Annotated[int | None, typer.Option("--threads", help="PyTorch CPU threads.")] = None,

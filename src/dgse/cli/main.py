@@ -318,13 +318,13 @@ def import_floorplan_cmd(
     else:
         fp = load_png_map(floorplan, resolution, pixel_size=pixel_size, width_m=width_m)
         where = ""
+    layout = layout_from_floorplan(
+        fp, None, [inlet], [outlet], name=name or floorplan.stem, carve_depth_m=carve_depth_m
+    )
     g = fp.grid
     console.print(
         f"floor plan [cyan]{path_text(floorplan)}[/]: {g.width_m:g} x {g.height_m:g} m "
         f"({g.width} x {g.height} cells){escape(where)}"
-    )
-    layout = layout_from_floorplan(
-        fp, None, [inlet], [outlet], name=name or floorplan.stem, carve_depth_m=carve_depth_m
     )
     path = save_layout(layout, out)
     console.print(f"[bold]{escape(layout.name)}[/]: {escape(_layout_summary(layout))}")

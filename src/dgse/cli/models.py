@@ -9,7 +9,7 @@
   The observations (and a DGSE-S estimator's sampling seed) are those of trial
   0 of ``dgse evaluate CASE.npz --seed S``.
 * ``dgse evaluate CASES_DIR_OR_STORE --method M --observations N [N ...]
-  --trials R --seed S [--json OUT.json] [--split test] [--model ...]``:
+  --trials R --seed S [-o OUT.json] [--split test] [--model ...]``:
   :func:`dgse.evaluation.evaluate.evaluate`, a table of the aggregate per
   observation count, the JSON result.
 * ``dgse export-onnx --model PATH -o OUT.onnx [--variant auto|pipeline|stages]``:

@@ -1190,7 +1190,8 @@ def make_filament_case(
             if "inlet_velocity" not in case.meta:
                 raise InputDataError(
                     f"case {case.name!r} has no meta inlet_velocity to solve its flow for nu_t: "
-                    'pass nut= or use noise="constant"'
+                    'use {noise}="constant" (or, from Python, pass nut=)',
+                    names={"noise": "noise"},
                 )
             t0 = time.perf_counter()
             flow, _ = flow_and_transport(layout, case.inlet_velocity, physics)
