@@ -346,6 +346,7 @@ def test_help_renders_fully_at_80_columns():
     assert len(pages) == len(commands) + 3
     for page in pages[1:]:
         assert "…" not in page and "Usage:" in page, page
+        assert not re.search(r"\bdgse\.[a-z]", page), page  # a default is a value, not a module path
         assert max(len(line) for line in page.splitlines()) <= 80, page
     flat = " ".join(pages[1].split())
     for summary in ("Train a DGSE network (paper Sec. III, App. A) on a dataset store, resumably.",):

@@ -98,7 +98,7 @@ import numba
 import numpy as np
 
 from dgse.errors import InputDataError
-from dgse.physics.constants import DEFAULT_PHYSICS, Physics
+from dgse.physics.constants import DEFAULT_PHYSICS, RECOMMENDED_MAX_FILAMENTS, Physics
 from dgse.world.case import Case
 from dgse.world.generate import RngLike, as_generator
 from dgse.world.grid import DEFAULT_RESOLUTION
@@ -121,8 +121,6 @@ _jit_inline = numba.njit(cache=True, nogil=True, inline="always")
 
 #: ``"turbulent"``: diffusivity from the RANS ``nu_t``; ``"constant"``: GADEN's velocity noise.
 NOISE_MODELS = ("turbulent", "constant")
-#: ``max_filaments`` of ``dgse plume`` and the benchmarks: a minute per 100 x 100 case at most.
-RECOMMENDED_MAX_FILAMENTS = 20_000
 
 # move outcomes
 _OK, _BLOCKED, _EXITED = 0, 1, 2
