@@ -124,8 +124,8 @@ def report_bug(exc: BaseException, argv: list[str] | None = None) -> None:
 
 
 #: A file written under a temporary name beside its target and renamed over it:
-#: ``x.npz.part``, or ``x.npz.<pid>.<thread>.part``.
-_TEMPORARY = re.compile(r"^(?P<target>.+?)(?:\.\d+\.\d+)?\.part$")
+#: ``x.npz.part``, ``x.npz.<pid>.<thread>.part``, ``x.journal.jsonl.tmp``.
+_TEMPORARY = re.compile(r"^(?P<target>.+?)(?:\.\d+\.\d+)?\.(?:part|tmp)$")
 
 
 def os_error_message(e: OSError) -> str:

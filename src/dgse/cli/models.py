@@ -325,10 +325,10 @@ def _aggregate_table(result: dict[str, Any]) -> Table:
         title_justify="left",
         box=box.SIMPLE_HEAD,
     )
-    table.add_column("metric", no_wrap=True)
+    table.add_column("metric", overflow="fold")  # a narrow terminal wraps and folds, never cuts
     aggs = result["aggregate"]
     for n in aggs:
-        table.add_column(f"n = {n}", justify="right", no_wrap=True)
+        table.add_column(f"n = {n}", justify="right", overflow="fold")
     table.add_row("estimates", *(str(a["n_estimates"]) for a in aggs.values()))
     for label, key, stat in _TABLE_ROWS:
         cells = [_mean_std(a, key) if stat == "mean" else _fmt(a.get(f"{key}_{stat}")) for a in aggs.values()]

@@ -104,18 +104,19 @@ def _table(rows: list[tuple[str, dict[str, Any]]], title: str) -> Table:
 
     t = Table(title=title, title_justify="left", box=box.SIMPLE_HEAD)
     t.add_column("case", no_wrap=True)
-    for col in ("trials", "SR [%]", "error [m]", "ST [s]", "TD [m]", "step [s]", "PER"):
-        t.add_column(escape(col), justify="right")
+    for col in ("trials", "SR [%]", "error [m]", "ST [s]", "TD [m]", "step [ms]", "PER"):
+        t.add_column(escape(col), justify="right", overflow="fold")  # a narrow terminal folds, never cuts
     for i, (name, agg) in enumerate(rows):
         sr = agg.get("success_rate")
+        step_ms = {k: v * 1e3 for k, v in agg.items() if k.startswith("step_seconds") and v is not None}
         t.add_row(
             escape(name),
             str(agg["n_trials"]),
             "-" if sr is None else f"{100 * sr:.0f}",
-            format_mean_std(agg, "error_m", ".3f"),
+            format_mean_std(agg, "error_m", ".2f"),
             format_mean_std(agg, "search_time_s", ".1f"),
             format_mean_std(agg, "distance_m", ".2f"),
-            format_mean_std(agg, "step_seconds", ".3g"),
+            format_mean_std(step_ms, "step_seconds", ".3g"),
             "-" if agg.get("per_mean") is None else f"{agg['per_mean']:.2f}",
             style="bold" if i == len(rows) - 1 and len(rows) > 1 else None,
             end_section=i == len(rows) - 2,

@@ -440,6 +440,7 @@ def _make_progress(
         return progress, None, contextlib.nullcontext()
     if not progress:
         return None, None, contextlib.nullcontext()
+    from rich import get_console
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -456,6 +457,7 @@ def _make_progress(
         TimeElapsedColumn(),
         TimeRemainingColumn(),
         transient=True,
+        disable=not get_console().is_terminal,  # a log gets no bar (rich would leave an empty line)
     )
     first = "evaluating" if not start else f"evaluating ({start} kept from an earlier run)"
     task = bar.add_task(first, total=total, completed=start)
