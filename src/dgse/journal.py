@@ -147,6 +147,10 @@ def count_records(path: str | os.PathLike[str]) -> int:
     return len(records) if header is not None else 0
 
 
+#: How a Python caller asks to discard a journal (the command line says ``--restart``).
+_RESTART = {"restart": "restart=True"}
+
+
 class Journal:
     """An append-only JSON-lines journal (module docstring); use as a context manager.
 
@@ -207,7 +211,8 @@ class Journal:
                 f"{self.path} holds {len(records)} finished {unit}{'s' * (len(records) != 1)} of a {kind} "
                 "run with other settings "
                 f"({'; '.join(diff)}): rerun with the same settings to resume it, give another output "
-                "path to keep both, or start afresh with --restart (restart=True)"
+                "path to keep both, or start afresh with {restart}",
+                names=_RESTART,
             )
         self.records = records
         self._rewrite = not clean

@@ -73,7 +73,7 @@ def test_interrupted_evaluation_resumes_to_the_same_result(case_dir, tmp_path):
     assert _untimed(again) == _untimed(whole) and _stats(again) == _stats(whole)
     assert count_records(journal) == 8
     # other settings: refused, with what differs
-    with pytest.raises(InputDataError, match=r"seed was 4, now 5.*--restart"):
+    with pytest.raises(InputDataError, match=r"seed was 4, now 5.*restart=True"):
         evaluate(case_dir, PeakEstimator(sigma=0.2), [3], seed=5, journal=journal)
     with pytest.raises(InputDataError, match='method was "peak", now "uniform"'):
         evaluate(case_dir, UniformEstimator(), [3], seed=4, journal=journal)

@@ -70,7 +70,7 @@ def test_named_methods_and_checks(tmp_path):
     assert "steps" in data["per_case"][0]["trials"][0]
     with pytest.raises(InputDataError, match="trials"):
         run_trials(d, "kdmv", "utility", trials=0)
-    with pytest.raises(InputDataError, match="time limit"):
+    with pytest.raises(InputDataError, match="time_limit must be a positive number"):
         run_trials(d, "kdmv", "utility", trials=1, time_limit=0.0)
 
 
@@ -161,7 +161,7 @@ def test_journal_of_other_settings_is_refused(tmp_path):
     d = _cases(tmp_path / "cases")
     journal = tmp_path / "search.journal.jsonl"
     _campaign(d, journal=journal, trials=1)
-    with pytest.raises(InputDataError, match=r"seed was 5, now 6.*--restart") as e:
+    with pytest.raises(InputDataError, match=r"seed was 5, now 6.*restart=True") as e:
         _campaign(d, journal=journal, trials=1, seed=6)
     assert str(journal) in str(e.value)
     with pytest.raises(InputDataError, match=r"time_limit_s was 90\.0, now 60\.0"):

@@ -165,6 +165,7 @@ def test_param_reaches_the_estimator_and_planner_has_no_short_form(peak, tmp_pat
     code, _, err = _run(capsys, cases, "-p", "utility", "--no-progress")
     assert code == 2 and "--param needs KEY=VALUE" in err
     code, help_text, _ = _run(capsys, "--help")
+    help_text = " ".join(help_text.split()).replace("- ", "-")  # as wrapped, also after a hyphen
     assert "--param" in help_text and "--option" not in help_text and "dgse-out/search-" in help_text
 
 

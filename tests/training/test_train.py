@@ -77,7 +77,7 @@ def _cli(*args: str):
 # -- the command -----------------------------------------------------------------------------
 def test_cli_fast_dev_run_writes_metrics_and_a_loadable_best_model(store, tmp_path):
     out = tmp_path / "run"
-    res = _cli("--config", TINY, "--model", "dgse-s", "--data", store, "--out", out, "--fast-dev-run")
+    res = _cli("--config", TINY, "--network", "dgse-s", "--data", store, "--out", out, "--fast-dev-run")
     assert res.exit_code == 0, res.output
     assert "metrics" in res.flat and str(out / "best.safetensors") in res.flat
     metrics = out / "logs" / "version_0" / "metrics.csv"

@@ -181,7 +181,9 @@ def test_png_map(tmp_path):
 def test_layout_from_floorplan(tmp_path):
     fp = load_ros_map(_write_map(tmp_path, _room_image()), 0.1)
     # the cropped map has its outer walls on the boundary: nothing free there
-    with pytest.raises(InputDataError, match=r"inlet 0 .* touches no free cell.*carve_depth_m"):
+    with pytest.raises(
+        InputDataError, match=r"the west inlet at 0.5-1.5 m touches no free cell.*carve_depth_m"
+    ):
         layout_from_floorplan(fp, None, Opening("west", 0.5, 1.5), [("east", 1.0, 2.0)])
     lay = layout_from_floorplan(
         fp,

@@ -20,7 +20,9 @@ from dgse.cli.common import (
     check_output_dir,
     check_output_file,
     console,
+    interruptible,
     path_text,
+    resume_command,
     user_errors,
 )
 from dgse.errors import InputDataError
@@ -30,6 +32,7 @@ __all__ = ["bench_cmd", "register", "report_cmd"]
 
 @user_errors
 def bench_cmd(
+    ctx: typer.Context,
     suites: Annotated[
         list[str],
         typer.Argument(
@@ -43,7 +46,13 @@ def bench_cmd(
     ] = False,
     data: Annotated[
         Path | None,
-        typer.Option("--data", "-d", help="Dataset store whose test split gives the scenarios."),
+        typer.Option(
+            "--data",
+            "-d",
+            exists=True,
+            dir_okay=False,
+            help="Dataset store whose test split gives the scenarios.",
+        ),
     ] = None,
     seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of scenarios and trials.")] = 0,
     threads: Annotated[int | None, typer.Option("--threads", help="PyTorch CPU threads.")] = None,
@@ -74,15 +83,22 @@ def bench_cmd(
         import torch
 
         torch.set_num_threads(threads)
-    for name in names:
-        t0 = time.perf_counter()
-        console.print(
-            f"[bold]{escape(name)}[/]: {escape(SUITES.entry(name).display)}{' (quick)' if quick else ''}"
-        )
-        manifest = run_suite(
-            name, out, quick=quick, data=data, seed=seed, knowledge=knowledge, progress=progress
-        )
-        console.print(f"  done in {time.perf_counter() - t0:.1f} s: [cyan]{path_text(manifest.parent)}[/]")
+
+    def kept() -> str:  # every suite keeps its finished results in its folder and reuses them
+        return f"the finished results are kept in {out}; resume with: {resume_command(ctx)}"
+
+    with interruptible(kept):
+        for name in names:
+            t0 = time.perf_counter()
+            console.print(
+                f"[bold]{escape(name)}[/]: {escape(SUITES.entry(name).display)}{' (quick)' if quick else ''}"
+            )
+            manifest = run_suite(
+                name, out, quick=quick, data=data, seed=seed, knowledge=knowledge, progress=progress
+            )
+            console.print(
+                f"  done in {time.perf_counter() - t0:.1f} s: [cyan]{path_text(manifest.parent)}[/]"
+            )
     if report:
         from dgse.bench.report import write_report
 
@@ -93,7 +109,7 @@ def bench_cmd(
 def report_cmd(
     directory: Annotated[Path, typer.Argument(metavar="DIR", help="Output directory of dgse bench.")],
     output: Annotated[
-        Path | None, typer.Option("--output", "-o", help="HTML file (default DIR/report.html).")
+        Path | None, typer.Option("--out", "-o", "--output", help="HTML file (default DIR/report.html).")
     ] = None,
 ) -> None:
     """Write one self-contained HTML page (figures embedded) from the results in DIR."""

@@ -1,16 +1,26 @@
 """What every ``dgse`` command shares: consoles, the error line, the exit status, crash logs.
 
-Every error a user can cause (:class:`~dgse.errors.DGSEError`, or a file that
-cannot be read or written) is printed as one red line ``error: <message>`` and
-the command exits with status :data:`EXIT_USER_ERROR`; there is no traceback.
+Every error a user can cause (:class:`~dgse.errors.DGSEError`, a file that
+cannot be read or written, or a command line that does not parse) is printed
+as one red line ``error: <message>`` and the command exits with status
+:data:`EXIT_USER_ERROR`; there is no traceback.  A message that names a
+Python argument names the command's option instead (:func:`error_message`).
 Anything else (a bug) prints one line naming the log file that holds the
 traceback (:func:`write_crash_log`) and exits with :data:`EXIT_BUG`.
+
+Ctrl-C (or SIGTERM inside :func:`interruptible`) ends every command with one
+yellow line, ``interrupted: <what was kept and how to resume>``, and status
+:data:`EXIT_INTERRUPTED` (:func:`user_errors`, :func:`interruptible`).
+
+Help is click's plain text, wrapped to the terminal and never cut
+(:class:`HelpGroup` lists each command's whole summary).
 """
 
 from __future__ import annotations
 
 import contextlib
 import functools
+import inspect
 import json
 import math
 import os
@@ -30,9 +40,22 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 from rich.text import Text
+from typer.core import TyperGroup
 
 from dgse.errors import DGSEError, InputDataError
 from dgse.files import write_text
+
+try:  # the copy of click that recent typer releases carry
+    from typer._click import exceptions as _click_exceptions
+    from typer._click import globals as _click_globals
+except ImportError:  # older typer runs on the click package
+    from click import exceptions as _click_exceptions  # type: ignore[no-redef]
+    from click import globals as _click_globals  # type: ignore[no-redef]
+
+#: click's errors of a command line that does not parse, and of the help a bare group shows.
+UsageError = _click_exceptions.UsageError
+ClickException = _click_exceptions.ClickException
+NoArgsIsHelpError: type[Exception] | None = getattr(_click_exceptions, "NoArgsIsHelpError", None)
 
 #: Exit status of every user-caused error.
 EXIT_USER_ERROR = 2
@@ -101,35 +124,137 @@ def report_bug(exc: BaseException, argv: list[str] | None = None) -> None:
     print_error(f"unexpected error ({what}); this is a bug in dgse: please report it; {where}")
 
 
+#: A file written under a temporary name beside its target and renamed over it:
+#: ``x.npz.part``, ``x.npz.<pid>.<thread>.part``, ``x.journal.jsonl.tmp``.
+_TEMPORARY = re.compile(r"^(?P<target>.+?)(?:\.\d+\.\d+)?\.(?:part|tmp)$")
+
+
 def os_error_message(e: OSError) -> str:
-    return f"{e.filename}: {e.strerror}" if e.filename and e.strerror else str(e)
+    """``<file>: <reason>``; a temporary file that stands for a target is named as that target."""
+    if not (e.filename and e.strerror):
+        return str(e)
+    name = str(e.filename)
+    m = _TEMPORARY.match(name)
+    if m:
+        return f"cannot write {m.group('target')}: {e.strerror}"
+    return f"{name}: {e.strerror}"
+
+
+def option_spellings(command: Any) -> dict[str, str]:
+    """Each option of a click ``command`` by how the command line spells it: ``{"restart": "--restart"}``."""
+    out: dict[str, str] = {}
+    for p in command.params:
+        if p.param_type_name == "option" and p.name:
+            longs = [o for o in p.opts if o.startswith("--")]
+            out[p.name] = (longs or p.opts)[0]
+    return out
+
+
+def error_message(e: DGSEError) -> str:
+    """``e``'s message, the arguments it names spelled as the running command's options.
+
+    A library message such as ``start afresh with restart=True`` reads ``start afresh
+    with --restart`` in ``dgse search`` (:meth:`~dgse.errors.DGSEError.spelled`; the
+    command's parameter must carry the library argument's name).
+    """
+    ctx = _click_globals.get_current_context(silent=True)
+    if ctx is None or not e.names:
+        return str(e)
+    return e.spelled(option_spellings(ctx.command))
+
+
+def usage_error_message(e: Any) -> str:
+    """A command line that does not parse, on one line, with where its options are listed."""
+    message = " ".join(e.format_message().split()).rstrip(".")
+    if e.ctx is not None:
+        message += f" (see {e.ctx.command_path} --help)"
+    return message
+
+
+# -- Ctrl-C ------------------------------------------------------------------------------
+#: What a command that keeps nothing says after Ctrl-C.
+NOTHING_KEPT = "nothing was kept; run the command again to start over"
+
+
+def print_interrupted(note: str) -> None:
+    """One yellow line on standard error after Ctrl-C: ``interrupted: <note>``."""
+    err_console.print(Text(f"interrupted: {' '.join(note.split())}", style="yellow"), soft_wrap=True)
+
+
+def resume_note(kept: int, unit: str, where: Path | str, command: str) -> str:
+    """``3 finished episodes kept in out.journal.jsonl; resume with: dgse search ...``."""
+    plural = unit if kept == 1 else unit + "s"
+    return f"{kept} finished {plural} kept in {where}; resume with: {command}"
+
+
+@contextlib.contextmanager
+def interruptible(note: Callable[[], str], sigterm: bool = True) -> Iterator[None]:
+    """Within the block Ctrl-C (and SIGTERM, ``kill``, when ``sigterm``) ends the command: the
+    line ``interrupted: <note()>`` (what was kept, how to resume) and exit status 130."""
+    try:
+        with sigterm_as_interrupt() if sigterm else contextlib.nullcontext():
+            yield
+    except KeyboardInterrupt:
+        print_interrupted(note())
+        raise typer.Exit(EXIT_INTERRUPTED) from None
 
 
 def user_errors(fn: F) -> F:
-    """Turn a user-caused error raised by a command into the error line and exit status 2."""
+    """The one rule of every command: a user-caused error is the error line and exit status 2;
+    Ctrl-C outside :func:`interruptible` is the line :data:`NOTHING_KEPT` and exit status 130."""
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
             return fn(*args, **kwargs)
         except DGSEError as e:
-            print_error(str(e))
+            print_error(error_message(e))
             raise typer.Exit(EXIT_USER_ERROR) from None
         except OSError as e:
             print_error(os_error_message(e))
             raise typer.Exit(EXIT_USER_ERROR) from None
+        except KeyboardInterrupt:
+            print_interrupted(NOTHING_KEPT)
+            raise typer.Exit(EXIT_INTERRUPTED) from None
 
+    wrapper.user_errors = True  # type: ignore[attr-defined]
     return wrapper  # type: ignore[return-value]
 
 
+# -- help ----------------------------------------------------------------------------------
+def command_summary(command: Any) -> str:
+    """A command's line in its group's help: its ``short_help``, else its help's first paragraph."""
+    if command.short_help:
+        return command.short_help
+    text = inspect.cleandoc(command.help or "")
+    return " ".join(text.split("\n\n", 1)[0].split())
+
+
+class HelpGroup(TyperGroup):
+    """A command group whose help lists every command's whole summary, wrapped, never cut."""
+
+    def format_commands(self, ctx: Any, formatter: Any) -> None:
+        rows = []
+        for name in self.list_commands(ctx):
+            command = self.get_command(ctx, name)
+            if command is not None and not command.hidden:
+                rows.append((name, command_summary(command)))
+        if rows:
+            with formatter.section("Commands"):
+                formatter.write_dl(rows)
+
+
 def new_app(name: str, help: str) -> typer.Typer:
-    """A typer app with the project's settings (no completion, ``-h``, no pretty tracebacks)."""
+    """A typer app with the project's settings: no completion, ``-h``, no pretty tracebacks,
+    plain help (click's: wrapped to the terminal, where rich's panels cut long names)."""
     return typer.Typer(
         name=name,
         help=help,
+        cls=HelpGroup,
         no_args_is_help=True,
         add_completion=False,
         pretty_exceptions_enable=False,
+        rich_markup_mode=None,
         context_settings={"help_option_names": ["-h", "--help"]},
     )
 
@@ -254,12 +379,16 @@ def _option_words(param: Any, value: Any) -> list[str]:
     if param.is_flag:
         return [name] if value else []
     values = value if param.multiple else [value]
-    return [w for v in values for w in (name, str(v))]
+    words: list[str] = []
+    for v in values:  # an option of several values (``--size MIN MAX``) takes them as words
+        words += [name, *(str(x) for x in (v if isinstance(v, list | tuple) else [v]))]
+    return words
 
 
-def resume_command(ctx: typer.Context, drop: Sequence[str] = ("restart",)) -> str:
+def resume_command(ctx: typer.Context, drop: Sequence[str] = ("restart",), add: Sequence[str] = ()) -> str:
     """The running command's line as a shell takes it: ``dgse <command>``, its arguments and
-    every option that differs from its default (the options named in ``drop`` left out)."""
+    every option that differs from its default (the options named in ``drop`` left out, the
+    words of ``add`` appended)."""
     words = ["dgse", *ctx.command_path.split()[1:]]
     options: list[str] = []
     for param in ctx.command.params:
@@ -272,24 +401,11 @@ def resume_command(ctx: typer.Context, drop: Sequence[str] = ("restart",)) -> st
             if getattr(param, "multiple", False) and not value:
                 continue
             options += _option_words(param, value)
-    return shlex.join(words + options)
+    return shlex.join(words + options + list(add))
 
 
-def report_interrupt(kept: int, unit: str, where: Path, command: str) -> None:
-    """One line on standard error after Ctrl-C: what was kept, where, how to resume."""
-    plural = unit if kept == 1 else unit + "s"
-    err_console.print(
-        f"[yellow]interrupted: {kept} finished {plural} kept in {path_text(where)}; "
-        f"resume with: {escape(command)}[/]",
-        soft_wrap=True,
-    )
-
-
-def kept_note(journal: Path, unit: str, restart: bool) -> str:
-    """The line that says where finished pieces are kept (and how many an earlier run left)."""
-    from dgse.journal import count_records
-
-    n = 0 if restart else count_records(journal)
+def kept_note(journal: Path, unit: str, n: int) -> str:
+    """The line that says where finished pieces are kept (and how many, ``n``, an earlier run left)."""
     if n:
         return f"{n} finished {unit}{'s' * (n != 1)} of an earlier run in [cyan]{path_text(journal)}[/]"
     return f"finished {unit}s are kept in [cyan]{path_text(journal)}[/] as they finish"

@@ -22,9 +22,11 @@ from dgse.cli.common import (
     check_output_dir,
     check_output_file,
     console,
+    interruptible,
     new_app,
     path_text,
-    print_error,
+    resume_command,
+    resume_note,
     user_errors,
 )
 from dgse.errors import InputDataError
@@ -43,8 +45,11 @@ __all__ = [
 # -- commands ------------------------------------------------------------------------------------
 @user_errors
 def generate_cmd(
-    layouts: Annotated[int, typer.Option("--layouts", "-n", help="Number of layouts (3750 in the paper).")],
-    out: Annotated[Path, typer.Option("--out", "-o", help="Dataset store (.h5) to create or resume.")],
+    ctx: typer.Context,
+    n_layouts: Annotated[int, typer.Option("--layouts", "-n", help="Number of layouts (3750 in the paper).")],
+    out: Annotated[
+        Path, typer.Option("--out", "-o", help="Dataset store (.h5 or .hdf5) to create or resume.")
+    ],
     engine: Annotated[
         str, typer.Option("--engine", "-e", help="Physics engine: builtin or openfoam.")
     ] = "builtin",
@@ -71,7 +76,7 @@ def generate_cmd(
     retry_failed: Annotated[
         bool, typer.Option("--retry-failed", help="Try layouts recorded as failed again.")
     ] = False,
-    checkpoint: Annotated[
+    checkpoint_s: Annotated[
         float,
         typer.Option("--checkpoint", help="Least seconds between commits into the store file."),
     ] = 60.0,
@@ -90,20 +95,26 @@ def generate_cmd(
     Resumable: run the same command again after an interruption (even kill -9)
     and it makes only the missing layouts.
     """
-    from dgse.data.generation import generate
+    from dgse.data.generation import generate, stored_layouts
 
     check_output_file(out, "dataset store")
     kwargs: dict[str, Any] = {}
     if size is not None:
         kwargs = {"width_range": tuple(size), "height_range": tuple(size)}
-    where = f"scheduler {scheduler}" if scheduler else f"{workers or 'all'} local workers"
-    console.print(
-        f"generating {layouts} layouts into [cyan]{path_text(out)}[/] with {escape(engine)} "
-        f"on {escape(where)} (seed {seed})"
-    )
-    try:
+
+    def started(todo: int, n_workers: int) -> None:
+        where = f"scheduler {scheduler}" if scheduler else f"{n_workers} local worker{'s' * (n_workers != 1)}"
+        console.print(
+            f"generating {todo} of {n_layouts} layouts into [cyan]{path_text(out)}[/] with "
+            f"{escape(engine)} on {escape(where)} (seed {seed})"
+        )
+
+    def kept() -> str:
+        return resume_note(stored_layouts(out), "layout", out, resume_command(ctx))
+
+    with interruptible(kept):
         report = generate(
-            layouts,
+            n_layouts,
             out,
             engine=engine,
             workers=workers,
@@ -112,13 +123,11 @@ def generate_cmd(
             progress=progress,
             retries=retries,
             retry_failed=retry_failed,
-            checkpoint_s=checkpoint,
+            checkpoint_s=checkpoint_s,
             only_splits=split or None,
+            on_start=started,
             **kwargs,
         )
-    except KeyboardInterrupt:
-        print_error(f"interrupted; what was finished is in {out}; run the command again to resume")
-        raise typer.Exit(130) from None
     splits = ", ".join(f"{k} {v}" for k, v in report.splits.items())
     rate = report.layouts_per_minute
     console.print(
@@ -139,7 +148,11 @@ def export_cmd(
     from dgse.data.store import DatasetStore
 
     check_output_dir(out)
-    with DatasetStore(store, "r") as s:
+
+    def kept() -> str:
+        return f"the case files written so far are in {out}, without manifest.json; run the command again"
+
+    with interruptible(kept), DatasetStore(store, "r") as s:
         files = s.export(out, split=split)
     console.print(f"wrote {len(files)} case files into [cyan]{path_text(out)}[/]")
 
@@ -182,13 +195,20 @@ def stats_cmd(
         Path | None, typer.Option("--plot", help="Save histograms to this figure (png, pdf, ...).")
     ] = None,
     json_out: Annotated[Path | None, typer.Option("--json", help="Write the statistics as JSON.")] = None,
+    verify: Annotated[
+        bool,
+        typer.Option(
+            "--verify/--no-verify",
+            help="Read every array first, so a damaged file is an error (seconds per 1000 layouts).",
+        ),
+    ] = True,
 ) -> None:
     """Statistics of a dataset: sizes, inlet speeds, release rates, concentrations, splits."""
     from dgse.data.stats import dataset_stats, plot_stats
 
     check_output_file(plot, "figure")
     check_output_file(json_out, "JSON file")
-    st = dataset_stats(store)
+    st = dataset_stats(store, verify=verify)
     sp = st["splits"]
     console.print(
         f"[bold]{escape(str(store))}[/]: {st['n_layouts']} layouts, {st['n_cases']} cases; "

@@ -25,7 +25,15 @@ from rich.markup import escape
 from rich.table import Table
 
 from dgse.belief.knowledge import DEFAULT_LEVEL, check_level, require_level
-from dgse.cli.common import KnowledgeOption, check_output_dir, console, path_text, user_errors
+from dgse.cli.common import (
+    NOTHING_KEPT,
+    KnowledgeOption,
+    check_output_dir,
+    console,
+    interruptible,
+    path_text,
+    user_errors,
+)
 from dgse.errors import InputDataError
 from dgse.files import atomic_path
 
@@ -104,6 +112,7 @@ def demo_cmd(
     seed = secrets.randbelow(2**31) if seed is None else seed
     t0 = time.perf_counter()
     run = resolve(method, level, search=True, planner_options={} if eta is None else {"eta": eta})
+    method = run.method
     kwargs = dict(run.estimator_options)
     if ESTIMATORS.accepts(run.estimator, "model"):
         kwargs["model"] = model
@@ -119,53 +128,65 @@ def demo_cmd(
         if "mass_radius_m" in opts
         else float(opts.get("eta", 0.65))
     )
-    with console.status("solving a random multi-room scenario (built-in RANS + gas transport)"):
-        case = random_cases(seed, n_sources=1)[0]
-    t_solve = time.perf_counter() - t0
-    g = case.grid
-    console.print(
-        f"scenario seed {seed}: {g.width_m:g} x {g.height_m:g} m, inlet {case.inlet_velocity:.2f} m/s, "
-        f"source at ({case.source[0]:.2f}, {case.source[1]:.2f}) m releasing {case.release_rate:.2f} g/s "
-        f"[dim](solved in {t_solve:.1f} s)[/]"
-    )
-    console.print(f"method {escape(method)}, knowledge {level}: {escape(_told(level))}")
-    with console.status(f"searching: sense, estimate ({escape(method)}), plan, move") as status:
-        result = run_episode(
-            case,
-            estimator,
-            planner,
-            rng=seed,
-            time_limit=time_limit,
-            min_start_distance=2.0,
-            on_step=lambda rec: status.update(step_text(rec, time_limit, stop_at)),
-            knowledge=level,
+    written: list[Path] = []
+
+    def kept() -> str:
+        if not written:
+            return NOTHING_KEPT
+        names = ", ".join(p.name for p in written)
+        return f"{names} written into {out}; the demo does not resume: run the command again"
+
+    with interruptible(kept):
+        with console.status("solving a random multi-room scenario (built-in RANS + gas transport)"):
+            case = random_cases(seed, n_sources=1)[0]
+        t_solve = time.perf_counter() - t0
+        g = case.grid
+        console.print(
+            f"scenario seed {seed}: {g.width_m:g} x {g.height_m:g} m, inlet {case.inlet_velocity:.2f} m/s, "
+            f"source at ({case.source[0]:.2f}, {case.source[1]:.2f}) m releasing {case.release_rate:.2f} g/s "
+            f"[dim](solved in {t_solve:.1f} s)[/]"
         )
-    m = episode_metrics(result)
-    table = Table(title="active search", title_justify="left", show_header=False)
-    table.add_row("outcome", "[green]success[/]" if m["success"] else "[red]failure[/]")
-    table.add_row("ended by", result.reason)
-    table.add_row("estimate", f"({result.estimate_xy[0]:.2f}, {result.estimate_xy[1]:.2f}) m")
-    table.add_row("localization error", f"{result.error_m:.2f} m")
-    table.add_row("search time", f"{result.search_time_s:.0f} s ({len(result.steps)} measurements)")
-    table.add_row("travelled", f"{result.distance_m:.1f} m (path efficiency {m['per']:.2f})")
-    table.add_row("one step", f"{1e3 * m['step_seconds']:.0f} ms of computation")
-    console.print(table)
-    out.mkdir(parents=True, exist_ok=True)
-    written = [case.save(out / f"{case.name}.npz")]
-    fig = plot_case(case)
-    with atomic_path(out / f"{case.name}.png") as tmp:
-        fig.savefig(tmp, dpi=110)
-    written.append(out / f"{case.name}.png")
-    with atomic_path(out / "search_final.png") as tmp:
-        plot_search_step(result, case, -1).savefig(tmp, dpi=110)
-    written.append(out / "search_final.png")
-    if animate:
-        with console.status("writing the animation"):
-            written.append(animate_episode(result, case, out / "search.gif", max_frames=30, dpi=70))
-    console.print(
-        f"wrote {', '.join(path_text(p.name) for p in written)} into [cyan]{path_text(out)}[/] "
-        f"[dim](total {time.perf_counter() - t0:.0f} s)[/]"
-    )
+        console.print(f"method {escape(method)}, knowledge {level}: {escape(_told(level))}")
+        with console.status(f"searching: sense, estimate ({escape(method)}), plan, move") as status:
+            result = run_episode(
+                case,
+                estimator,
+                planner,
+                rng=seed,
+                time_limit=time_limit,
+                min_start_distance=2.0,
+                on_step=lambda rec: status.update(step_text(rec, time_limit, stop_at)),
+                knowledge=level,
+            )
+        m = episode_metrics(result)
+        table = Table(title="active search", title_justify="left", show_header=False)
+        table.add_row("outcome", "[green]success[/]" if m["success"] else "[red]failure[/]")
+        table.add_row("ended by", result.reason)
+        table.add_row("estimate", f"({result.estimate_xy[0]:.2f}, {result.estimate_xy[1]:.2f}) m")
+        table.add_row("localization error", f"{result.error_m:.2f} m")
+        table.add_row("search time", f"{result.search_time_s:.0f} s ({len(result.steps)} measurements)")
+        table.add_row(
+            "travelled",
+            f"{result.distance_m:.1f} m (path efficiency ratio {m['per']:.2f}: travelled / shortest path)",
+        )
+        table.add_row("one step", f"{1e3 * m['step_seconds']:.0f} ms of computation")
+        console.print(table)
+        out.mkdir(parents=True, exist_ok=True)
+        written.append(case.save(out / f"{case.name}.npz"))
+        fig = plot_case(case)
+        with atomic_path(out / f"{case.name}.png") as tmp:
+            fig.savefig(tmp, dpi=110)
+        written.append(out / f"{case.name}.png")
+        with atomic_path(out / "search_final.png") as tmp:
+            plot_search_step(result, case, -1).savefig(tmp, dpi=110)
+        written.append(out / "search_final.png")
+        if animate:
+            with console.status("writing the animation"):
+                written.append(animate_episode(result, case, out / "search.gif", max_frames=30, dpi=70))
+        console.print(
+            f"wrote {', '.join(path_text(p.name) for p in written)} into [cyan]{path_text(out)}[/] "
+            f"[dim](total {time.perf_counter() - t0:.0f} s)[/]"
+        )
 
 
 def register(app: typer.Typer) -> None:

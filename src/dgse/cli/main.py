@@ -18,11 +18,13 @@ Commands (``dgse COMMAND --help`` for each):
 * ``search``: active search episodes with any estimator and planner (:mod:`dgse.cli.search`);
 * ``bench``, ``report``: the paper's experiments as suites, and their HTML report (:mod:`dgse.cli.bench`).
 
-Every error a user can cause (:class:`~dgse.errors.DGSEError`, or a file that
-cannot be written) is printed as one red line ``error: <message>`` and the
-exit status is 2; there is no traceback.  Ctrl-C ends a command with status
-130; anything unexpected prints one line with the path of a log file holding
-the traceback (:func:`dgse.cli.common.write_crash_log`) and exits with 1.
+Every error a user can cause (:class:`~dgse.errors.DGSEError`, a file that
+cannot be written, or a command line that does not parse) is printed as one
+red line ``error: <message>`` and the exit status is 2; there is no
+traceback.  Ctrl-C ends a command with one line saying what was kept and how
+to resume, and status 130; anything unexpected prints one line with the path
+of a log file holding the traceback (:func:`dgse.cli.common.write_crash_log`)
+and exits with 1.
 """
 
 from __future__ import annotations
@@ -45,6 +47,10 @@ from dgse.cli.common import (
     EXIT_BUG,
     EXIT_INTERRUPTED,
     EXIT_USER_ERROR,
+    NOTHING_KEPT,
+    ClickException,
+    NoArgsIsHelpError,
+    UsageError,
     check_output_dir,
     check_output_file,
     console,
@@ -52,7 +58,10 @@ from dgse.cli.common import (
     os_error_message,
     path_text,
     print_error,
+    print_interrupted,
     report_bug,
+    usage_error_message,
+    user_errors,
 )
 from dgse.errors import DGSEError, InputDataError
 from dgse.files import atomic_path
@@ -160,9 +169,7 @@ def _check_source(layout: Layout, x: float, y: float) -> None:
     """Raise :class:`InputDataError` unless ``(x, y)`` m lies in a free cell of ``layout``."""
     i, j = layout.grid.cell_of(x, y)
     if layout.occupancy[i, j]:
-        raise InputDataError(
-            f"source ({x:g}, {y:g}) m lies in a wall: cell ({i}, {j}) of layout {layout.name!r} is solid"
-        )
+        raise InputDataError(f"source ({x:g}, {y:g}) m lies in a wall of layout {layout.name!r}")
 
 
 def _fmt_s(seconds: object) -> str:
@@ -208,6 +215,7 @@ def _case_summary(case: Case, path: Path, seconds: float) -> Table:
 
 # -- commands ----------------------------------------------------------------------------
 @app.command("layout")
+@user_errors
 def layout_cmd(
     seed: Annotated[int | None, typer.Option("--seed", "-s", help=_SEED_HELP)] = None,
     ood: Annotated[
@@ -253,6 +261,7 @@ def layout_cmd(
 
 
 @app.command("import-floorplan")
+@user_errors
 def import_floorplan_cmd(
     floorplan: Annotated[
         Path,
@@ -283,7 +292,7 @@ def import_floorplan_cmd(
         float | None,
         typer.Option("--width-m", help="Image width in m (plain images; instead of --pixel-size)."),
     ] = None,
-    carve: Annotated[
+    carve_depth_m: Annotated[
         float,
         typer.Option("--carve", help="Cut the openings through an outer wall up to this depth in m."),
     ] = 0.0,
@@ -309,13 +318,13 @@ def import_floorplan_cmd(
     else:
         fp = load_png_map(floorplan, resolution, pixel_size=pixel_size, width_m=width_m)
         where = ""
+    layout = layout_from_floorplan(
+        fp, None, [inlet], [outlet], name=name or floorplan.stem, carve_depth_m=carve_depth_m
+    )
     g = fp.grid
     console.print(
         f"floor plan [cyan]{path_text(floorplan)}[/]: {g.width_m:g} x {g.height_m:g} m "
         f"({g.width} x {g.height} cells){escape(where)}"
-    )
-    layout = layout_from_floorplan(
-        fp, None, [inlet], [outlet], name=name or floorplan.stem, carve_depth_m=carve
     )
     path = save_layout(layout, out)
     console.print(f"[bold]{escape(layout.name)}[/]: {escape(_layout_summary(layout))}")
@@ -327,6 +336,7 @@ def import_floorplan_cmd(
 
 
 @app.command("solve")
+@user_errors
 def solve_cmd(
     input_file: Annotated[
         Path, typer.Argument(metavar="CASE_OR_LAYOUT", help="A case file or a layout file (.npz).")
@@ -419,6 +429,7 @@ def solve_cmd(
 
 
 @app.command("show")
+@user_errors
 def show_cmd(
     input_file: Annotated[Path, typer.Argument(metavar="CASE", help="A case file (or a layout file).")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Figure to write (png, pdf, svg, ...).")],
@@ -449,6 +460,7 @@ _SCENARIO_HELP = (
 )
 
 
+@user_errors
 def scenario_cmd(
     seed: Annotated[int | None, typer.Option("--seed", "-s", help=_SEED_HELP)] = None,
     out: Annotated[
@@ -547,6 +559,7 @@ app.command("scenario", help=_SCENARIO_HELP)(scenario_cmd)
 
 
 @app.command("engines")
+@user_errors
 def engines_cmd() -> None:
     """List the physics engines and why unavailable ones are missing."""
     from dgse.physics.engines import ENGINES, unavailable_engines
@@ -599,30 +612,40 @@ def register_commands(argv: Sequence[str]) -> None:
 def main(args: Sequence[str] | None = None) -> int:
     """Run the CLI with ``args`` (default ``sys.argv[1:]``); returns the exit status.
 
-    User-caused errors print ``error: <message>`` in red and return 2; Ctrl-C
-    returns 130; an unexpected error prints one line naming its crash log and
-    returns 1.
+    User-caused errors (a command line that does not parse included) print
+    ``error: <message>`` in red and return 2; Ctrl-C returns 130 (the command
+    says what it kept); an unexpected error prints one line naming its crash
+    log and returns 1.
     """
     argv = list(args) if args is not None else sys.argv[1:]
     try:
         register_commands(argv)
-        app(args=argv, prog_name="dgse", standalone_mode=True)
+        status = app(args=argv, prog_name="dgse", standalone_mode=False)
     except SystemExit as e:
         code = e.code
         return code if isinstance(code, int) else (0 if code is None else 1)
+    except UsageError as e:
+        if NoArgsIsHelpError is not None and isinstance(e, NoArgsIsHelpError):
+            e.show()  # `dgse`, `dgse data`: the help
+            return e.exit_code
+        print_error(usage_error_message(e))
+        return EXIT_USER_ERROR
+    except ClickException as e:
+        print_error(e.format_message())
+        return e.exit_code
+    except (KeyboardInterrupt, typer.Abort):
+        print_interrupted(NOTHING_KEPT)
+        return EXIT_INTERRUPTED
     except DGSEError as e:
         print_error(str(e))
         return EXIT_USER_ERROR
     except OSError as e:  # a file that cannot be written (permission, disk full, ...)
         print_error(os_error_message(e))
         return EXIT_USER_ERROR
-    except KeyboardInterrupt:
-        print_error("interrupted")
-        return EXIT_INTERRUPTED
     except Exception as e:  # a bug: one line here, the traceback in a log file
         report_bug(e, argv)
         return EXIT_BUG
-    return 0
+    return status if isinstance(status, int) else 0
 
 
 def run() -> None:

@@ -9,7 +9,7 @@
   The observations (and a DGSE-S estimator's sampling seed) are those of trial
   0 of ``dgse evaluate CASE.npz --seed S``.
 * ``dgse evaluate CASES_DIR_OR_STORE --method M --observations N [N ...]
-  --trials R --seed S [--json OUT.json] [--split test] [--model ...]``:
+  --trials R --seed S [-o OUT.json] [--split test] [--model ...]``:
   :func:`dgse.evaluation.evaluate.evaluate`, a table of the aggregate per
   observation count, the JSON result.
 * ``dgse export-onnx --model PATH -o OUT.onnx [--variant auto|pipeline|stages]``:
@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -58,7 +59,16 @@ __all__ = [
 ]
 
 
+class Dtype(StrEnum):
+    """What ``--dtype`` takes (the DGSE estimators take more names from Python)."""
+
+    float32 = "float32"
+    bf16 = "bf16"
+    auto = "auto"
+
+
 _DTYPE_HELP = "DGSE precision: float32, bf16, or auto (bf16 where the CPU computes it natively)."
+DtypeOption = Annotated[Dtype | None, typer.Option("--dtype", help=_DTYPE_HELP, show_default=False)]
 _MODEL_HELP = "DGSE weights: 'default' (shipped with dgse) or a .safetensors checkpoint."
 _PARAM_HELP = "Estimator argument KEY=VALUE (VALUE as JSON, else a string); repeatable."
 _THREADS_HELP = "PyTorch CPU threads (1 is often fastest on busy, shared cores)."
@@ -81,7 +91,7 @@ def _estimator_kwargs(
     k: int | None,
     t: int | None,
     device: str | None,
-    dtype: str | None,
+    dtype: Dtype | None,
     params: Sequence[str] | None,
 ) -> dict[str, Any]:
     """Keyword arguments of ``get_estimator(method, ...)`` from the command's options.
@@ -92,8 +102,8 @@ def _estimator_kwargs(
     """
     from dgse.estimators.registry import ESTIMATORS, estimator_names
 
-    given = {"--model": ("model", model), "-K": ("K", k), "-T": ("T", t),
-             "--device": ("device", device), "--dtype": ("dtype", dtype)}  # fmt: skip
+    given = {"--model": ("model", model), "-K": ("K", k), "-T": ("T", t), "--device": ("device", device),
+             "--dtype": ("dtype", None if dtype is None else Dtype(dtype).value)}  # fmt: skip
     for name, v in (("-K", k), ("-T", t)):
         if v is not None and v < 1:
             raise InputDataError(f"{name} must be at least 1, got {v}")
@@ -156,7 +166,7 @@ def estimate_cmd(
     k: Annotated[int | None, typer.Option("-K", help="DGSE-S wind samples (default 5).")] = None,
     t: Annotated[int | None, typer.Option("-T", help="DGSE-S concentration samples (default 5).")] = None,
     device: Annotated[str | None, typer.Option("--device", help="DGSE device (cpu, cuda, ...).")] = None,
-    dtype: Annotated[str | None, typer.Option("--dtype", help=_DTYPE_HELP)] = None,
+    dtype: DtypeOption = None,
     params: Annotated[list[str] | None, typer.Option("--param", "-p", help=_PARAM_HELP)] = None,
     threads: Annotated[int | None, typer.Option("--threads", help=_THREADS_HELP)] = None,
     plot: Annotated[Path | None, typer.Option("--plot", help="Also save a figure of the belief.")] = None,
@@ -210,7 +220,7 @@ def estimate_cmd(
     m = metrics.to_dict()
     x, y = belief.source_estimate()
     sx, sy = float(case.source[0]), float(case.source[1])
-    i, j = belief.most_likely_cell()
+    mx, my = case.grid.center_of(*belief.most_likely_cell())
     table = Table.grid(padding=(0, 2))
     table.add_column(style="bold")
     table.add_column()
@@ -218,9 +228,13 @@ def estimate_cmd(
     table.add_row(
         "method", f"{escape(method)} (knowledge: {level}), {observations} observations, seed {seed}"
     )
-    table.add_row("source estimate", f"({x:.2f}, {y:.2f}) m; most likely cell ({i}, {j})")
+    table.add_row(
+        "source estimate", f"({x:.2f}, {y:.2f}) m (the posterior mean); most likely at ({mx:.2f}, {my:.2f}) m"
+    )
     table.add_row("true source", f"({sx:.2f}, {sy:.2f}) m")
-    table.add_row("error", f"[bold]{m['sl_error_m']:.2f} m[/] (most likely cell {m['map_error_m']:.2f} m)")
+    table.add_row(
+        "error", f"[bold]{m['sl_error_m']:.2f} m[/] (most likely position {m['map_error_m']:.2f} m)"
+    )
     table.add_row(
         "entropy",
         f"{m['entropy']:.2f} nats ({m['normalized_entropy']:.2f} of log N); "
@@ -313,10 +327,10 @@ def _aggregate_table(result: dict[str, Any]) -> Table:
         title_justify="left",
         box=box.SIMPLE_HEAD,
     )
-    table.add_column("metric", no_wrap=True)
+    table.add_column("metric", overflow="fold")  # a narrow terminal wraps and folds, never cuts
     aggs = result["aggregate"]
     for n in aggs:
-        table.add_column(f"n = {n}", justify="right", no_wrap=True)
+        table.add_column(f"n = {n}", justify="right", overflow="fold")
     table.add_row("estimates", *(str(a["n_estimates"]) for a in aggs.values()))
     for label, key, stat in _TABLE_ROWS:
         cells = [_mean_std(a, key) if stat == "mean" else _fmt(a.get(f"{key}_{stat}")) for a in aggs.values()]
@@ -336,22 +350,25 @@ def evaluate_cmd(
         ),
     ],
     observations: Annotated[
-        list[str] | None,
+        list[str],
         typer.Option(
             "--observations",
             "-n",
             metavar="N [N ...]",
             help="Numbers of sensors, e.g. --observations 50 100 150 (or 50,100,150).",
+            show_default=False,
         ),
-    ] = None,
+    ],
     method: Annotated[str, typer.Option("--method", "-m", help="Estimator name (registry).")] = "dgse-s",
     trials: Annotated[
         int, typer.Option("--trials", "-r", help="Random sensor configurations per case and count.")
     ] = 20,
     seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of the observations (>= 0).")] = 0,
-    json_out: Annotated[
+    out: Annotated[
         Path | None,
         typer.Option(
+            "--out",
+            "-o",
             "--json",
             help="The full result as JSON (default: dgse-out/evaluate-<method>.json).  Finished "
             "estimates are kept as they finish in <name>.journal.jsonl beside it; the same command "
@@ -367,7 +384,7 @@ def evaluate_cmd(
     k: Annotated[int | None, typer.Option("-K", help="DGSE-S wind samples (default 5).")] = None,
     t: Annotated[int | None, typer.Option("-T", help="DGSE-S concentration samples (default 5).")] = None,
     device: Annotated[str | None, typer.Option("--device", help="DGSE device (cpu, cuda, ...).")] = None,
-    dtype: Annotated[str | None, typer.Option("--dtype", help=_DTYPE_HELP)] = None,
+    dtype: DtypeOption = None,
     params: Annotated[list[str] | None, typer.Option("--param", "-p", help=_PARAM_HELP)] = None,
     threads: Annotated[int | None, typer.Option("--threads", help=_THREADS_HELP)] = None,
     limit: Annotated[int | None, typer.Option("--limit", help="Only the first N cases.")] = None,
@@ -384,46 +401,42 @@ def evaluate_cmd(
     Every finished estimate is kept at once (in the journal beside the JSON
     file); after Ctrl-C or a kill, the same command resumes where it stopped.
     """
-    from dgse.cli.common import (
-        EXIT_INTERRUPTED,
-        default_output,
-        kept_note,
-        report_interrupt,
-        resume_command,
-        sigterm_as_interrupt,
-    )
+    from dgse.cli.common import default_output, interruptible, kept_note, resume_command, resume_note
     from dgse.evaluation.evaluate import evaluate, write_json
     from dgse.journal import count_records, journal_path
 
     level = check_level(knowledge)
-    cases, counts = _split_positionals(args, observations or [])
+    cases, counts = _split_positionals(args, observations)
     kwargs = _estimator_kwargs(method, model, k, t, device, dtype, params)
-    _set_threads(threads)
     names = (method,) if level == DEFAULT_LEVEL else (method, level)
-    out = json_out if json_out is not None else default_output("evaluate", *names)
+    out = out if out is not None else default_output("evaluate", *names)
     journal = journal_path(out)
     check_output_file(out, "JSON file")
     check_output_file(journal, "journal")
-    console.print(kept_note(journal, "estimate", restart))
-    try:
-        with sigterm_as_interrupt():
-            result = evaluate(
-                cases,
-                method,
-                counts,
-                trials=trials,
-                seed=seed,
-                estimator_kwargs=kwargs,
-                progress=progress,
-                split=split,
-                limit=limit,
-                journal=journal,
-                restart=restart,
-                knowledge=level,
-            )
-    except KeyboardInterrupt:
-        report_interrupt(count_records(journal), "estimate", journal, resume_command(ctx))
-        raise typer.Exit(EXIT_INTERRUPTED) from None
+    _set_threads(threads)
+
+    def started(kept: int, total: int) -> None:
+        console.print(kept_note(journal, "estimate", kept))
+
+    def kept() -> str:
+        return resume_note(count_records(journal), "estimate", journal, resume_command(ctx))
+
+    with interruptible(kept):
+        result = evaluate(
+            cases,
+            method,
+            counts,
+            trials=trials,
+            seed=seed,
+            estimator_kwargs=kwargs,
+            progress=progress,
+            split=split,
+            limit=limit,
+            journal=journal,
+            restart=restart,
+            knowledge=level,
+            on_start=started,
+        )
     console.print(_aggregate_table(result))
     console.print(f"{len(result['per_case'])} estimates in {result['seconds_total']:.1f} s")
     console.print(f"wrote [cyan]{path_text(write_json(result, out))}[/]")

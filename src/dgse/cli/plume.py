@@ -22,6 +22,7 @@ import typer
 
 from dgse.cli.common import check_output_file, console, path_text, user_errors
 from dgse.errors import InputDataError
+from dgse.physics.constants import RECOMMENDED_MAX_FILAMENTS
 
 __all__ = ["plume_cmd", "register"]
 
@@ -52,19 +53,18 @@ def plume_cmd(
         bool, typer.Option("--prefill/--no-prefill", help="Start from the case's steady concentration.")
     ] = True,
     max_filaments: Annotated[
-        int | None,
+        int,
         typer.Option(
             "--max-filaments",
             help="Cap of the filaments standing for the steady field at the start (heavier ones carry "
-            "the rest; bounds the cost in poorly ventilated rooms); 0: no cap; default: "
-            "dgse.physics.filament.RECOMMENDED_MAX_FILAMENTS.",
+            "the rest; bounds the cost in poorly ventilated rooms); 0: no cap.",
         ),
-    ] = None,
+    ] = RECOMMENDED_MAX_FILAMENTS,
 ) -> None:
     """Simulate filament dispersion on a case and write it with concentration frames."""
     import secrets
 
-    from dgse.physics.filament import RECOMMENDED_MAX_FILAMENTS, FilamentSettings, make_filament_case
+    from dgse.physics.filament import FilamentSettings, make_filament_case
     from dgse.world.case import Case
 
     if out.resolve() == case_file.resolve():
@@ -76,7 +76,7 @@ def plume_cmd(
         noise=noise,
         noise_std=noise_std,
         prefill=prefill,
-        max_filaments=RECOMMENDED_MAX_FILAMENTS if max_filaments is None else (max_filaments or None),
+        max_filaments=max_filaments or None,
         warmup=warmup,
         frame_dt=frame_dt,
         duration=duration,

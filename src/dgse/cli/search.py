@@ -1,6 +1,6 @@
 """The ``dgse search`` command: active gas source search trials with a simulated robot.
 
-``dgse search CASES_DIR_OR_CASE --method dgse-s --trials 20 --seed 0 [--json out.json]``
+``dgse search CASES_DIR_OR_CASE --method dgse-s --trials 20 --seed 0 [-o out.json]``
 runs ``--trials`` episodes (:func:`dgse.search.episode.run_episode`) per case
 with the estimator ``--method`` (any registered name, built by
 :func:`~dgse.estimators.registry.get_estimator`) and the planner ``--planner``
@@ -34,25 +34,25 @@ command lines), ``-P/--planner-option KEY=VALUE`` planner options.
 
 Signs of life and keeping what was done: the progress bar shows the running
 episode's step, simulated clock (of the time limit), normalized entropy and
-current error.  Every finished episode is kept at once in the journal beside
-the JSON file (``out.json`` -> ``out.journal.jsonl``,
-:func:`dgse.journal.journal_path`); without ``--json`` the JSON file
-is ``dgse-out/search-<method>-<planner>.json`` (printed).  Ctrl-C (or
-SIGTERM) stops the run with one line: how many episodes are kept, where, and
-the command that resumes the run (exit status 130).  Running the same command
-again skips the kept episodes and gives the same JSON as an uninterrupted run
-(up to the measured computation times); a run with other settings into the
-same file is refused (the error names the difference): give another
-``--json`` or ``--restart`` to discard the journal.
+current error; without a terminal (a log file, a pipe) one line per finished
+episode is printed instead.  Every finished episode is kept at once in the
+journal beside the JSON file (``out.json`` -> ``out.journal.jsonl``,
+:func:`dgse.journal.journal_path`); without ``-o/--out`` (``--json`` is the
+same option) the JSON file is ``dgse-out/search-<method>-<planner>.json``
+(printed).  Ctrl-C (or SIGTERM) stops the run with one line: how many
+episodes are kept, where, and the command that resumes the run (exit status
+130).  Running the same command again skips the kept episodes and gives the
+same JSON as an uninterrupted run (up to the measured computation times); a
+run with other settings into the same file is refused (the error names the
+difference): give another ``--out`` or ``--restart`` to discard the journal.
 
-The helpers :func:`default_output`, :func:`kept_note`, :func:`resume_command`,
-:func:`sigterm_as_interrupt` and :func:`report_interrupt` are shared with
-``dgse evaluate`` (:mod:`dgse.cli.models`).
+Every setting is checked (by :func:`~dgse.search.campaign.run_trials`) before
+anything is printed; the summary table's abbreviations are spelled out under
+it (:data:`LEGEND`).
 """
 
 from __future__ import annotations
 
-import math
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
@@ -65,18 +65,17 @@ from rich.table import Table
 
 from dgse.belief.knowledge import DEFAULT_LEVEL, check_level
 from dgse.cli.common import (
-    EXIT_INTERRUPTED,
     KnowledgeOption,
     check_output_dir,
     check_output_file,
     console,
     default_output,
+    interruptible,
     kept_note,
     parse_params,
     path_text,
-    report_interrupt,
     resume_command,
-    sigterm_as_interrupt,
+    resume_note,
     user_errors,
 )
 from dgse.errors import InputDataError
@@ -105,18 +104,19 @@ def _table(rows: list[tuple[str, dict[str, Any]]], title: str) -> Table:
 
     t = Table(title=title, title_justify="left", box=box.SIMPLE_HEAD)
     t.add_column("case", no_wrap=True)
-    for col in ("trials", "SR [%]", "error [m]", "ST [s]", "TD [m]", "step [s]", "PER"):
-        t.add_column(escape(col), justify="right")
+    for col in ("trials", "SR [%]", "error [m]", "ST [s]", "TD [m]", "step [ms]", "PER"):
+        t.add_column(escape(col), justify="right", overflow="fold")  # a narrow terminal folds, never cuts
     for i, (name, agg) in enumerate(rows):
         sr = agg.get("success_rate")
+        step_ms = {k: v * 1e3 for k, v in agg.items() if k.startswith("step_seconds") and v is not None}
         t.add_row(
             escape(name),
             str(agg["n_trials"]),
             "-" if sr is None else f"{100 * sr:.0f}",
-            format_mean_std(agg, "error_m", ".3f"),
+            format_mean_std(agg, "error_m", ".2f"),
             format_mean_std(agg, "search_time_s", ".1f"),
             format_mean_std(agg, "distance_m", ".2f"),
-            format_mean_std(agg, "step_seconds", ".3g"),
+            format_mean_std(step_ms, "step_seconds", ".3g"),
             "-" if agg.get("per_mean") is None else f"{agg['per_mean']:.2f}",
             style="bold" if i == len(rows) - 1 and len(rows) > 1 else None,
             end_section=i == len(rows) - 2,
@@ -133,6 +133,23 @@ def _write_json(path: Path, data: dict[str, Any]) -> Path:
 
 # -- command -----------------------------------------------------------------------------
 _PARAM_HELP = "Estimator argument KEY=VALUE (VALUE as JSON, else a string); repeatable."
+#: What the columns of the summary table stand for, printed under it.
+LEGEND = (
+    "SR success rate (error <= 2 m when the method stops), ST search time, TD travelled distance, "
+    "PER path efficiency ratio = distance travelled / shortest path from the start to the source; "
+    "mean (std)"
+)
+
+
+def _episode_line(stem: str, trial: int, trials: int, result: EpisodeResult) -> str:
+    """One line per finished episode, for a log without a terminal."""
+    from dgse.search.metrics import is_success
+
+    outcome = "found" if is_success(result) else "not found"
+    return (
+        f"{stem} trial {trial + 1}/{trials}: {outcome} ({result.reason}), error {result.error_m:.2f} m, "
+        f"{result.search_time_s:.0f} s, {result.distance_m:.1f} m, {len(result.steps)} measurements"
+    )
 
 
 @user_errors
@@ -186,11 +203,12 @@ def search_cmd(
             "--compute-time/--no-compute-time", help="Add the measured computation time to the clock."
         ),
     ] = False,
-    json_out: Annotated[
+    out: Annotated[
         Path | None,
         typer.Option(
-            "--json",
+            "--out",
             "-o",
+            "--json",
             help="The metrics as JSON (default: dgse-out/search-<method>-<planner>.json).  Finished "
             "episodes are kept as they finish in <name>.journal.jsonl beside it; the same command "
             "again resumes an interrupted run.",
@@ -222,35 +240,27 @@ def search_cmd(
     threads: Annotated[
         int | None, typer.Option("--threads", help="PyTorch CPU threads (1 is fastest on busy cores).")
     ] = None,
-    progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")] = True,
+    progress: Annotated[
+        bool,
+        typer.Option(
+            "--progress/--no-progress",
+            help="Show a progress bar (without a terminal: one line per finished episode).",
+        ),
+    ] = True,
     knowledge: KnowledgeOption = DEFAULT_LEVEL,
 ) -> None:
-    """Run active source search trials and report success rate, error, ST, TD, step time, PER.
+    """Run active source search trials and report success rate, error, search time, travelled
+    distance, step time and path efficiency.
 
     Every finished episode is kept at once (in the journal beside the JSON
     file); after Ctrl-C or a kill, the same command resumes where it stopped.
     """
-    from dgse.estimators.registry import get_estimator
-    from dgse.planning.planners import get_planner
     from dgse.presets import resolve
-    from dgse.search.campaign import estimator_options, json_safe, load_cases, run_trials
+    from dgse.search.campaign import estimator_options, json_safe, run_trials
 
     level = check_level(knowledge)
-    if trials < 1:
-        raise InputDataError(f"--trials must be at least 1, got {trials}")
-    for name, v in (("--time-limit", time_limit), ("--speed", speed), ("--dwell", dwell)):
-        if not (math.isfinite(v) and v > 0):
-            raise InputDataError(f"{name} must be a positive number, got {v:g}")
-    if not (math.isfinite(min_start_distance) and min_start_distance >= 0):
-        raise InputDataError(f"--min-start-distance must be >= 0, got {min_start_distance:g}")
-    if threads is not None:
-        if threads < 1:
-            raise InputDataError(f"--threads must be at least 1, got {threads}")
-        import torch
-
-        torch.set_num_threads(threads)
-
-    cases = load_cases(cases_path)
+    if threads is not None and threads < 1:
+        raise InputDataError(f"--threads must be at least 1, got {threads}")
     user_est = parse_params([*(option or []), *(param or [])], "--param")
     user_plan = parse_params(planner_option, "--planner-option")
     if eta is not None:
@@ -262,67 +272,79 @@ def search_cmd(
         run.estimator, seed=seed, options={**run.estimator_options, **chosen_model, **user_est}
     )
     plan_kwargs = run.planner_options
-    estimator = get_estimator(run.estimator, **est_kwargs)  # run_trials checks the knowledge level first
-    plan = get_planner(planner, **plan_kwargs)
     names = (method, planner) if level == DEFAULT_LEVEL else (method, planner, level)
-    out = json_out if json_out is not None else default_output("search", *names)
+    out = out if out is not None else default_output("search", *names)
     journal = journal_path(out)
     check_output_file(out, "JSON file")
     check_output_file(journal, "journal")
     check_output_dir(animate, "animation folder")
-    total = len(cases) * trials
+    if threads is not None:
+        import torch
 
-    console.print(
-        f"searching {len(cases)} case{'s' * (len(cases) != 1)} x {trials} trials with "
-        f"[bold]{escape(method)}[/] + [bold]{escape(planner)}[/] (knowledge {level}, seed {seed}, "
-        f"time limit {time_limit:g} s)"
-    )
-    console.print(kept_note(journal, "episode", restart))
+        torch.set_num_threads(threads)
+
     gifs: list[Path] = []
     fresh = 0
-
-    def finished(path: Path, case: Case, trial: int, result: EpisodeResult) -> None:
-        nonlocal fresh
-        fresh += 1
-        if animate is not None and trial == 0:
-            from dgse.viz.search import animate_episode
-
-            gifs.append(animate_episode(result, case, animate / f"{path.stem}.gif"))
-
-    t_start = time.perf_counter()
+    log_lines = progress and not console.is_terminal  # a log gets a line per episode, not a bar
     bar = Progress(
         TextColumn("{task.description}"),
         BarColumn(),
         MofNCompleteColumn(),
         TimeElapsedColumn(),
         console=console,
-        disable=not progress,
+        disable=not progress or log_lines,
         transient=True,
     )
-    state = {"done": 0}
-    try:
-        with sigterm_as_interrupt(), bar:
-            task = bar.add_task("episodes", total=total)
+    task = bar.add_task("episodes", total=None, start=False)
+    state = {"done": 0, "total": 0}
 
-            def tick(description: str, done: int, total: int) -> None:
-                state["done"] = done
-                bar.update(task, description=escape(description), completed=done)
+    def started(kept: int, total: int) -> None:
+        n_cases = total // trials
+        console.print(
+            f"searching {n_cases} case{'s' * (n_cases != 1)} x {trials} trials with "
+            f"[bold]{escape(method)}[/] + [bold]{escape(planner)}[/] (knowledge {level}, seed {seed}, "
+            f"time limit {time_limit:g} s)"
+        )
+        console.print(kept_note(journal, "episode", kept))
+        state["total"] = total
+        bar.update(task, total=total, completed=kept)
+        bar.start_task(task)
+        bar.start()
 
-            def step(path: Path, trial: int, rec: StepRecord) -> None:
-                within = min(rec.time_s / time_limit, 0.99)  # the bar creeps along the episode's clock
-                text = _step_text(path.stem, trial, trials, rec, time_limit)
-                bar.update(task, description=escape(text), completed=state["done"] + within)
+    def tick(description: str, done: int, total: int) -> None:
+        state["done"] = done
+        bar.update(task, description=escape(description), completed=done)
 
+    def step(path: Path, trial: int, rec: StepRecord) -> None:
+        within = min(rec.time_s / time_limit, 0.99)  # the bar creeps along the episode's clock
+        text = _step_text(path.stem, trial, trials, rec, time_limit)
+        bar.update(task, description=escape(text), completed=state["done"] + within)
+
+    def finished(path: Path, case: Case, trial: int, result: EpisodeResult) -> None:
+        nonlocal fresh
+        fresh += 1
+        if log_lines:
+            console.print(escape(_episode_line(path.stem, trial, trials, result)), soft_wrap=True)
+        if animate is not None and trial == 0:
+            from dgse.viz.search import animate_episode
+
+            gifs.append(animate_episode(result, case, animate / f"{path.stem}.gif"))
+
+    def kept() -> str:
+        return resume_note(count_records(journal), "episode", journal, resume_command(ctx))
+
+    t_start = time.perf_counter()
+    with interruptible(kept):
+        try:
             data = run_trials(
-                cases,
-                estimator,
-                plan,
+                cases_path,
+                run.estimator,
+                planner,
                 trials,
                 seed,
                 estimator_options=est_kwargs,
                 planner_options=plan_kwargs,
                 method=method,
-                planner_name=planner,
                 speed=speed,
                 dwell=dwell,
                 time_limit=time_limit,
@@ -333,19 +355,20 @@ def search_cmd(
                 record_first=animate is not None,
                 progress=tick,
                 on_episode=finished,
-                on_step=step if progress else None,
+                on_step=step if progress and not log_lines else None,
+                on_start=started,
                 journal=journal,
                 restart=restart,
                 knowledge=level,
             )
-    except KeyboardInterrupt:
-        report_interrupt(count_records(journal), "episode", journal, resume_command(ctx))
-        raise typer.Exit(EXIT_INTERRUPTED) from None
+        finally:
+            bar.stop()
     data["resolved"] = {**run.to_json(), "estimator_options": json_safe(est_kwargs)}
     table_rows = [(Path(c["file"]).stem, c["metrics"]) for c in data["per_case"]]
     table_rows.append(("all", data["aggregate"]))
     console.print(_table(table_rows, f"active search: {escape(method)} + {escape(planner)}"))
-    resumed = total - fresh
+    console.print(f"[dim]{escape(LEGEND)}[/]")
+    resumed = state["total"] - fresh
     console.print(
         f"{data['aggregate']['n_trials']} episodes in {time.perf_counter() - t_start:.1f} s"
         + (f" ({resumed} kept from an earlier run)" if resumed else "")

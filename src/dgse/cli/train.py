@@ -5,7 +5,8 @@ increasing priority: the paper's defaults (:class:`~dgse.training.config.TrainCo
 a YAML file (``--config``, e.g. ``configs/train/paper.yaml``), ``--set
 KEY=VALUE`` overrides (values in YAML syntax; ``model_overrides.<key>`` and
 ``loss_weights.<key>`` reach the nested settings), and the dedicated options
-(``--model``, ``--data``, ``--epochs``, ...).
+(``--network``, ``--data``, ``--epochs``, ...).  An error names what caused
+it: the YAML file, the ``--set`` item or the option (``--batch-size 0``).
 
 Every error a user can cause (:class:`~dgse.errors.DGSEError`, or a file that
 cannot be written) prints one red line ``error: <message>`` and exits with
@@ -20,7 +21,16 @@ from typing import Annotated, Any
 import typer
 from rich.markup import escape
 
-from dgse.cli.common import check_output_dir, check_output_file, console
+from dgse.cli.common import (
+    EXIT_INTERRUPTED,
+    NOTHING_KEPT,
+    check_output_dir,
+    check_output_file,
+    console,
+    interruptible,
+    print_interrupted,
+    resume_command,
+)
 from dgse.cli.common import user_errors as _user_errors
 from dgse.errors import InputDataError
 
@@ -61,11 +71,51 @@ def parse_set(items: list[str]) -> dict[str, Any]:
     return out
 
 
+#: The options that set a config key, as the command line spells them (``--set`` aside).
+_OPTION_OF = {
+    "model": "--network",
+    "data": "--data",
+    "out_dir": "--out",
+    "preset": "--preset",
+    "epochs": "--epochs",
+    "batch_size": "--batch-size",
+    "max_time": "--max-time",
+    "precision": "--precision",
+    "accelerator": "--accelerator",
+    "devices": "--devices",
+    "strategy": "--strategy",
+    "num_nodes": "--num-nodes",
+    "num_workers": "--workers",
+    "threads": "--threads",
+    "seed": "--seed",
+    "export": "--export",
+    "init": "--init",
+}
+
+
+def _kept_run(out_dir: Path, ctx: typer.Context) -> str:
+    """What an interrupted run kept (its epochs in last.safetensors) and the command that resumes it."""
+    from dgse.training.train import LAST_NAME, read_train_state
+
+    last = out_dir / LAST_NAME
+    try:
+        n = read_train_state(last).next_epoch
+    except InputDataError:
+        return NOTHING_KEPT
+    command = resume_command(ctx, drop=("resume",), add=("--resume",))
+    return f"{n} epoch{'s' * (n != 1)} kept in {last}; resume with: {command}"
+
+
 @_user_errors
 def train_cmd(
-    model: Annotated[
-        str | None, typer.Option("--model", "-m", help="Variant: dgse-o, dgse-p or dgse-s (default dgse-s).")
+    ctx: typer.Context,
+    network: Annotated[
+        str | None,
+        typer.Option(
+            "--network", "-m", help="The network to train: dgse-o, dgse-p or dgse-s (default dgse-s)."
+        ),
     ] = None,
+    model: Annotated[str | None, typer.Option("--model", hidden=True, help="Not an option of train.")] = None,
     data: Annotated[
         Path | None, typer.Option("--data", "-d", help="Dataset store (.h5) with train and val splits.")
     ] = None,
@@ -151,13 +201,22 @@ def train_cmd(
     Writes into --out: last.safetensors (weights + optimizer state, for
     --resume), best.safetensors (lowest validation source loss; a model
     checkpoint), history.csv (one row per epoch), logs/version_N/metrics.csv
-    (Lightning's CSV log) and config.yaml.
+    (Lightning's CSV log) and config.yaml.  The settings are checked before
+    PyTorch is loaded; Ctrl-C stops after the current batch, saves, and says
+    how to resume.
     """
     from dgse.training.config import load_config
 
-    overrides: dict[str, Any] = parse_set(list(set_ or []))
+    if model is not None:
+        raise InputDataError(
+            "dgse train has no --model: give the network to train as --network (dgse-o, dgse-p or "
+            "dgse-s) and weights to start from as --init FILE"
+        )
+    items = list(set_ or [])
+    overrides: dict[str, Any] = parse_set(items)
+    origins = {item.partition("=")[0].strip(): f"--set {item}" for item in items}
     options: dict[str, Any] = {
-        "model": model,
+        "model": network,
         "data": str(data) if data is not None else None,
         "out_dir": str(out) if out is not None else None,
         "preset": preset,
@@ -174,28 +233,35 @@ def train_cmd(
         "seed": seed,
         "export": str(export) if export is not None else None,
         "init": init,
-        "progress_bar": progress,
     }
-    overrides.update({k: v for k, v in options.items() if v is not None})
+    for key, value in options.items():
+        if value is not None:
+            overrides[key] = value
+            origins[key] = f"{_OPTION_OF[key]} {devices if key == 'devices' else value}"
+    if progress is not None:
+        overrides["progress_bar"] = progress
+        origins["progress_bar"] = "--progress" if progress else "--no-progress"
     if fast_dev_run:
         overrides["fast_dev_run"] = True
+        origins["fast_dev_run"] = "--fast-dev-run"
     if lightning_info:
         overrides["lightning_messages"] = True
-    config = load_config(config_file, overrides)
+        origins["lightning_messages"] = "--lightning-info"
+    config = load_config(config_file, overrides, origins=origins)
     if config.data is None:
         raise InputDataError("no dataset store: pass --data STORE (or set data in the --config file)")
+    out_dir = Path(config.out_dir)
+    # the checks train() makes first, before anything is printed or PyTorch is loaded
+    if not Path(config.data).is_file():
+        raise InputDataError(f"dataset store {config.data} not found")
+    check_output_dir(out_dir, "run folder")
+    check_output_file(Path(config.export) if config.export else None, "exported model")
 
     from lightning.pytorch.utilities import rank_zero_only
 
     from dgse.models.networks import build_model, count_parameters
     from dgse.training.train import prepare_out_dir, train
 
-    out_dir = Path(config.out_dir)
-    # the checks train() makes first, before anything is printed
-    if not Path(config.data).is_file():
-        raise InputDataError(f"dataset store {config.data} not found")
-    check_output_dir(out_dir, "run folder")
-    check_output_file(Path(config.export) if config.export else None, "exported model")
     state = prepare_out_dir(config, resume)
     talk = getattr(rank_zero_only, "rank", 0) == 0  # set by Lightning from the environment
     if talk:
@@ -215,13 +281,17 @@ def train_cmd(
             f"[cyan]{_p(out_dir / 'logs')}/version_N/metrics.csv[/]; checkpoints -> "
             f"[cyan]{_p(out_dir / 'last.safetensors')}[/], [cyan]{_p(out_dir / 'best.safetensors')}[/]"
         )
-    result = train(config, resume=resume)
+    with interruptible(lambda: _kept_run(out_dir, ctx), sigterm=False):  # Lightning handles SIGTERM
+        result = train(config, resume=resume)
+    if result.stop_reason == "interrupted":  # the first Ctrl-C: the run stopped cleanly and saved
+        if talk:
+            print_interrupted(_kept_run(out_dir, ctx))
+        raise typer.Exit(EXIT_INTERRUPTED)
     if not talk:
         return
     stopped = {
         "max_epochs": "all epochs done",
         "max_time": "time budget reached",
-        "interrupted": "interrupted",
         "fast_dev_run": "fast dev run",
         "already_done": f"nothing to do: {result.epochs_done} epochs already trained",
     }[result.stop_reason]
@@ -244,7 +314,7 @@ def train_cmd(
     console.print("checkpoints " + ", ".join(f"[cyan]{_p(p)}[/]" for p in ckpts))
     if result.export_path is not None:
         console.print(f"exported model [cyan]{_p(result.export_path)}[/]")
-    if result.stop_reason in ("max_time", "interrupted"):
+    if result.stop_reason == "max_time":
         console.print("continue with the same command and --resume")
 
 

@@ -369,9 +369,12 @@ def load_gaden(
     if not (resolution > 0 and math.isfinite(resolution)):
         raise InputDataError(f"resolution must be positive, got {resolution}")
     if len(paths) > 1 and frame_dt is None:
-        raise InputDataError(f"{len(paths)} frames given: pass frame_dt (seconds between them)")
+        raise InputDataError(
+            f"{len(paths)} frames given: pass {{frame_dt}} (seconds between them)",
+            names={"frame_dt": "frame_dt"},
+        )
     if frame_dt is not None and not (frame_dt > 0 and math.isfinite(frame_dt)):
-        raise InputDataError(f"frame_dt must be positive, got {frame_dt}")
+        raise InputDataError(f"{{frame_dt}} must be positive, got {frame_dt}", names={"frame_dt": "frame_dt"})
     frames = [read_gaden_frame(paths[0], z_index)]
     z = frames[0].z_index
     for p in paths[1:]:
@@ -411,7 +414,7 @@ def load_gaden(
         )
     if occ[i, j]:
         raise InputDataError(
-            f"GADEN source ({f0.source[0]:g}, {f0.source[1]:g}) m lies in a solid cell ({i}, {j}) "
+            f"GADEN source ({f0.source[0]:g}, {f0.source[1]:g}) m lies in a solid cell "
             f"of the obstacle image {obstacles}"
         )
     stem = paths[0].parent.name if len(paths) > 1 else paths[0].name

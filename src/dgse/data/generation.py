@@ -46,7 +46,7 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -60,6 +60,7 @@ from dgse.data.store import (
     Journal,
     _check_fractions,
     assign_splits,
+    check_store_path,
     commit_pending,
     create_store,
 )
@@ -74,6 +75,7 @@ __all__ = [
     "layout_id_for",
     "layout_seed",
     "solve_layout",
+    "stored_layouts",
 ]
 
 #: Generation parameters that must match to resume into an existing store.
@@ -251,6 +253,26 @@ def _check_layout_kwargs(layout_kwargs: Mapping[str, Any]) -> dict[str, Any]:
 
 
 @contextlib.contextmanager
+def _sigint_ignored() -> Iterator[None]:
+    """SIGINT ignored while the block starts the local cluster, so its worker processes are born
+    ignoring it (an ignored signal stays ignored across ``exec``).
+
+    Ctrl-C in a terminal reaches every process of the foreground group; a worker that took it
+    would die printing its traceback.  Ignoring it, only this process stops, and it closes the
+    workers itself.  A Ctrl-C while the workers start is lost (it takes a few seconds; press
+    it again).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+@contextlib.contextmanager
 def _dask_client(scheduler: Any, workers: int, connect_timeout: float) -> Iterator[Any]:
     """A ``distributed.Client``: on a new LocalCluster, or on ``scheduler`` (address or Client)."""
     try:
@@ -264,15 +286,16 @@ def _dask_client(scheduler: Any, workers: int, connect_timeout: float) -> Iterat
     try:
         if scheduler is None:
             try:
-                cluster = LocalCluster(
-                    n_workers=workers,
-                    threads_per_worker=1,
-                    processes=True,
-                    dashboard_address=None,
-                    scheduler_kwargs={"dashboard": False},
-                    silence_logs=logging.ERROR,
-                )
-                client = Client(cluster)
+                with _sigint_ignored():
+                    cluster = LocalCluster(
+                        n_workers=workers,
+                        threads_per_worker=1,
+                        processes=True,
+                        dashboard_address=None,
+                        scheduler_kwargs={"dashboard": False},
+                        silence_logs=logging.ERROR,
+                    )
+                    client = Client(cluster)
             except (RuntimeError, OSError) as e:
                 raise ClusterError(
                     f"cannot start a local Dask cluster of {workers} workers: {e} (scripts "
@@ -295,12 +318,24 @@ def _dask_client(scheduler: Any, workers: int, connect_timeout: float) -> Iterat
         try:
             yield client
         finally:
-            with contextlib.suppress(Exception):
+            with _quiet_distributed(), contextlib.suppress(Exception):
                 client.close()
     finally:
         if cluster is not None:
-            with contextlib.suppress(Exception):
+            with _quiet_distributed(), contextlib.suppress(Exception):
                 cluster.close()
+
+
+@contextlib.contextmanager
+def _quiet_distributed() -> Iterator[None]:
+    """distributed's loggers silent (a cluster closed on Ctrl-C reports its cancelled tasks)."""
+    logger = logging.getLogger("distributed")
+    level = logger.level
+    logger.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
 
 
 @contextlib.contextmanager
@@ -387,6 +422,7 @@ def generate(
     checkpoint_s: float = 60.0,
     connect_timeout: float = 5.0,
     only_splits: Sequence[str] | None = None,
+    on_start: Callable[[int, int], None] | None = None,
     **layout_kwargs: Any,
 ) -> GenerationReport:
     """Generate (or finish generating) a dataset store of ``n_layouts`` layouts.
@@ -413,6 +449,9 @@ def generate(
         only_splits: make only the layouts these splits get (e.g. ``["test"]``: a
             dataset's test scenarios without its training set).  The layouts are the
             same as in the whole dataset; running again without it completes the store.
+        on_start: called as ``on_start(todo, workers)`` once every argument is checked and
+            the store is read, before the cluster starts: the layouts this run makes and
+            the local workers (ignored with ``scheduler``).
         **layout_kwargs: options of :func:`~dgse.world.generate.random_layout`, e.g.
             ``width_range=(3, 3.5), height_range=(3, 3.5)`` for tiny layouts.
 
@@ -428,18 +467,20 @@ def generate(
 
     t_start = time.perf_counter()
     if isinstance(n_layouts, bool) or not isinstance(n_layouts, int) or n_layouts < 1:
-        raise InputDataError(f"number of layouts must be a positive integer, got {n_layouts!r}")
+        raise _argument_error("n_layouts", f"must be a positive integer, got {n_layouts!r}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise InputDataError(f"seed must be a non-negative integer, got {seed!r}")
+        raise _argument_error("seed", f"must be a non-negative integer, got {seed!r}")
     if n_sources < 1:
-        raise InputDataError(f"n_sources must be at least 1, got {n_sources}")
+        raise _argument_error("n_sources", f"must be at least 1, got {n_sources}")
     if retries < 0:
-        raise InputDataError(f"retries must be >= 0, got {retries}")
+        raise _argument_error("retries", f"must be >= 0, got {retries}")
     workers = _default_workers() if workers is None else int(workers)
     if workers < 1:
-        raise InputDataError(f"workers must be at least 1, got {workers}")
-    if not (checkpoint_s >= 0 and connect_timeout > 0):
-        raise InputDataError("checkpoint_s must be >= 0 and connect_timeout > 0")
+        raise _argument_error("workers", f"must be at least 1, got {workers}")
+    if not checkpoint_s >= 0:
+        raise _argument_error("checkpoint_s", f"must be >= 0, got {checkpoint_s!r}")
+    if not connect_timeout > 0:
+        raise _argument_error("connect_timeout", f"must be positive, got {connect_timeout!r}")
     get_engine(engine)  # UnsupportedError, clear, before any work
     kwargs = _check_layout_kwargs(layout_kwargs)
     fractions = _check_fractions(split_fractions)
@@ -454,13 +495,17 @@ def generate(
         "split_fractions": fractions,
         "configs_per_env": int(configs_per_env),
     }
-    if out.is_dir():
+    if not out.exists():
+        check_store_path(out)
+    elif out.is_dir():
         raise InputDataError(f"{out} is a directory; give the dataset store's file name")
     with _generation_lock(out):
         done, _ = _read_state(out, info, retry_failed) if out.exists() else (set(), 0)
         splits = assign_splits(n_layouts, seed, fractions)
         todo = [i for i in range(n_layouts) if i not in done and splits[i] in wanted_splits]
         report = GenerationReport(out, n_layouts, n_before=len(done))
+        if on_start is not None:
+            on_start(len(todo), workers)
         if todo:
             with _dask_client(scheduler, workers, connect_timeout) as client:
                 if not out.exists():
@@ -486,6 +531,20 @@ def generate(
     report.complete = all(i in stored for i in range(n_layouts))
     report.seconds = time.perf_counter() - t_start
     return report
+
+
+def _argument_error(name: str, problem: str) -> InputDataError:
+    """``<name> <problem>``, the argument spelled as each front end spells it."""
+    return InputDataError(f"{{{name}}} {problem}", names={name: name})
+
+
+def stored_layouts(out: str | Path) -> int:
+    """The layouts a store holds, made or recorded as failed (0 when there is no store yet)."""
+    out = Path(out)
+    if not out.is_file():
+        return 0
+    with DatasetStore(out, "r") as s:
+        return len(s.layout_indices() | s.failed_indices())
 
 
 def _check_only_splits(only_splits: Sequence[str] | None) -> set[str]:
@@ -551,8 +610,10 @@ def _run(
         TimeElapsedColumn(),
         TimeRemainingColumn(),
     )
+    console = Console(stderr=True)
     with (
-        Progress(*columns, console=Console(stderr=True), disable=not progress) as bar,
+        # without a terminal the bar would only print its last state
+        Progress(*columns, console=console, disable=not (progress and console.is_terminal)) as bar,
         _stop_requests() as stop,
     ):
         bar_task = bar.add_task("layouts", total=n_total, completed=n_total - len(todo), failed="")
@@ -602,11 +663,15 @@ def _run(
                     commit_pending(out)
                     commit_cost = time.monotonic() - now
                     last_commit = time.monotonic()
+        except KeyboardInterrupt:
+            bar.live.transient = True  # the caller says what was kept; the bar goes
+            raise
         finally:
             for fut in futures:
                 fut.cancel()
             commit_pending(out)
         if stop.is_set():
+            bar.live.transient = True
             raise KeyboardInterrupt  # after the finished layouts were committed
 
 

@@ -86,11 +86,13 @@ __all__ = [
     "FORMAT_VERSION",
     "SENSOR_COUNTS",
     "SPLITS",
+    "STORE_SUFFIXES",
     "DatasetStore",
     "FixedConfigurations",
     "Journal",
     "SensorConfiguration",
     "assign_splits",
+    "check_store_path",
     "commit_pending",
     "split_counts",
 ]
@@ -105,6 +107,9 @@ DEFAULT_SPLIT_FRACTIONS: dict[str, float] = {"train": 12 / 15, "val": 2 / 15, "t
 SENSOR_COUNTS = np.arange(5, 301, 5)
 #: Fixed sensor configurations per environment for validation and test (paper Sec. IV).
 DEFAULT_CONFIGS_PER_ENV = 30
+
+#: The names a new store file may have (an HDF5 file).
+STORE_SUFFIXES = (".h5", ".hdf5")
 
 _ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]{0,127}$")
 _TAG_SPLIT = 0x5B11
@@ -415,6 +420,47 @@ def _write_layout(
     return g
 
 
+def _read_all(name: str, obj: Any) -> None:
+    """Read a dataset whole (``visititems``), attributes included: HDF5 raises on damaged data."""
+    dict(obj.attrs)
+    if isinstance(obj, h5py.Dataset):
+        obj[()]
+
+
+def _layout_problem(g: h5py.Group) -> str | None:
+    """What is wrong with a layout group's arrays (None: nothing); HDF5 errors propagate."""
+    a = g.attrs
+    summary = json.loads(a["summary"])
+    S, res = int(a["n_sources"]), float(a["resolution"])
+    H, W = (int(v) for v in summary["shape"])
+    occ, wind, conc = g["occupancy"][()], g["wind"][()], g["concentration"][()]
+    source, meta = g["source"][()], [json.loads(m) for m in g["meta"].asstr()[()]]
+    expected = {
+        "occupancy": (occ.shape, (H, W)),
+        "wind": (wind.shape, (2, H, W)),
+        "concentration": (conc.shape, (S, H, W)),
+        "source": (source.shape, (S, 2)),
+        "meta": ((len(meta),), (S,)),
+    }
+    for key, (got, want) in expected.items():
+        if tuple(got) != want:
+            return f"{key} has shape {tuple(got)}, the layout's summary says {want}"
+    if not np.isin(occ, (0, 1)).all():
+        return "occupancy holds values other than 0 and 1"
+    for key, arr in (("wind", wind), ("concentration", conc)):
+        if not np.isfinite(arr).all():
+            return f"{key} holds non-finite values"
+    if not (np.isfinite(source).all() and (source >= 0).all() and (source <= (W * res, H * res)).all()):
+        return "a source lies outside the map"
+    if not all(isinstance(m, dict) for m in meta):
+        return "a case's meta is not a JSON object"
+    if "frames" in g:
+        for k, frames in g["frames"].items():
+            if frames.shape[1:] != (H, W) or not np.isfinite(frames[()]).all():
+                return f"frames of source {k} have shape {frames.shape} or non-finite values"
+    return None
+
+
 def _prepare_cases(cases: Sequence[Case] | Iterable[Case]) -> list[Case]:
     out = list(cases)
     if not out:
@@ -432,6 +478,23 @@ def _prepare_cases(cases: Sequence[Case] | Iterable[Case]) -> list[Case]:
 
 
 # -- the store ---------------------------------------------------------------------------------
+def check_store_path(path: str | Path) -> Path:
+    """``path`` as a :class:`~pathlib.Path` if it names a store file to create: ``*.h5`` or ``*.hdf5``.
+
+    Raises:
+        InputDataError: another suffix (``x.txt``), or a folder.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise InputDataError(f"{path} is a folder; give the dataset store's file name (*.h5)")
+    if path.suffix.lower() not in STORE_SUFFIXES:
+        raise InputDataError(
+            f"{path}: a dataset store is an HDF5 file; give it a name ending in "
+            + " or ".join(STORE_SUFFIXES)
+        )
+    return path
+
+
 class DatasetStore:
     """Many cases in one HDF5 file, grouped by layout (see the module docstring).
 
@@ -465,6 +528,8 @@ class DatasetStore:
             raise InputDataError(f"{self.path}: no such dataset store")
         if mode == "x" and exists:
             raise InputDataError(f"{self.path} already exists")
+        if mode in ("w", "x") or (mode == "a" and not exists):
+            check_store_path(self.path)
         if mode != "r":
             self.path.parent.mkdir(parents=True, exist_ok=True)
         try:
@@ -765,6 +830,28 @@ class DatasetStore:
         fails = self._f.require_group("failures")
         if layout_id in fails:
             del fails[layout_id]
+
+    def verify(self) -> int:
+        """Read every array of the store and check it against what the layout says; the layouts read.
+
+        Decompressing every chunk finds damaged data (gzip checks its stream); the shapes are
+        checked against each layout's summary and source count, the occupancy against 0/1, the
+        fields for finite values and the sources for positions inside the map.  It reads the
+        whole file (seconds per thousand layouts).
+
+        Raises:
+            InputDataError: naming the first damaged layout (or group) and what is wrong.
+        """
+        for lid in self.layouts():
+            with self._guard(f"layout {lid}"):
+                problem = _layout_problem(self._f["layouts"][lid])
+            if problem:
+                raise InputDataError(f"{self.path}: corrupt dataset store (layout {lid}): {problem}")
+        for name in ("failures", "fixed"):
+            if name in self._f:
+                with self._guard(name):
+                    self._f[name].visititems(_read_all)
+        return len(self.layouts())
 
     def failures(self) -> list[dict[str, Any]]:
         """The failure records, sorted by layout id."""

@@ -259,7 +259,8 @@ def default_model_path(variant: str) -> Path:
     if not res.is_file():
         raise UnsupportedError(
             f"no shipped {variant} weights in this installation (expected dgse/assets/models/"
-            f"{variant}.safetensors); pass model=<path to a .safetensors checkpoint>"
+            f"{variant}.safetensors); pass {{model}}=<path to a .safetensors checkpoint>",
+            names={"model": "model"},
         )
     return Path(str(res))
 

@@ -429,6 +429,7 @@ def _make_progress(
         return progress, None, contextlib.nullcontext()
     if not progress:
         return None, None, contextlib.nullcontext()
+    from rich import get_console
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -445,6 +446,7 @@ def _make_progress(
         TimeElapsedColumn(),
         TimeRemainingColumn(),
         transient=True,
+        disable=not get_console().is_terminal,  # a log gets no bar (rich would leave an empty line)
     )
     first = "evaluating" if not start else f"evaluating ({start} kept from an earlier run)"
     task = bar.add_task(first, total=total, completed=start)
@@ -473,6 +475,7 @@ def evaluate(
     journal: str | os.PathLike[str] | None = None,
     restart: bool = False,
     knowledge: str = DEFAULT_LEVEL,
+    on_start: Callable[[int, int], None] | None = None,
 ) -> dict[str, Any]:
     """Evaluate one estimator on a set of cases (see the module docstring for protocol and result).
 
@@ -498,6 +501,8 @@ def evaluate(
         knowledge: what the estimator is told about each case besides the readings
             (:mod:`dgse.belief.knowledge`: ``"map"``, ``"openings"`` or ``"wind"``);
             recorded in the result.
+        on_start: called as ``on_start(kept, total)`` once, after every check and before the
+            first estimate: ``kept`` of the ``total`` estimates come from the journal.
 
     Returns:
         The result dict (JSON-ready; :func:`write_json` writes it).
@@ -512,7 +517,9 @@ def evaluate(
     level = check_level(knowledge)
     counts = _check_counts(observation_counts)
     if isinstance(trials, bool) or not isinstance(trials, (int, np.integer)) or int(trials) < 1:
-        raise InputDataError(f"trials must be a positive integer, got {trials!r}")
+        raise InputDataError(
+            f"{{trials}} must be a positive integer, got {trials!r}", names={"trials": "trials"}
+        )
     trials = int(trials)
     observation_seed(seed, "", 1, 0)  # validates the seed
     kwargs = dict(estimator_kwargs or {})
@@ -557,6 +564,8 @@ def evaluate(
                         kept[(rec.get("case"), rec.get("n_obs"), rec.get("trial"))] = entry
             total = len(refs) * len(counts) * trials
             start = sum((r.id, n, t) in kept for r in refs for n in counts for t in range(trials))
+            if on_start is not None:
+                on_start(start, total)
             callback, before, bar = _make_progress(progress, total, start)
             with bar:
                 for ref in refs:
@@ -636,7 +645,8 @@ def _evaluate_case(
                 if old.get("case_fingerprint") != fingerprint:
                     raise InputDataError(
                         f"case {ref.id!r} differs from the one whose estimates {book.path} keeps "
-                        "(re-solved?): start afresh with --restart (restart=True), or give another path"
+                        "(re-solved?): start afresh with {restart}, or give another path",
+                        names={"restart": "restart=True"},
                     )
                 out.append(dict(old["record"]))
                 continue

@@ -1,6 +1,7 @@
 """DGSE neural networks (paper Sec. III): U-Nets, the three variants, losses, inference, checkpoints.
 
-Needs PyTorch.  Main entry points:
+Needs PyTorch (but :mod:`dgse.models.config`, the architecture settings, does not).  Main
+entry points:
 
 * :func:`create_model` / :func:`build_model` with :class:`ModelConfig` and the
   ``"paper"`` / ``"small"`` presets (:func:`preset_config`);
@@ -9,31 +10,43 @@ Needs PyTorch.  Main entry points:
 * :func:`save_model` / :func:`load_model` (safetensors, no pickles).
 """
 
-from dgse.models.checkpoint import CheckpointError, load_model, read_checkpoint_info, save_model
-from dgse.models.inference import Prediction, moment_match, predict
-from dgse.models.networks import (
-    DGSE_O,
-    DGSE_P,
-    DGSE_S,
-    PRESETS,
-    VARIANTS,
-    DGSEModel,
-    DGSEOutput,
-    ModelConfig,
-    build_model,
-    count_parameters,
-    create_model,
-    preset_config,
-)
-from dgse.models.objectives import (
-    LossWeights,
-    TargetBatch,
-    dgse_loss,
-    gaussian_nll,
-    mc_marginal_nll,
-    source_cross_entropy,
-)
-from dgse.models.unet import UNet, UNetDecoder, UNetEncoder
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+#: Where each name of the package lives; imported on first use, so that importing one
+#: module of the package (its torch-free settings) does not import the others.
+_WHERE: dict[str, str] = {
+    "CheckpointError": "dgse.models.checkpoint",
+    "load_model": "dgse.models.checkpoint",
+    "read_checkpoint_info": "dgse.models.checkpoint",
+    "save_model": "dgse.models.checkpoint",
+    "LossWeights": "dgse.models.config",
+    "ModelConfig": "dgse.models.config",
+    "PRESETS": "dgse.models.config",
+    "VARIANTS": "dgse.models.config",
+    "preset_config": "dgse.models.config",
+    "Prediction": "dgse.models.inference",
+    "moment_match": "dgse.models.inference",
+    "predict": "dgse.models.inference",
+    "DGSEModel": "dgse.models.networks",
+    "DGSEOutput": "dgse.models.networks",
+    "DGSE_O": "dgse.models.networks",
+    "DGSE_P": "dgse.models.networks",
+    "DGSE_S": "dgse.models.networks",
+    "build_model": "dgse.models.networks",
+    "count_parameters": "dgse.models.networks",
+    "create_model": "dgse.models.networks",
+    "TargetBatch": "dgse.models.objectives",
+    "dgse_loss": "dgse.models.objectives",
+    "gaussian_nll": "dgse.models.objectives",
+    "mc_marginal_nll": "dgse.models.objectives",
+    "source_cross_entropy": "dgse.models.objectives",
+    "UNet": "dgse.models.unet",
+    "UNetDecoder": "dgse.models.unet",
+    "UNetEncoder": "dgse.models.unet",
+}
 
 __all__ = [
     "DGSE_O",
@@ -65,3 +78,16 @@ __all__ = [
     "save_model",
     "source_cross_entropy",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    module = _WHERE.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -30,6 +30,7 @@ import torch
 
 from dgse.data.rasterize import Targets
 from dgse.errors import InputDataError
+from dgse.models.config import LossWeights
 from dgse.models.inference import log_mean_exp, make_generator, run_sequential
 from dgse.models.networks import DGSE_S, DGSEOutput, masked_log_softmax
 
@@ -44,21 +45,6 @@ __all__ = [
 ]
 
 LOG_2PI = math.log(2.0 * math.pi)
-
-
-@dataclass(frozen=True)
-class LossWeights:
-    """Task weights ``lambda_w``, ``lambda_c``, ``lambda_s`` (paper defaults 1, 1, 0.05)."""
-
-    wind: float = 1.0
-    conc: float = 1.0
-    source: float = 0.05
-
-    def __post_init__(self) -> None:
-        for name in ("wind", "conc", "source"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0):
-                raise InputDataError(f"loss weight {name} must be finite and >= 0, got {v}")
 
 
 @dataclass(eq=False)

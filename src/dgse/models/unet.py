@@ -29,13 +29,13 @@ their own by DGSE-P (one shared encoder, three task decoders).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Literal
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
 from dgse.errors import InputDataError
+from dgse.models.config import Activation, Norm
 
 __all__ = [
     "Activation",
@@ -49,9 +49,6 @@ __all__ = [
     "make_norm",
     "pad_to_multiple",
 ]
-
-Norm = Literal["group", "batch", "none"]
-Activation = Literal["relu", "silu", "gelu", "leaky_relu"]
 
 
 def make_norm(kind: Norm, channels: int, groups: int = 8) -> nn.Module:

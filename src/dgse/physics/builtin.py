@@ -100,7 +100,8 @@ class BuiltinEngine:
         cells = [grid.cell_of(*s.position) for s in sources]
         for s, (i, j) in zip(sources, cells, strict=True):
             if layout.occupancy[i, j]:
-                raise InputDataError(f"source at {s.position} lies in a solid cell ({i}, {j})")
+                x, y = s.position
+                raise InputDataError(f"source at ({x:g}, {y:g}) m lies in a solid cell")
             if not s.release_rate > 0:
                 raise InputDataError(f"release rate must be positive, got {s.release_rate}")
         t0 = time.perf_counter()

@@ -51,3 +51,7 @@ class Physics:
 
 
 DEFAULT_PHYSICS = Physics()
+
+#: ``max_filaments`` of ``dgse plume`` and the benchmarks (:mod:`dgse.physics.filament`): a minute
+#: per 100 x 100 case at most.  Here, without numba, so that the command's help can show it.
+RECOMMENDED_MAX_FILAMENTS = 20_000

@@ -98,7 +98,7 @@ import numba
 import numpy as np
 
 from dgse.errors import InputDataError
-from dgse.physics.constants import DEFAULT_PHYSICS, Physics
+from dgse.physics.constants import DEFAULT_PHYSICS, RECOMMENDED_MAX_FILAMENTS, Physics
 from dgse.world.case import Case
 from dgse.world.generate import RngLike, as_generator
 from dgse.world.grid import DEFAULT_RESOLUTION
@@ -121,8 +121,6 @@ _jit_inline = numba.njit(cache=True, nogil=True, inline="always")
 
 #: ``"turbulent"``: diffusivity from the RANS ``nu_t``; ``"constant"``: GADEN's velocity noise.
 NOISE_MODELS = ("turbulent", "constant")
-#: ``max_filaments`` of ``dgse plume`` and the benchmarks: a minute per 100 x 100 case at most.
-RECOMMENDED_MAX_FILAMENTS = 20_000
 
 # move outcomes
 _OK, _BLOCKED, _EXITED = 0, 1, 2
@@ -938,9 +936,7 @@ def _check_inputs(
     if not (0 <= i < H and 0 <= j < W):
         raise InputDataError(f"source ({src[0]:.3f}, {src[1]:.3f}) m lies outside the map")
     if occ[i, j]:
-        raise InputDataError(
-            f"source ({src[0]:.3f}, {src[1]:.3f}) m lies in a wall: cell ({i}, {j}) is solid"
-        )
+        raise InputDataError(f"source ({src[0]:.3f}, {src[1]:.3f}) m lies in a wall (a solid cell)")
     if outlet_mask is None:
         mask = np.zeros((H, W), dtype=bool)
     else:
@@ -1192,7 +1188,8 @@ def make_filament_case(
             if "inlet_velocity" not in case.meta:
                 raise InputDataError(
                     f"case {case.name!r} has no meta inlet_velocity to solve its flow for nu_t: "
-                    'pass nut= or use noise="constant"'
+                    'use {noise}="constant" (or, from Python, pass nut=)',
+                    names={"noise": "noise"},
                 )
             t0 = time.perf_counter()
             flow, _ = flow_and_transport(layout, case.inlet_velocity, physics)

@@ -951,7 +951,8 @@ class OpenFOAMEngine:
         for s in sources:
             i, j = g.cell_of(*s.position)
             if layout.occupancy[i, j]:
-                raise InputDataError(f"source at {s.position} m lies in a solid cell ({i}, {j})")
+                x, y = s.position
+                raise InputDataError(f"source at ({x:g}, {y:g}) m lies in a solid cell")
             if not (s.release_rate > 0 and math.isfinite(s.release_rate)):
                 raise InputDataError(f"release rate must be positive, got {s.release_rate}")
             src_cells.append((i, j))
@@ -1051,7 +1052,7 @@ class OpenFOAMEngine:
             if boundary.get(p.name, (0, 0))[1] == 0:
                 raise OpenFOAMError(
                     "createPatch",
-                    f"patch {p.name} ({p.opening.to_dict()}) got no boundary face",
+                    f"patch {p.name} ({p.opening.describe()}) got no boundary face",
                     _tail(case / "log.createPatch"),
                 )
         owner = _read_label_list(mesh_dir / "owner")

@@ -61,6 +61,7 @@ from dgse.world.case import Case
 __all__ = [
     "EpisodeCallback",
     "Progress",
+    "StartCallback",
     "TrialStepCallback",
     "estimator_options",
     "json_safe",
@@ -75,6 +76,9 @@ Progress = Callable[[str, int, int], None]
 EpisodeCallback = Callable[[Path, Case, int, EpisodeResult], None]
 #: ``on_step(path, trial, record)``: called after every step of every episode run.
 TrialStepCallback = Callable[[Path, int, StepRecord], None]
+#: ``on_start(kept, total)``: called once, after every check and before the first episode;
+#: ``kept`` of the ``total`` episodes come from the journal.
+StartCallback = Callable[[int, int], None]
 
 
 def load_cases(path: str | os.PathLike[str]) -> list[tuple[Path, Case]]:
@@ -141,13 +145,17 @@ def estimator_options(
 
 
 def _check_settings(trials: int, time_limit: float, speed: float, dwell: float, min_start: float) -> None:
+    """Raise :class:`InputDataError` naming the argument (``{name}``: each front end spells it)."""
     if trials < 1:
-        raise InputDataError(f"trials must be at least 1, got {trials}")
-    for name, v in (("time limit", time_limit), ("speed", speed), ("dwell", dwell)):
+        raise InputDataError(f"{{trials}} must be at least 1, got {trials}", names={"trials": "trials"})
+    for name, v in (("time_limit", time_limit), ("speed", speed), ("dwell", dwell)):
         if not (math.isfinite(v) and v > 0):
-            raise InputDataError(f"{name} must be a positive number, got {v:g}")
+            raise InputDataError(f"{{{name}}} must be a positive number, got {v:g}", names={name: name})
     if not (math.isfinite(min_start) and min_start >= 0):
-        raise InputDataError(f"min_start_distance must be >= 0, got {min_start:g}")
+        raise InputDataError(
+            f"{{min_start_distance}} must be >= 0, got {min_start:g}",
+            names={"min_start_distance": "min_start_distance"},
+        )
 
 
 def run_trials(
@@ -172,6 +180,7 @@ def run_trials(
     progress: Progress | None = None,
     on_episode: EpisodeCallback | None = None,
     on_step: TrialStepCallback | None = None,
+    on_start: StartCallback | None = None,
     journal: str | os.PathLike[str] | None = None,
     restart: bool = False,
     knowledge: str = DEFAULT_LEVEL,
@@ -204,6 +213,7 @@ def run_trials(
         on_episode: see :data:`EpisodeCallback` (e.g. keep the results); not
             called for resumed episodes.
         on_step: see :data:`TrialStepCallback` (signs of life within an episode).
+        on_start: see :data:`StartCallback` (e.g. say what the run will do once it is sure to start).
         journal: keep every finished episode in this JSON-lines file and skip
             the ones already there (module docstring); None keeps nothing.
             With estimator or planner objects, give the options they were
@@ -272,6 +282,8 @@ def run_trials(
     per_case: list[dict[str, Any]] = []
     all_rows: list[dict[str, Any]] = []
     total, done = len(pairs) * trials, 0
+    if on_start is not None:
+        on_start(sum((p.stem, r) in kept for p, _ in pairs for r in range(trials)), total)
     try:
         for path, case in pairs:
             fingerprint = None if book is None else case_fingerprint(case)
@@ -282,7 +294,8 @@ def run_trials(
                     if old.get("case_fingerprint") != fingerprint:
                         raise InputDataError(
                             f"{path} differs from the case whose episodes {book.path} keeps (re-solved?): "
-                            "start afresh with --restart (restart=True), or give another output path"
+                            "start afresh with {restart}, or give another output path",
+                            names={"restart": "restart=True"},
                         )
                     row = old["row"]
                 else:

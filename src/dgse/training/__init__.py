@@ -1,6 +1,7 @@
 """Training the DGSE networks with Lightning (paper Sec. III-B/C, Sec. IV, Appendix A).
 
-Needs PyTorch and Lightning.  Main entry points:
+Needs PyTorch and Lightning (but :mod:`dgse.training.config` does not: a configuration is
+checked before they are imported).  Main entry points:
 
 * :class:`TrainConfig` / :func:`load_config`: the run's settings (YAML + overrides);
 * :func:`train`: a resumable training run that writes ``last.safetensors``
@@ -12,21 +13,36 @@ Needs PyTorch and Lightning.  Main entry points:
 ``dgse train`` (:mod:`dgse.cli.train`) is the command line front end.
 """
 
-from dgse.training.config import PRECISIONS, TrainConfig, load_config, parse_duration
-from dgse.training.datamodule import DGSEDataModule, EpochSetup, EpochShuffleSampler
-from dgse.training.module import DGSELightningModule, localization_error
-from dgse.training.train import (
-    BEST_NAME,
-    HISTORY_NAME,
-    LAST_NAME,
-    StopControl,
-    TrainResult,
-    TrainState,
-    TrainStateCheckpoint,
-    export_model,
-    read_train_state,
-    train,
-)
+from __future__ import annotations
+
+import importlib
+import sys
+import types
+from typing import Any
+
+#: Where each name of the package lives; imported on first use, so that importing one
+#: module of the package (its torch-free settings) does not import the others.
+_WHERE: dict[str, str] = {
+    "PRECISIONS": "dgse.training.config",
+    "TrainConfig": "dgse.training.config",
+    "load_config": "dgse.training.config",
+    "parse_duration": "dgse.training.config",
+    "DGSEDataModule": "dgse.training.datamodule",
+    "EpochSetup": "dgse.training.datamodule",
+    "EpochShuffleSampler": "dgse.training.datamodule",
+    "DGSELightningModule": "dgse.training.module",
+    "localization_error": "dgse.training.module",
+    "BEST_NAME": "dgse.training.train",
+    "HISTORY_NAME": "dgse.training.train",
+    "LAST_NAME": "dgse.training.train",
+    "StopControl": "dgse.training.train",
+    "TrainResult": "dgse.training.train",
+    "TrainState": "dgse.training.train",
+    "TrainStateCheckpoint": "dgse.training.train",
+    "export_model": "dgse.training.train",
+    "read_train_state": "dgse.training.train",
+    "train": "dgse.training.train",
+}
 
 __all__ = [
     "BEST_NAME",
@@ -49,3 +65,29 @@ __all__ = [
     "read_train_state",
     "train",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    module = _WHERE.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
+
+class _Package(types.ModuleType):
+    """This package: its ``train`` is the function, also once the submodule of that name is imported
+    (the import system then sets the package's attribute to the submodule)."""
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name == "train" and isinstance(value, types.ModuleType) and hasattr(value, "train"):
+            value = value.train
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package

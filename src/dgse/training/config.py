@@ -35,8 +35,7 @@ import yaml
 
 from dgse.errors import InputDataError
 from dgse.files import write_text
-from dgse.models.networks import PRESETS, VARIANTS, ModelConfig, preset_config
-from dgse.models.objectives import LossWeights
+from dgse.models.config import PRESETS, VARIANTS, LossWeights, ModelConfig, preset_config
 
 __all__ = [
     "PRECISIONS",
@@ -427,13 +426,20 @@ def _apply_override(data: dict[str, Any], key: str, value: Any) -> None:
 
 
 def load_config(
-    path: str | os.PathLike[str] | None = None, overrides: Mapping[str, Any] | None = None
+    path: str | os.PathLike[str] | None = None,
+    overrides: Mapping[str, Any] | None = None,
+    *,
+    origins: Mapping[str, str] | None = None,
 ) -> TrainConfig:
     """The defaults, updated by the YAML file ``path`` (if given), then by ``overrides``.
 
     ``overrides`` maps field names (or ``model_overrides.<key>`` /
     ``loss_weights.<key>``) to values; a value of None in ``overrides`` is
-    applied too (use it to clear ``max_time`` or ``export``).
+    applied too (use it to clear ``max_time`` or ``export``).  The file is
+    checked first, then each override in turn, so an error names what caused
+    it: the file, or the override as ``origins`` says it was given (e.g.
+    ``{"batch_size": "--batch-size 0"}``; default ``override 'batch_size'``).
+    The network's architecture (preset plus ``model_overrides``) is checked too.
 
     Raises:
         InputDataError: a missing or malformed file, an unknown key, a bad value.
@@ -442,6 +448,22 @@ def load_config(
     data: dict[str, Any] = _read_yaml(Path(path)) if path is not None else {}
     if "model_overrides" in data and data["model_overrides"] is None:
         data["model_overrides"] = {}
+    config = _checked(data, source)
     for key, value in (overrides or {}).items():
-        _apply_override(data, key, value)
-    return TrainConfig.from_dict(data, source)
+        origin = (origins or {}).get(key, f"override {key!r}")
+        try:
+            _apply_override(data, key, value)
+            config = _checked(data, None)
+        except InputDataError as e:
+            raise InputDataError(f"{origin}: {e}") from None
+    return config
+
+
+def _checked(data: Mapping[str, Any], source: str | None) -> TrainConfig:
+    """The config of ``data``, its network's architecture checked too."""
+    config = TrainConfig.from_dict(data, source)
+    try:
+        config.model_config()
+    except InputDataError as e:
+        raise InputDataError(f"{e} in {source}" if source else str(e)) from None
+    return config

@@ -55,7 +55,8 @@ the same epoch of an uninterrupted run.
 Stopping: the time budget ``max_time`` (per invocation, measured from the
 call of :func:`train`; leave a margin for the final validation and save) and
 a first Ctrl-C (SIGINT) both stop training after the current batch
-(:class:`StopControl`; a second Ctrl-C aborts at once and saves nothing).
+(:class:`StopControl`; a second Ctrl-C aborts at once, saves nothing and
+:func:`train` raises ``KeyboardInterrupt``).
 As with Lightning's ``should_stop``, the stopped epoch is then validated,
 counts as done (its remaining batches are skipped) and is saved, with
 ``partial_epoch = true``; ``--resume`` continues at the next epoch.
@@ -430,6 +431,7 @@ class StopControl(L.Callback):
 
     Attributes:
         reason: None, ``"max_time"`` or ``"interrupted"`` once a stop was requested.
+        aborted: a second Ctrl-C came.
     """
 
     def __init__(
@@ -438,6 +440,7 @@ class StopControl(L.Callback):
         self.max_time_s = max_time_s
         self.handle_sigint = handle_sigint
         self.reason: str | None = None
+        self.aborted = False
         self._sigint = False
         self._t0: float | None = t0
         self._old_handler: Any = None
@@ -445,10 +448,12 @@ class StopControl(L.Callback):
 
     def _on_sigint(self, signum: int, frame: FrameType | None) -> None:
         if self._sigint:
+            self.aborted = True
             raise KeyboardInterrupt
         self._sigint = True
         print(
-            "\nstopping after this batch: validating and saving (Ctrl-C again to abort without saving)",
+            ("\n" if sys.stderr.isatty() else "")  # off the line of a progress bar
+            + "stopping after this batch: validating and saving (Ctrl-C again to abort without saving)",
             file=sys.stderr,
             flush=True,
         )
@@ -490,8 +495,8 @@ class StopControl(L.Callback):
         if decision and not trainer.should_stop:
             self.reason = decision
             trainer.should_stop = True
-            what = "time budget reached" if decision == "max_time" else "interrupted"
-            _note(f"{what}: stopping after epoch {trainer.current_epoch} batch {batch_idx}")
+            if decision == "max_time":  # a Ctrl-C was answered when it came
+                _note(f"time budget reached: stopping after epoch {trainer.current_epoch} batch {batch_idx}")
 
     def teardown(self, trainer: L.Trainer, pl_module: L.LightningModule, stage: str) -> None:
         self.uninstall()
@@ -952,14 +957,24 @@ def train(
         if trainer.is_global_zero:
             out.mkdir(parents=True, exist_ok=True)
             logger.log_hyperparams(config.to_dict())
+        main_thread = threading.current_thread() is threading.main_thread()
+        sigint = signal.getsignal(signal.SIGINT) if main_thread else None
         try:
             with warnings.catch_warnings():
                 warnings.filterwarnings("ignore", message=".*does not have many workers.*")
                 # Lightning's own use of a deprecated PyTorch pytree API: not ours to act on
                 warnings.filterwarnings("ignore", message=".*LeafSpec.*is deprecated.*")
                 trainer.fit(module, datamodule=dm)
+        except SystemExit as e:
+            # Lightning exits on a Ctrl-C it catches (the second, or one before training starts):
+            # it is the caller's interrupt
+            if stop.aborted or isinstance(e.__context__, KeyboardInterrupt):
+                raise KeyboardInterrupt from None
+            raise
         finally:
             stop.uninstall()
+            if sigint is not None:  # Lightning leaves Ctrl-C ignored after it caught one
+                signal.signal(signal.SIGINT, sigint)
     if config.fast_dev_run:
         reason = "fast_dev_run"
     elif stop.reason is not None:

@@ -22,7 +22,7 @@ from dgse.belief.belief import Belief
 from dgse.errors import InputDataError
 from dgse.sensing.sensors import Observations
 from dgse.viz.case import SOURCE_STYLE as _CASE_SOURCE_STYLE
-from dgse.viz.case import _field_cmap, _log_ppm_ticks, _style_map_axes
+from dgse.viz.case import _field_cmap, _style_map_axes, log_ppm_ticks
 from dgse.world.case import Case
 
 __all__ = ["plot_belief"]
@@ -62,7 +62,7 @@ def _imshow(
     )
     cb = fig.colorbar(im, ax=ax, shrink=0.85, pad=0.02)
     if log_ppm:
-        ticks, labels = _log_ppm_ticks(vmax)
+        ticks, labels = log_ppm_ticks(vmax)
         cb.set_ticks(ticks, labels=labels)
     cb.set_label(label, fontsize=8)
     cb.ax.tick_params(labelsize=7)

@@ -16,6 +16,7 @@ import numpy as np
 from matplotlib import colormaps
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.colorbar import Colorbar
 from matplotlib.colors import Colormap, ListedColormap
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
@@ -25,13 +26,27 @@ from dgse.errors import InputDataError
 from dgse.world.case import Case
 from dgse.world.layout import INWARD_NORMAL, Layout, Opening
 
-__all__ = ["plot_case", "plot_layout"]
+__all__ = [
+    "CONCENTRATION_LABEL",
+    "INLET_COLOR",
+    "OUTLET_COLOR",
+    "SOURCE_STYLE",
+    "draw_openings",
+    "label_ppm_colorbar",
+    "log_ppm_ticks",
+    "opening_handles",
+    "openings_of",
+    "plot_case",
+    "plot_layout",
+]
 
 INLET_COLOR = "#1a9641"
 OUTLET_COLOR = "#d7191c"
 SOLID_COLOR = "#4d4d4d"
 SOLID_IN_FIELD = "#bdbdbd"
 SOURCE_STYLE = {"marker": "*", "ms": 15, "mfc": "#00e5ff", "mec": "black", "mew": 0.9}
+#: The colour bar of a concentration drawn on a ``log(1 + c)`` scale (:func:`label_ppm_colorbar`).
+CONCENTRATION_LABEL = "concentration [ppm], log(1 + c) scale"
 _OCC_CMAP = ListedColormap(["white", SOLID_COLOR])
 #: Arrows along the longer side of the wind panel.
 _ARROWS_ALONG = 24
@@ -48,7 +63,7 @@ def _new_figure(n_panels: int, width_m: float, height_m: float) -> Figure:
     return fig
 
 
-def _openings_of(meta: Mapping) -> tuple[list[Opening], list[Opening]]:
+def openings_of(meta: Mapping) -> tuple[list[Opening], list[Opening]]:
     """Inlets and outlets named in a case's ``meta`` (empty when absent or malformed)."""
 
     def read(plural: str, single: str) -> list[Opening]:
@@ -72,7 +87,7 @@ def _segment(o: Opening, width_m: float, height_m: float) -> tuple[list[float], 
     return [o.start_m, o.end_m], [height_m, height_m]
 
 
-def _draw_openings(
+def draw_openings(
     ax: Axes,
     inlets: Sequence[Opening],
     outlets: Sequence[Opening],
@@ -140,18 +155,22 @@ def _add_legend(fig: Figure, ax: Axes, handles: list, own: bool) -> None:
         ax.legend(handles=handles, loc="upper right", fontsize=7, framealpha=0.85)
 
 
-def _layout_handles(with_source: bool) -> list:
-    handles: list = [
-        Patch(facecolor=SOLID_COLOR, edgecolor="none", label="solid"),
+def opening_handles() -> list[Line2D]:
+    """Legend entries of the inlets and outlets :func:`draw_openings` draws."""
+    return [
         Line2D([], [], color=INLET_COLOR, lw=4, label="inlet"),
         Line2D([], [], color=OUTLET_COLOR, lw=4, label="outlet"),
     ]
+
+
+def _layout_handles(with_source: bool) -> list:
+    handles: list = [Patch(facecolor=SOLID_COLOR, edgecolor="none", label="solid"), *opening_handles()]
     if with_source:
         handles.append(Line2D([], [], ls="none", label="source", **SOURCE_STYLE))
     return handles
 
 
-def _log_ppm_ticks(vmax: float) -> tuple[list[float], list[str]]:
+def log_ppm_ticks(vmax: float) -> tuple[list[float], list[str]]:
     """Colorbar ticks at round ppm values on a ``log(1 + c)`` axis up to ``vmax``."""
     values = [0.0]
     for decade in range(0, 9):
@@ -162,6 +181,13 @@ def _log_ppm_ticks(vmax: float) -> tuple[list[float], list[str]]:
     if len(values) > 7:  # keep it readable: drop the 3s
         values = [v for v in values if v == 0 or str(int(v)).startswith("1")]
     return [math.log1p(v) for v in values], [f"{v:g}" for v in values]
+
+
+def label_ppm_colorbar(colorbar: Colorbar, vmax: float) -> None:
+    """Ticks at round ppm values and :data:`CONCENTRATION_LABEL` on a colour bar of ``log(1 + c)``."""
+    ticks, labels = log_ppm_ticks(vmax)
+    colorbar.set_ticks(ticks, labels=labels)
+    colorbar.set_label(CONCENTRATION_LABEL)
 
 
 def _as_axes(ax: Axes | Sequence[Axes] | None, n: int, what: str) -> list[Axes] | None:
@@ -205,12 +231,12 @@ def plot_case(case: Case, *, ax: Sequence[Axes] | None = None, arrows: bool = Tr
         own = False
     a_occ, a_wind, a_gas = axes
     solid = case.occupancy == 1
-    inlets, outlets = _openings_of(case.meta)
+    inlets, outlets = openings_of(case.meta)
     sx, sy = float(case.source[0]), float(case.source[1])
 
     # 1. layout
     _draw_occupancy(a_occ, case.occupancy, extent)
-    _draw_openings(a_occ, inlets, outlets, W_m, H_m)
+    draw_openings(a_occ, inlets, outlets, W_m, H_m)
     a_occ.plot(sx, sy, ls="none", zorder=8, **SOURCE_STYLE)
     _style_map_axes(a_occ, "Layout" if own else f"{case.name}: layout", W_m, H_m)
     _add_legend(fig, a_occ, _layout_handles(with_source=True), own)
@@ -229,7 +255,7 @@ def plot_case(case: Case, *, ax: Sequence[Axes] | None = None, arrows: bool = Tr
     fig.colorbar(im, ax=a_wind, shrink=0.9, pad=0.02, label="wind speed [m/s]")
     if arrows:
         _quiver(a_wind, case, speed)
-    _draw_openings(a_wind, inlets, outlets, W_m, H_m, thick=False)
+    draw_openings(a_wind, inlets, outlets, W_m, H_m, thick=False)
     _style_map_axes(a_wind, "Wind", W_m, H_m)
 
     # 3. concentration
@@ -244,11 +270,8 @@ def plot_case(case: Case, *, ax: Sequence[Axes] | None = None, arrows: bool = Tr
         vmin=0.0,
         vmax=vmax,
     )
-    cb = fig.colorbar(im, ax=a_gas, shrink=0.9, pad=0.02)
-    ticks, labels = _log_ppm_ticks(vmax)
-    cb.set_ticks(ticks, labels=labels)
-    cb.set_label("concentration [ppm], log(1 + c) scale")
-    _draw_openings(a_gas, inlets, outlets, W_m, H_m, thick=False)
+    label_ppm_colorbar(fig.colorbar(im, ax=a_gas, shrink=0.9, pad=0.02), vmax)
+    draw_openings(a_gas, inlets, outlets, W_m, H_m, thick=False)
     a_gas.plot(sx, sy, ls="none", zorder=8, **SOURCE_STYLE)
     _style_map_axes(a_gas, "Gas concentration", W_m, H_m)
     peak = float(case.concentration.max())
@@ -291,7 +314,7 @@ def plot_layout(layout: Layout, *, ax: Axes | None = None) -> Figure:
         a = axes[0]
         fig = a.get_figure()  # type: ignore[assignment]
     _draw_occupancy(a, layout.occupancy, (0.0, W_m, 0.0, H_m))
-    _draw_openings(a, layout.inlets, layout.outlets, W_m, H_m)
+    draw_openings(a, layout.inlets, layout.outlets, W_m, H_m)
     n_in, n_out = len(layout.inlets), len(layout.outlets)
     openings = (
         "1 inlet, 1 outlet"

@@ -3,13 +3,16 @@
 Three map panels per search step ``k`` (one per measurement location):
 
 1. the predicted wind field: speed (colour) and direction (unit arrows);
-2. the predicted concentration, mean of ``log(1 + c)`` (ticks in ppm);
+2. the predicted concentration, mean of ``log(1 + c)`` (colour bar in ppm, as the
+   case figure's, :func:`dgse.viz.case.label_ppm_colorbar`);
 3. the source posterior ``pi_s``.
 
-Every panel shows the walls (grey), the robot trajectory up to the step
-(black line), the measurement locations so far (orange circles, area
-proportional to the gas reading), the true source (star) and the current
-estimate (the probability-weighted mean, a white cross).  The maps are the
+Every panel shows the walls (grey), the inlets (green) and outlets (red) as
+the case figure draws them (:func:`dgse.viz.case.draw_openings`), the robot's
+start (a yellow triangle), its trajectory up to the step (black line), the
+measurement locations so far (orange circles, area proportional to the gas
+reading), the true source (star) and the current estimate (the
+probability-weighted mean, a white cross).  The maps are the
 ones recorded by :func:`~dgse.search.episode.run_episode` with
 ``record=True`` (possibly block-averaged); a method without a wind or
 concentration estimate leaves that panel empty with a note.
@@ -37,15 +40,24 @@ from matplotlib.lines import Line2D
 from dgse.errors import InputDataError
 from dgse.files import atomic_path
 from dgse.search.episode import EpisodeResult
-from dgse.viz.case import SOLID_IN_FIELD, SOURCE_STYLE
+from dgse.viz.case import (
+    SOLID_IN_FIELD,
+    SOURCE_STYLE,
+    draw_openings,
+    label_ppm_colorbar,
+    opening_handles,
+    openings_of,
+)
 from dgse.world.case import Case
 
-__all__ = ["animate_episode", "frame_steps", "plot_search_step"]
+__all__ = ["START_STYLE", "animate_episode", "frame_steps", "plot_search_step"]
 
 MEASUREMENT_COLOR = "#ff8c00"
 TRAJECTORY_COLOR = "black"
 #: The true source marker (the case figures' style, smaller).
 _SOURCE: dict[str, Any] = {**SOURCE_STYLE, "ms": 12}
+#: The robot's start.
+START_STYLE: dict[str, Any] = {"marker": "^", "ms": 9, "mfc": "#ffd92f", "mec": "black", "mew": 0.9}
 #: Arrows along the longer side of the wind panel.
 _ARROWS_ALONG = 16
 _MIN_MARKER, _MAX_MARKER = 12.0, 220.0
@@ -86,7 +98,7 @@ class _SearchFigure:
         winds = [s.wind_mean for s in steps if s.wind_mean is not None]
         concs = [s.log_conc_mean for s in steps if s.log_conc_mean is not None]
         wmax = max((float(np.nanmax(np.hypot(a[0], a[1]))) for a in winds), default=1.0)
-        cmax = max((float(np.nanmax(a)) for a in concs), default=1.0)
+        cmax = max(max((float(np.nanmax(a)) for a in concs), default=1.0), 1.0)  # as the case figure
         self.has_wind, self.has_conc = bool(winds), bool(concs)
 
         blank = np.zeros((h, w))
@@ -95,11 +107,11 @@ class _SearchFigure:
             blank, origin="lower", extent=ext, cmap=colormaps["viridis"], vmin=0.0, vmax=max(wmax, 1e-6)
         )
         self.im_conc = a_c.imshow(
-            blank, origin="lower", extent=ext, cmap=colormaps["inferno"], vmin=0.0, vmax=max(cmax, 1e-6)
+            blank, origin="lower", extent=ext, cmap=colormaps["inferno"], vmin=0.0, vmax=cmax
         )
         self.im_prob = a_p.imshow(blank, origin="lower", extent=ext, cmap=colormaps["magma"], vmin=0, vmax=1)
         self.fig.colorbar(self.im_wind, ax=a_w, shrink=0.85, pad=0.02, label="wind speed [m/s]")
-        self.fig.colorbar(self.im_conc, ax=a_c, shrink=0.85, pad=0.02, label="log(1 + c), c in ppm")
+        label_ppm_colorbar(self.fig.colorbar(self.im_conc, ax=a_c, shrink=0.85, pad=0.02), cmax)
         self.fig.colorbar(self.im_prob, ax=a_p, shrink=0.85, pad=0.02, label="source probability")
         for im in (self.im_wind, self.im_conc, self.im_prob):
             im.set_interpolation("nearest")
@@ -121,12 +133,16 @@ class _SearchFigure:
         gas_max = max((s.gas for s in steps), default=0.0)
         self.gas_scale = gas_max if gas_max > 0 else 1.0
         sx, sy = float(case.source[0]), float(case.source[1])
+        start_x, start_y = case.grid.center_of(*result.start_cell)
+        inlets, outlets = openings_of(case.meta)
         self.lines: list[Line2D] = []
         self.scatters = []
         self.estimates: list[Line2D] = []
         titles = ("Predicted wind", "Predicted concentration", "Source posterior")
         for ax, title in zip(self.axes, titles, strict=True):
             ax.imshow(walls, origin="lower", extent=(0.0, self.W_m, 0.0, self.H_m), zorder=3)
+            draw_openings(ax, inlets, outlets, self.W_m, self.H_m, thick=False)
+            ax.plot(start_x, start_y, ls="none", zorder=7, **START_STYLE)
             (line,) = ax.plot([], [], color=TRAJECTORY_COLOR, lw=1.4, zorder=5)
             self.lines.append(line)
             sc = ax.scatter(
@@ -146,12 +162,16 @@ class _SearchFigure:
             if not ok:
                 ax.text(0.5, 0.5, f"no {what} estimate", transform=ax.transAxes, ha="center", zorder=10)
         handles = [
+            Line2D([], [], ls="none", label="start", **START_STYLE),
             Line2D([], [], color=TRAJECTORY_COLOR, lw=1.4, label="trajectory"),
             Line2D([], [], ls="none", marker="o", mfc="none", mec=MEASUREMENT_COLOR, label="measurements"),
             Line2D([], [], ls="none", label="true source", **{**_SOURCE, "ms": 10}),
             Line2D([], [], ls="none", marker="X", mfc="white", mec="black", label="estimate"),
+            *opening_handles(),
         ]
-        self.fig.legend(handles=handles, loc="outside lower center", ncol=4, frameon=False, fontsize=8)
+        self.fig.legend(
+            handles=handles, loc="outside lower center", ncol=len(handles), frameon=False, fontsize=8
+        )
         res_xy = np.asarray(result.trajectory_cells, dtype=np.float64)
         self.traj_x = (res_xy[:, 1] + 0.5) * res
         self.traj_y = (res_xy[:, 0] + 0.5) * res

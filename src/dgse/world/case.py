@@ -238,7 +238,7 @@ def validate_arrays(occ, wind, conc, source, resolution, meta, frames=None) -> l
         if not (0 <= i < H and 0 <= j < W):
             p.append(f"source ({x:.3f}, {y:.3f}) m lies outside the map")
         elif occ[i, j] != 0:
-            p.append(f"source ({x:.3f}, {y:.3f}) m lies in a solid cell ({i}, {j})")
+            p.append(f"source ({x:.3f}, {y:.3f}) m lies in a solid cell")
     if isinstance(meta, dict) and resolution > 0:
         for key, n in (("width_m", W), ("height_m", H)):
             if key in meta and abs(float(meta[key]) - n * resolution) > 0.5 * resolution:

@@ -416,7 +416,7 @@ def _as_openings(items: Opening | Mapping | Iterable, kind: str) -> tuple[Openin
             out.append(Opening(str(o[0]), float(o[1]), float(o[2])))
         else:
             raise InputDataError(
-                f"{kind} {k}: {o!r} is not an Opening, a dict {{side, start_m, end_m}} "
+                f"{kind} {k}: {o!r} is not an Opening, a dict with side, start_m and end_m "
                 "or a (side, start_m, end_m) tuple"
             )
     if not out:
@@ -490,29 +490,27 @@ def layout_from_floorplan(
     outs = _as_openings(outlets, "outlet")
     depth = math.floor(carve_depth_m / grid.resolution + 1e-9) if carve_depth_m > 0 else 0
     for kind, group in (("inlet", ins), ("outlet", outs)):
-        for k, o in enumerate(group):
+        for o in group:
             length = grid.width_m if o.side in ("south", "north") else grid.height_m
             if o.start_m < -1e-9 or o.end_m > length + 1e-9:
-                raise InputDataError(
-                    f"{kind} {k} {o.to_dict()} runs outside the {o.side} side (0 to {length} m)"
-                )
+                raise InputDataError(f"{o.describe(kind)} runs outside the {o.side} side (0 to {length:g} m)")
             rows, cols = o.cells(grid)
             if rows.size == 0:
                 raise InputDataError(
-                    f"{kind} {k} {o.to_dict()} covers no cell centre: make it at least one "
-                    f"cell ({grid.resolution} m) long"
+                    f"{o.describe(kind)} covers no cell centre: make it at least one "
+                    f"cell ({grid.resolution:g} m) long"
                 )
             if depth:
                 _carve(occ, grid, o, depth)
             if not (occ[rows, cols] == 0).any():
                 hint = (
-                    "; pass carve_depth_m (e.g. 0.5) to cut through an outer wall"
+                    "; give {carve_depth_m} (e.g. 0.5 m) to cut it through an outer wall"
                     if not depth
-                    else f" even after carving {carve_depth_m} m deep"
+                    else f" even after carving {carve_depth_m:g} m deep"
                 )
                 raise InputDataError(
-                    f"{kind} {k} {o.to_dict()} touches no free cell: every boundary cell "
-                    f"under it is solid{hint}"
+                    f"{o.describe(kind)} touches no free cell: every boundary cell under it is solid{hint}",
+                    names={"carve_depth_m": "carve_depth_m"},
                 )
     if fill_unreachable:
         labels, _ = ndimage.label(occ == 0, structure=_FOUR)

@@ -58,6 +58,10 @@ class Opening:
             return np.zeros_like(along), along
         return np.full_like(along, grid.height - 1), along
 
+    def describe(self, kind: str = "opening") -> str:
+        """``the west inlet at 0-0.1 m`` (``kind``: inlet, outlet or opening), for messages."""
+        return f"the {self.side} {kind} at {self.start_m:g}-{self.end_m:g} m"
+
     def to_dict(self) -> dict:
         return {"side": self.side, "start_m": float(self.start_m), "end_m": float(self.end_m)}
 
@@ -96,15 +100,13 @@ class Layout:
         object.__setattr__(self, "walls", tuple(tuple(map(float, w)) for w in self.walls))
         if not self.inlets or not self.outlets:
             raise InputDataError("a layout needs at least one inlet and one outlet")
-        for o in self.inlets + self.outlets:
+        for kind, o in [("inlet", o) for o in self.inlets] + [("outlet", o) for o in self.outlets]:
             length = self.grid.width_m if o.side in ("south", "north") else self.grid.height_m
             if o.start_m < -1e-9 or o.end_m > length + 1e-9:
-                raise InputDataError(
-                    f"opening {o.to_dict()} runs outside the {o.side} side (0 to {length} m)"
-                )
+                raise InputDataError(f"{o.describe(kind)} runs outside the {o.side} side (0 to {length:g} m)")
             rows, cols = o.cells(self.grid)
             if rows.size == 0 or not (self.occupancy[rows, cols] == 0).any():
-                raise InputDataError(f"opening {o.to_dict()} touches no free cell")
+                raise InputDataError(f"{o.describe(kind)} touches no free cell")
         if not (self.occupancy == 0).any():
             raise InputDataError("layout has no free cell")
 
