@@ -304,7 +304,7 @@ class UtilityPlanner(PlannerBase):
         deadline_estimate_radius_m: None (the belief's posterior mean, the paper's ``s_hat``)
             or a radius, m: at a deadline stop the search declares the centre of the free cell
             whose disk of this radius holds the most posterior mass
-            (:func:`declared_source`).  A search that never passed its stop test often ends
+            (:meth:`declare`).  A search that never passed its stop test often ends
             with a posterior split between two places, whose mean lies between them.
         deadline_estimate: what that disk gives at a deadline stop: ``"disk"`` its centre,
             ``"local"`` the posterior mean within it (:func:`local_mean`).
