@@ -148,11 +148,15 @@ def test_floorplan_messages_name_the_option_and_the_opening(capsys, tmp_path):
     assert _run(capsys, *args, "--carve", "0.3")[0] == 0
 
 
-def test_a_temporary_file_is_named_as_the_users_file(capsys, tmp_path):
-    (tmp_path / "x.npz.part").mkdir()  # in the way of the layout file's temporary name
+def test_a_temporary_file_is_named_as_the_users_file(capsys, tmp_path, monkeypatch):
+    import dgse.files
+
+    blocker = tmp_path / ".x.npz.tmp-0000.npz"
+    blocker.mkdir()  # in the way of the layout file's temporary name
+    monkeypatch.setattr(dgse.files, "temporary_name", lambda path: blocker)
     code, out, err = _run(capsys, "layout", "--seed", "1", "-o", tmp_path / "x.npz")
     _assert_user_error(code, out, err, f"cannot write {tmp_path / 'x.npz'}")
-    assert ".part" not in err
+    assert ".tmp-" not in err
 
 
 def test_restart_is_the_option_not_the_python_argument(capsys, tmp_path, case_file):

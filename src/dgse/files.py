@@ -70,7 +70,7 @@ def _reserve(target: Path) -> Path:
             continue
         os.close(fd)
         return tmp
-    raise FileExistsError(f"no free temporary name beside {target}")
+    raise FileExistsError(f"cannot write {target}: no free temporary name beside it")
 
 
 def _fsync(path: Path) -> None:

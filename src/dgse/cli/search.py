@@ -164,8 +164,8 @@ def search_cmd(
         typer.Option(
             "--method",
             "-m",
-            help="Method: a preset of dgse.presets or a registered estimator (default: dgse-phys). "
-            "A preset runs its estimator and planner with the options it was measured with.",
+            help="Method (default: dgse-phys): a named method runs its estimator and planner with "
+            "the options it was measured with; any registered estimator runs with its defaults.",
         ),
     ] = None,
     model: Annotated[
