@@ -686,12 +686,14 @@ def censored_correction(
     ``kappa`` gives the same weights.
 
     Args:
-        A: ``(m, N)`` responses; z: ``(m,)`` readings (zeros are the censored ones);
+        A: ``(m, N)`` responses.
+        z: ``(m,)`` readings (zeros are the censored ones).
         r: ``(m,)`` noise weights, or ``(m, N)``: each candidate's own; with ``sums``, the
-        zeros' rows alone will do (``(n_zeros,)`` or ``(n_zeros, N)``); logl: ``(N,)`` the
-        positive readings' log evidence; sums: the positive readings' weighted sums ``(sum w
-        a^2, sum w a z, sum w z^2)`` with these weights (``w = 1 / r^2``), where the caller has
-        them (:func:`adjoint_log_evidence` does; computed here otherwise).
+            zeros' rows alone will do (``(n_zeros,)`` or ``(n_zeros, N)``).
+        logl: ``(N,)`` the positive readings' log evidence.
+        sums: the positive readings' weighted sums ``(sum w a^2, sum w a z, sum w z^2)`` with
+            these weights (``w = 1 / r^2``), where the caller has them
+            (:func:`adjoint_log_evidence` does; computed here otherwise).
     """
     cen = z <= 0.0
     if not cen.any():
