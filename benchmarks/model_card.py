@@ -6,7 +6,9 @@
 
 Everything in the card comes from files: the checkpoint's metadata (variant,
 configuration, training metadata), the run's ``history.csv`` (epochs, time,
-validation curve) and ``dgse evaluate`` JSON files (aggregate metrics).
+validation curve) and ``dgse evaluate`` JSON files (aggregate metrics). Files and folders
+are named by their own name only (the dataset ``dgse1000.h5``, not where it lay on the
+machine that trained the model), so a card holds no machine's paths.
 """
 
 from __future__ import annotations
@@ -21,6 +23,11 @@ from pathlib import Path
 from dgse.files import write_text
 from dgse.models.checkpoint import load_model, read_checkpoint_info
 from dgse.models.networks import count_parameters
+
+
+def _name(path: object) -> str:
+    """A file or folder by its own name, without the folders it lay in (``?`` when unknown)."""
+    return (Path(str(path)).name or "?") if path else "?"
 
 
 def _row(agg: dict, n: str) -> str:
@@ -57,8 +64,9 @@ def main() -> None:
         f"- **Model:** {info.variant} (`{info.config}`), "
         f"{n_params / 1e6:.3f} M parameters; weights in safetensors, "
         "loadable as `--model default`.",
-        f"- **Data:** `{info.training.get('data', '?')}`, made by `dgse generate --layouts 1000 --seed 0` "
-        "with the built-in solver (800 / 133 / 67 train / val / test layouts, 4 sources each).",
+        f"- **Data:** `{_name(info.training.get('data'))}`, 1,000 generated layouts made by "
+        "`dgse generate --layouts 1000 --seed 0` with the built-in solver "
+        "(800 / 133 / 67 train / val / test layouts, 4 sources each).",
         f"- **Training:** {len(rows)} epochs, {int(rows[-1]['global_step'])} steps, "
         f"{train_s / 3600:.2f} h of wall time on {os.cpu_count()} CPU cores ({cpu}), "
         "shared with other jobs; checkpoint of the lowest validation source loss "
@@ -83,9 +91,10 @@ def main() -> None:
     for spec in args.eval:
         name, _, path = spec.partition("=")
         ev = json.load(open(path))
+        source = ev.get("split") or _name(ev["cases_source"])
         lines += [
             "",
-            f"## {name}: `dgse evaluate` on {ev['n_cases']} cases ({ev.get('split') or ev['cases_source']}), "
+            f"## {name}: `dgse evaluate` on {ev['n_cases']} cases ({source}), "
             f"{ev['trials']} trials, seed {ev['seed']}",
             "",
             "| observations | SL error mean m | SL error median m | CE | wind RMSE m/s | log(1+ppm) RMSE | "

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Run the test suite against the newest releases of every dependency, in a fresh virtual
+# Run the docs build and the test suite against the newest releases of every dependency, in a fresh virtual
 # environment, so that the next breakage is seen here before a user sees it.
 #
 #   ./scripts/test-latest.sh            # newest releases, lint, pytest (pytest arguments may follow)
@@ -24,7 +24,7 @@ pip_q=(-m pip install -q --disable-pip-version-check)
 # torch first: a bare `torch` requirement would pull a multi-GB CUDA build
 "$py" "${pip_q[@]}" --upgrade pip
 "$py" "${pip_q[@]}" "torch==2.13.0"
-"$py" "${pip_q[@]}" --upgrade --upgrade-strategy eager -e ".[dev]"
+"$py" "${pip_q[@]}" --upgrade --upgrade-strategy eager -e ".[dev,docs]"
 
 versions="$venv/versions.txt"
 "$py" -m pip list --format=freeze --exclude-editable --disable-pip-version-check > "$versions"
@@ -34,6 +34,9 @@ grep -iE '^(numpy|scipy|numba|h5py|dask|distributed|torch|lightning|typer|rich|m
 echo
 
 "$py" -m ruff check src tests benchmarks scripts
+site_dir="$(mktemp -d)"
+trap 'rm -rf "$site_dir"' EXIT
+"$py" -m mkdocs build --strict --quiet --site-dir "$site_dir"
 "$py" -m pytest -q -p no:cacheprovider "$@"
 
 if [ "$lock" = 1 ]; then

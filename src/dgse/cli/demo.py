@@ -112,7 +112,7 @@ def demo_cmd(
     seed = secrets.randbelow(2**31) if seed is None else seed
     t0 = time.perf_counter()
     run = resolve(method, level, search=True, planner_options={} if eta is None else {"eta": eta})
-    method = run.method
+    method = run.method  # without --method: the level's default method
     kwargs = dict(run.estimator_options)
     if ESTIMATORS.accepts(run.estimator, "model"):
         kwargs["model"] = model

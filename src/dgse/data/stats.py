@@ -66,14 +66,14 @@ def dataset_stats(store: DatasetStore | str | Path, verify: bool = False) -> dic
     Returns:
         A JSON-able dict:
 
-        * ``n_layouts``, ``n_cases``;
-        * ``splits``: ``{split: {"layouts": n, "cases": n}}``;
-        * ``failures``: ``{"count": n, "by_error": {error type: n}}``;
-        * ``width_m``, ``height_m``, ``cells`` (H x W), ``free_fraction``,
-          ``inlet_velocity`` (m/s), ``max_speed`` (m/s, per layout),
-          ``release_rate_gps``, ``max_ppm``, ``mean_ppm`` (per case, over free
-          cells): each a :func:`summarize` dict;
-        * ``values``: the raw per-layout and per-case lists behind them (for plots).
+            * ``n_layouts``, ``n_cases``;
+            * ``splits``: ``{split: {"layouts": n, "cases": n}}``;
+            * ``failures``: ``{"count": n, "by_error": {error type: n}}``;
+            * ``width_m``, ``height_m``, ``cells`` (H x W), ``free_fraction``,
+              ``inlet_velocity`` (m/s), ``max_speed`` (m/s, per layout),
+              ``release_rate_gps``, ``max_ppm``, ``mean_ppm`` (per case, over free
+              cells): each a :func:`summarize` dict;
+            * ``values``: the raw per-layout and per-case lists behind them (for plots).
 
     Raises:
         InputDataError: a missing or damaged store (``verify`` finds what the summaries hide).

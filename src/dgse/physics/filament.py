@@ -966,7 +966,7 @@ def run_filaments(
     Args:
         occupancy: ``(H, W)`` 1 solid, 0 free.
         wind: ``(2, H, W)`` cell-centred ``[u_x, u_y]`` in m/s (taken as 0 in solid cells).
-        source_xy: source ``(x, y)`` in m, in a free cell.
+        source_xy (tuple[float, float]): source ``(x, y)`` in m, in a free cell.
         settings: the simulation's parameters; ``settings.release_rate`` must be set.
         rng: seed or numpy Generator; the result is a deterministic function of it.
         outlet_mask: ``(H, W)`` bool, free boundary cells whose outer edge is

@@ -259,8 +259,8 @@ class GalerkinMap:
     the same pattern).  Entries that cancel exactly stay as explicit zeros.
 
     Args:
-        pattern: a CSR matrix whose ``indptr``/``indices`` are ``A``'s pattern.
-        R, P: restriction ``(nc, n)`` and interpolation ``(n, nc)``.
+        pattern (scipy.sparse.csr_matrix): a CSR matrix whose ``indptr``/``indices`` are ``A``'s pattern.
+        R, P (scipy.sparse.spmatrix): restriction ``(nc, n)`` and interpolation ``(n, nc)``.
     """
 
     def __init__(self, pattern, R, P) -> None:

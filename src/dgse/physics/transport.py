@@ -166,8 +166,8 @@ class TransportSolver:
         """Concentration fields ``(n_sources, H, W)`` in g/m^3 for sources in ``cells``.
 
         Args:
-            cells: ``(i, j)`` source cells.
-            rates: release rates in g/s.
+            cells (Sequence[tuple[int, int]]): ``(i, j)`` source cells.
+            rates (Sequence[float]): release rates in g/s.
         """
         B = self._rhs(cells, rates)
         if self.scheme != "limitedLinearUpwind":

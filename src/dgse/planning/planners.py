@@ -52,8 +52,8 @@ what the paper leaves open:
   leaves nothing (a one-cell map), ``next_goal`` returns None;
 * ties (utilities equal to a relative ``1e-12``): the nearest cell by path
   length, then the lowest row-major index;
-* ``confirm_radius_m`` (default None, the paper's rule): see the class; issue 12's
-  searches stopped confidently on spots nobody had measured at;
+* ``confirm_radius_m`` (default None, the paper's rule): see the class; without it,
+  searches with ``dgse-phys`` stopped confidently on spots nobody had measured at;
 * ``min_observations`` (default 0, the paper's rule): the entropy test waits
   for that many readings.  A network trained on 5 to 300 readings (the
   paper's range, ``dgse.sensing.sensors.MIN_SENSORS``) has never seen fewer

@@ -65,7 +65,7 @@ says only that the noisy concentration was at most 0: its likelihood is
 ``Phi(-q a_i(s) / (sigma r_i))``, not a Gaussian density at 0 (``censored``,
 the default).  Read as exact zeros, clipped noise in clean air (0, 8, 33, 74
 ppm where the truth is 0) has a positive mean and looks like a weak source
-nearby: the failure of issue 12's searches.  The positive readings keep the
+nearby, and searches stopped on such spots.  The positive readings keep the
 closed form above; the zeros multiply it by ``E[prod Phi(...)]`` under the
 posterior of ``(q, tau)`` given the positive readings
 (:func:`censored_correction`: an adaptive Gauss-Hermite rule over ``log tau``
@@ -686,12 +686,14 @@ def censored_correction(
     ``kappa`` gives the same weights.
 
     Args:
-        A: ``(m, N)`` responses; z: ``(m,)`` readings (zeros are the censored ones);
+        A: ``(m, N)`` responses.
+        z: ``(m,)`` readings (zeros are the censored ones).
         r: ``(m,)`` noise weights, or ``(m, N)``: each candidate's own; with ``sums``, the
-        zeros' rows alone will do (``(n_zeros,)`` or ``(n_zeros, N)``); logl: ``(N,)`` the
-        positive readings' log evidence; sums: the positive readings' weighted sums ``(sum w
-        a^2, sum w a z, sum w z^2)`` with these weights (``w = 1 / r^2``), where the caller has
-        them (:func:`adjoint_log_evidence` does; computed here otherwise).
+            zeros' rows alone will do (``(n_zeros,)`` or ``(n_zeros, N)``).
+        logl: ``(N,)`` the positive readings' log evidence.
+        sums: the positive readings' weighted sums ``(sum w a^2, sum w a z, sum w z^2)`` with
+            these weights (``w = 1 / r^2``), where the caller has them
+            (:func:`adjoint_log_evidence` does; computed here otherwise).
     """
     cen = z <= 0.0
     if not cen.any():
@@ -794,7 +796,7 @@ CENSORED_FAINT = 1e-3
 #: After few readings the exact zeros say little under the broad noise posterior; the
 #: plug-in acts as a tighter noise prior, which the searches benefit from.  A tighter
 #: prior with the bound ranking (dgse-phys ``alpha0=5``) did worse still: 5 of 8 on
-#: 900-907, three stops 2.1-4.8 m off (issue 12).
+#: 900-907, three stops 2.1-4.8 m off.
 CENSORED_RANKING = "plug-in"
 #: The rankings :func:`censored_correction` knows.
 CENSORED_RANKINGS = ("plug-in", "bound")

@@ -3,7 +3,7 @@
 The factor of each candidate source is a small two-dimensional quadrature (over the
 log noise precision and the release rate) whose nodes depend on the candidate: done
 with NumPy it is a few dozen passes over ``(nodes, candidates)`` arrays and their
-temporaries, most of a search step's cost (issue 12).  Here one loop over the
+temporaries, most of a search step's cost.  Here one loop over the
 candidates does the same arithmetic in registers.  The normal distribution's
 ``log Phi`` and its inverse are written out, as numba cannot call SciPy's ufuncs:
 

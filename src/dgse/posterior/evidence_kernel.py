@@ -6,7 +6,7 @@ needs, per noise-weight hypothesis ``kappa``, the sums ``sum_i w a_is^2``, ``sum
 Done with NumPy, the positive readings' rows are first copied out of the ``(m, N)`` responses,
 squared, and (with each candidate's own noise weights) multiplied into the ``(m, N)`` weights
 ``r`` and ``1 / r^2``: in a search step most of that time went into writing those
-temporaries, not into the sums (issue 12).  The kernels here read the rows in place, once, and
+temporaries, not into the sums.  The kernels here read the rows in place, once, and
 keep only the sums:
 
 - :func:`row_sums`: weights shared by every candidate (homoscedastic, ``w = 1``, or the

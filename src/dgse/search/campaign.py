@@ -204,8 +204,8 @@ def run_trials(
         method: the estimator's name in ``settings`` (default: the name given,
             or the object's ``name``).
         planner_name: the planner's name in ``settings`` (the same default).
-        speed, dwell, time_limit, use_frames, min_start_distance,
-            include_compute_time: :func:`~dgse.search.episode.run_episode`'s.
+        speed, dwell, time_limit, use_frames, min_start_distance, include_compute_time:
+            :func:`~dgse.search.episode.run_episode`'s.
         steps: include every step's record in the trials' summaries.
         record_first: record the belief maps of trial 0 of every case (for
             ``on_episode``; e.g. an animation).

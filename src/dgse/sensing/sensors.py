@@ -223,7 +223,7 @@ def measure(
         cells: ``(n, 2)`` integer cells ``(i, j)``, each free and on the map.
         noise_params: the sample's noise parameters.
         rng: consumes gas noise draws, then wind noise draws.
-        t: optional measurement time in s, scalar or ``(n,)``; stored in
+        t (float | np.ndarray | None): optional measurement time in s, scalar or ``(n,)``; stored in
             ``Observations.times``.
 
     Raises:
