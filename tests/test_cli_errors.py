@@ -26,10 +26,10 @@ def case_file(tmp_path_factory):
 @pytest.mark.parametrize(
     ("args", "fragments"),
     [
-        (["--device", "cuda"], ["cuda", "use --device cpu"]),
-        (["--device", "gpu"], ["unknown device 'gpu'", "cpu, cuda"]),
-        (["-p", "foo=1"], ["unknown estimator 'dgse-s' option(s) foo", "known: K, T"]),
-        (["-p", "K=abc"], ["option K='abc' must be an integer"]),
+        (["--method", "dgse-s", "--device", "cuda"], ["cuda", "use --device cpu"]),
+        (["--method", "dgse-s", "--device", "gpu"], ["unknown device 'gpu'", "cpu, cuda"]),
+        (["--method", "dgse-s", "-p", "foo=1"], ["unknown estimator 'dgse-s' option(s) foo", "known: K, T"]),
+        (["--method", "dgse-s", "-p", "K=abc"], ["option K='abc' must be an integer"]),
         (["--method", "kdmv", "-p", "sigma=abc"], ["kdmv: option sigma='abc' must be a number"]),
         (["--method", "kdmv", "-p", "foo=1"], ["unknown kdmv option(s) foo"]),
     ],

@@ -248,6 +248,8 @@ def test_cli_estimate(case_dir, checkpoint, tmp_path, capsys):
         12,
         "--seed",
         4,
+        "--method",
+        "dgse-s",
         "--model",
         checkpoint,
         "-K",
@@ -314,13 +316,27 @@ def test_cli_errors(case_dir, checkpoint, tmp_path, capsys):
         "unknown estimator 'nope'",
     )
     _assert_user_error(
-        *_run(capsys, "evaluate", case_dir, "-n", 100000, "--model", checkpoint, "--no-progress"),
+        *_run(
+            capsys,
+            "evaluate",
+            case_dir,
+            "-n",
+            100000,
+            "--method",
+            "dgse-s",
+            "--model",
+            checkpoint,
+            "--no-progress",
+        ),
         "free cells",
     )
     _assert_user_error(
-        *_run(capsys, "evaluate", tmp_path / "missing", "-n", 5, "--model", checkpoint), "no such file"
+        *_run(capsys, "evaluate", tmp_path / "missing", "-n", 5, "--method", "dgse-s", "--model", checkpoint),
+        "no such file",
     )
-    _assert_user_error(*_run(capsys, "evaluate", case_dir, "--model", checkpoint), "--observations")
+    _assert_user_error(
+        *_run(capsys, "evaluate", case_dir, "--method", "dgse-s", "--model", checkpoint), "--observations"
+    )
     _assert_user_error(
         *_run(
             capsys,

@@ -111,12 +111,10 @@ def test_a_journal_of_other_estimator_settings_is_refused(case_dir, tmp_path):
 @pytest.fixture
 def peak_method(monkeypatch):
     """``--method peak`` builds a PeakEstimator from its ``--param`` arguments."""
-    real = evaluation.get_estimator
+    from dgse.estimators.registry import ESTIMATORS
 
-    def get_estimator(name, **kwargs):
-        return PeakEstimator(**kwargs) if name == "peak" else real(name, **kwargs)
-
-    monkeypatch.setattr(evaluation, "get_estimator", get_estimator)
+    monkeypatch.setattr(ESTIMATORS, "_entries", dict(ESTIMATORS._entries))
+    ESTIMATORS.register("peak", PeakEstimator)
 
 
 def _run(capsys, *args):

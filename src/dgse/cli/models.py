@@ -161,7 +161,12 @@ def estimate_cmd(
     ],
     out: Annotated[Path, typer.Option("--out", "-o", help="Estimate file (.npz) to write.")],
     seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of the observations (>= 0).")] = 0,
-    method: Annotated[str, typer.Option("--method", "-m", help="Estimator name (registry).")] = "dgse-s",
+    method: Annotated[
+        str | None,
+        typer.Option(
+            "--method", "-m", help="Method or registered estimator (default: dgse-phys, the named method)."
+        ),
+    ] = None,
     model: Annotated[str | None, typer.Option("--model", help=_MODEL_HELP)] = None,
     k: Annotated[int | None, typer.Option("-K", help="DGSE-S wind samples (default 5).")] = None,
     t: Annotated[int | None, typer.Option("-T", help="DGSE-S concentration samples (default 5).")] = None,
@@ -180,12 +185,14 @@ def estimate_cmd(
     observations and the metrics into the output .npz.
     """
     from dgse.estimators.registry import get_estimator
-    from dgse.evaluation.evaluate import draw_observations, estimator_seed, save_estimate
-    from dgse.evaluation.metrics import evaluate_belief
+    from dgse.evaluation.evaluate import estimate_once, save_estimate
+    from dgse.presets import resolve
     from dgse.world.case import Case
 
     level = check_level(knowledge)
-    kwargs = _estimator_kwargs(method, model, k, t, device, dtype, params)
+    run = resolve(method, level, search=False)
+    method = run.method
+    kwargs = {**run.estimator_options, **_estimator_kwargs(run.estimator, model, k, t, device, dtype, params)}
     _set_threads(threads)
     check_output_file(out, "estimate file")
     if plot is not None:
@@ -193,17 +200,10 @@ def estimate_cmd(
         check_output_file(plot, "figure")
     case = Case.load(case_file)
     case_id = case_file.stem
-    obs = draw_observations(case, observations, seed, case_id, trial=0)
     with console.status(f"loading {escape(method)} ..."):
-        est: Any = get_estimator(method, knowledge=Knowledge.from_case(case, level), **kwargs)
-    if "seed" not in kwargs:
-        est.seed = estimator_seed(seed, case_id, observations, 0)
-    import time
-
-    t0 = time.perf_counter()
-    belief = est.estimate(case.occupancy, case.resolution, obs)
-    seconds = time.perf_counter() - t0
-    metrics = evaluate_belief(belief, case)
+        est: Any = get_estimator(run.estimator, knowledge=Knowledge.from_case(case, level), **kwargs)
+    result = estimate_once(est, case, case_id, observations, seed, reseed="seed" not in kwargs)
+    obs, belief, metrics, seconds = result.observations, result.belief, result.metrics, result.seconds
     extra = {
         "case": str(case_file),
         "case_id": case_id,
@@ -359,7 +359,12 @@ def evaluate_cmd(
             show_default=False,
         ),
     ],
-    method: Annotated[str, typer.Option("--method", "-m", help="Estimator name (registry).")] = "dgse-s",
+    method: Annotated[
+        str | None,
+        typer.Option(
+            "--method", "-m", help="Method or registered estimator (default: dgse-phys, the named method)."
+        ),
+    ] = None,
     trials: Annotated[
         int, typer.Option("--trials", "-r", help="Random sensor configurations per case and count.")
     ] = 20,
@@ -404,10 +409,13 @@ def evaluate_cmd(
     from dgse.cli.common import default_output, interruptible, kept_note, resume_command, resume_note
     from dgse.evaluation.evaluate import evaluate, write_json
     from dgse.journal import count_records, journal_path
+    from dgse.presets import resolve
 
     level = check_level(knowledge)
     cases, counts = _split_positionals(args, observations)
-    kwargs = _estimator_kwargs(method, model, k, t, device, dtype, params)
+    run = resolve(method, level, search=False)
+    method = run.method
+    kwargs = {**run.estimator_options, **_estimator_kwargs(run.estimator, model, k, t, device, dtype, params)}
     names = (method,) if level == DEFAULT_LEVEL else (method, level)
     out = out if out is not None else default_output("evaluate", *names)
     journal = journal_path(out)
@@ -424,7 +432,7 @@ def evaluate_cmd(
     with interruptible(kept):
         result = evaluate(
             cases,
-            method,
+            run.estimator,
             counts,
             trials=trials,
             seed=seed,

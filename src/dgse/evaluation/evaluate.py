@@ -667,6 +667,43 @@ def estimator_seed(seed: int, case_id: str, n_obs: int, trial: int) -> int:
     return int(ss.generate_state(1, np.uint32)[0])
 
 
+@dataclass(frozen=True)
+class Estimate:
+    """One estimate from random readings: the readings, the belief, its scores and its time (s)."""
+
+    observations: Observations
+    belief: Belief
+    metrics: EstimateMetrics
+    seconds: float
+
+
+def estimate_once(
+    est: Estimator,
+    case: Case,
+    case_id: str,
+    n_obs: int,
+    seed: int,
+    trial: int = 0,
+    noise_model: NoiseModel | None = None,
+    reseed: bool = True,
+) -> Estimate:
+    """Draw trial ``trial``'s ``n_obs`` readings of ``case`` (:func:`draw_observations`), estimate
+    and score the belief against the case: what :func:`evaluate` does for every estimate.
+
+    ``reseed``: seed the estimator's draws by ``(seed, case_id, n_obs, trial)``
+    (:func:`estimator_seed`), so that the same call gives the same belief.
+    """
+    obs = draw_observations(case, n_obs, seed, case_id, trial, noise_model)
+    if reseed:
+        est.seed = estimator_seed(seed, case_id, n_obs, trial)
+    t0 = time.perf_counter()
+    belief = est.estimate(case.occupancy, case.resolution, obs)
+    seconds = time.perf_counter() - t0
+    if not isinstance(belief, Belief):
+        raise InputDataError(f"the estimator returned a {type(belief).__name__}, not a Belief")
+    return Estimate(obs, belief, evaluate_belief(belief, case), seconds)
+
+
 def _one_estimate(
     est: Any,
     case: Case,
@@ -677,18 +714,10 @@ def _one_estimate(
     noise_model: NoiseModel | None,
     reseed: bool,
 ) -> dict[str, Any]:
-    obs = draw_observations(case, n_obs, seed, case_id, trial, noise_model)
-    if reseed:
-        est.seed = estimator_seed(seed, case_id, n_obs, trial)
-    t0 = time.perf_counter()
-    belief = est.estimate(case.occupancy, case.resolution, obs)
-    seconds = time.perf_counter() - t0
-    if not isinstance(belief, Belief):
-        raise InputDataError(f"the estimator returned a {type(belief).__name__}, not a Belief")
-    metrics = evaluate_belief(belief, case)
-    x, y = belief.source_estimate()
-    rec: dict[str, Any] = {"case": case_id, "n_obs": int(n_obs), "trial": int(trial), "seconds": seconds}
-    rec.update({k: _nan_to_none(v) for k, v in metrics.to_dict().items()})
+    e = estimate_once(est, case, case_id, n_obs, seed, trial, noise_model, reseed)
+    x, y = e.belief.source_estimate()
+    rec: dict[str, Any] = {"case": case_id, "n_obs": int(n_obs), "trial": int(trial), "seconds": e.seconds}
+    rec.update({k: _nan_to_none(v) for k, v in e.metrics.to_dict().items()})
     rec["source_estimate_xy"] = [x, y]
     rec["true_source_xy"] = [float(case.source[0]), float(case.source[1])]
     return rec
