@@ -24,11 +24,35 @@ from dgse.sensing.sensors import MIN_SENSORS
 __all__ = [
     "DEFAULT_METHOD",
     "PRESETS",
+    "PROTOCOL",
     "Preset",
     "ResolvedMethod",
+    "SearchProtocol",
     "preset",
     "resolve",
 ]
+
+
+@dataclass(frozen=True)
+class SearchProtocol:
+    """The paper's search protocol (Sec. V-D): what every search runs with unless told otherwise.
+
+    Attributes:
+        speed: the robot's speed, m/s.
+        dwell: the time spent at a cell for one reading, s.
+        time_limit: a search's time limit, s.
+        min_start_distance: the least path length from a random start to the source, m (a start
+            inside the 2 m success radius would make a trial trivial).
+    """
+
+    speed: float = 0.5
+    dwell: float = 3.0
+    time_limit: float = 2000.0
+    min_start_distance: float = 2.0
+
+
+#: The protocol of every search, benchmark and command.
+PROTOCOL = SearchProtocol()
 
 
 @dataclass(frozen=True)

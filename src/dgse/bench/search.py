@@ -75,7 +75,7 @@ import numpy as np
 
 from dgse.bench.core import BenchContext
 from dgse.bench.plots import plt
-from dgse.presets import DGSE_S_ETA, PRESETS, Preset
+from dgse.presets import DGSE_S_ETA, PRESETS, PROTOCOL, Preset
 from dgse.search.metrics import format_mean_std
 from dgse.sensing.sensors import MIN_SENSORS
 
@@ -87,8 +87,6 @@ ETA_TUNED = DGSE_S_ETA
 ETA_OOD = round(ETA_TUNED + 0.1, 2)
 #: The paper's out-of-domain value (its in-domain 0.65 + 0.1), also run.
 ETA_OOD_PAPER = 0.75
-#: The paper's time limit, s.
-TIME_LIMIT = 2000.0
 #: The time limit of a method tagged ``"slow"`` (seconds per step), s (full / quick).
 SLOW_TIME_LIMIT = (300.0, 10.0)
 
@@ -135,7 +133,7 @@ def make_plan(ctx: BenchContext) -> Plan:
         n_dgse_filament=ctx.pick(20, 2),
         n_ood=ctx.pick(6, 1),
         trials=ctx.pick(1, 1),
-        time_limit=ctx.pick(TIME_LIMIT, 20.0),
+        time_limit=ctx.pick(PROTOCOL.time_limit, 20.0),
         overrides={m.name: {"time_limit": ctx.pick(*SLOW_TIME_LIMIT)} for m in METHODS if _slow(m)},
         extra_options={m.name: dict(m.quick_options) for m in METHODS if ctx.quick and m.quick_options},
     )

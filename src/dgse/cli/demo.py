@@ -36,6 +36,7 @@ from dgse.cli.common import (
 )
 from dgse.errors import InputDataError
 from dgse.files import atomic_path
+from dgse.presets import PROTOCOL
 
 if TYPE_CHECKING:
     from dgse.search.episode import StepRecord
@@ -70,7 +71,9 @@ def demo_cmd(
     model: Annotated[
         str, typer.Option("--model", help="DGSE-S weights: default (shipped) or a .safetensors path.")
     ] = "default",
-    time_limit: Annotated[float, typer.Option("--time-limit", help="Search time limit, s.")] = 2000.0,
+    time_limit: Annotated[
+        float, typer.Option("--time-limit", help="Search time limit, s.")
+    ] = PROTOCOL.time_limit,
     eta: Annotated[
         float | None,
         typer.Option(
@@ -154,7 +157,7 @@ def demo_cmd(
                 planner,
                 rng=seed,
                 time_limit=time_limit,
-                min_start_distance=2.0,
+                min_start_distance=PROTOCOL.min_start_distance,
                 on_step=lambda rec: status.update(step_text(rec, time_limit, stop_at)),
                 knowledge=level,
             )

@@ -81,6 +81,7 @@ from dgse.cli.common import (
 from dgse.errors import InputDataError
 from dgse.files import write_json
 from dgse.journal import count_records, journal_path
+from dgse.presets import PROTOCOL
 
 if TYPE_CHECKING:
     from dgse.search.episode import EpisodeResult, StepRecord
@@ -182,13 +183,15 @@ def search_cmd(
         float | None,
         typer.Option("--eta", help="Entropy termination threshold of the utility planner (-P eta=...)."),
     ] = None,
-    time_limit: Annotated[float, typer.Option("--time-limit", help="Time limit per episode, s.")] = 2000.0,
+    time_limit: Annotated[
+        float, typer.Option("--time-limit", help="Time limit per episode, s.")
+    ] = PROTOCOL.time_limit,
     frames: Annotated[
         bool,
         typer.Option("--frames/--steady", help="Read time-varying frames when a case has them."),
     ] = True,
-    speed: Annotated[float, typer.Option("--speed", help="Robot speed, m/s.")] = 0.5,
-    dwell: Annotated[float, typer.Option("--dwell", help="Time per measurement, s.")] = 3.0,
+    speed: Annotated[float, typer.Option("--speed", help="Robot speed, m/s.")] = PROTOCOL.speed,
+    dwell: Annotated[float, typer.Option("--dwell", help="Time per measurement, s.")] = PROTOCOL.dwell,
     min_start_distance: Annotated[
         float,
         typer.Option(
@@ -196,7 +199,7 @@ def search_cmd(
             help="Least path length from a random start to the source, m (a start inside the "
             "2 m success radius would make a trial trivial).",
         ),
-    ] = 2.0,
+    ] = PROTOCOL.min_start_distance,
     compute_time: Annotated[
         bool,
         typer.Option(

@@ -17,12 +17,11 @@ Example::
 """
 
 from dgse.search.campaign import load_cases, run_trials, trial_seed
-from dgse.search.episode import DEFAULT_TIME_LIMIT, EpisodeResult, StepRecord, run_episode
+from dgse.search.episode import EpisodeResult, StepRecord, run_episode
 from dgse.search.metrics import aggregate, episode_metrics, is_success, path_efficiency_ratio
 from dgse.search.robot import Robot, random_start_cell
 
 __all__ = [
-    "DEFAULT_TIME_LIMIT",
     "EpisodeResult",
     "Robot",
     "StepRecord",

@@ -54,8 +54,8 @@ from dgse.belief.knowledge import DEFAULT_LEVEL, check_level, require_level
 from dgse.errors import InputDataError
 from dgse.files import is_temporary
 from dgse.planning.planners import Planner
-from dgse.search.episode import DEFAULT_TIME_LIMIT, EpisodeResult, StepRecord
-from dgse.search.robot import DEFAULT_DWELL, DEFAULT_SPEED
+from dgse.presets import PROTOCOL
+from dgse.search.episode import EpisodeResult, StepRecord
 from dgse.world.case import Case
 
 __all__ = [
@@ -169,11 +169,11 @@ def run_trials(
     planner_options: Mapping[str, Any] | None = None,
     method: str | None = None,
     planner_name: str | None = None,
-    speed: float = DEFAULT_SPEED,
-    dwell: float = DEFAULT_DWELL,
-    time_limit: float = DEFAULT_TIME_LIMIT,
+    speed: float = PROTOCOL.speed,
+    dwell: float = PROTOCOL.dwell,
+    time_limit: float = PROTOCOL.time_limit,
     use_frames: bool = True,
-    min_start_distance: float = 2.0,
+    min_start_distance: float = PROTOCOL.min_start_distance,
     include_compute_time: bool = False,
     steps: bool = False,
     record_first: bool = False,

@@ -64,12 +64,12 @@ from dgse.planning.planners import (
     SearchHistory,
     point_estimates,
 )
-from dgse.search.robot import DEFAULT_DWELL, DEFAULT_SPEED, Robot, random_start_cell
+from dgse.presets import PROTOCOL
+from dgse.search.robot import Robot, random_start_cell
 from dgse.sensing.noise import NoiseModel, NoiseParams
 from dgse.world.case import Case
 
 __all__ = [
-    "DEFAULT_TIME_LIMIT",
     "REASONS",
     "EpisodeResult",
     "StepCallback",
@@ -78,8 +78,6 @@ __all__ = [
     "run_episode",
 ]
 
-#: Time limit of a search, s (paper Sec. V-D).
-DEFAULT_TIME_LIMIT = 2000.0
 #: Why an episode ended: the planner's termination test, its deadline (``deadline_margin_s``),
 #: ``next_goal`` returned None, the time limit.
 REASONS = ("converged", "deadline", "planner_stop", "time_limit")
@@ -198,7 +196,7 @@ class EpisodeResult:
     search_time_s: float
     distance_m: float
     shortest_path_m: float
-    time_limit_s: float = DEFAULT_TIME_LIMIT
+    time_limit_s: float = PROTOCOL.time_limit
     steps: list[StepRecord] = field(default_factory=list)
     trajectory_cells: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64), repr=False)
     trajectory_times: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
@@ -311,9 +309,9 @@ def run_episode(
     *,
     start: Sequence[int] | None = None,
     rng: np.random.Generator | np.random.SeedSequence | int | None = None,
-    speed: float = DEFAULT_SPEED,
-    dwell: float = DEFAULT_DWELL,
-    time_limit: float = DEFAULT_TIME_LIMIT,
+    speed: float = PROTOCOL.speed,
+    dwell: float = PROTOCOL.dwell,
+    time_limit: float = PROTOCOL.time_limit,
     include_compute_time: bool = False,
     record: bool = True,
     use_frames: bool = True,

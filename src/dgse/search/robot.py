@@ -33,16 +33,12 @@ import numpy as np
 
 from dgse.errors import InputDataError
 from dgse.planning.paths import Cell, FreeSpaceGraph, graph_for
+from dgse.presets import PROTOCOL
 from dgse.sensing.noise import NoiseModel, NoiseParams
 from dgse.sensing.sensors import Observations, mean_free_concentration, measure
 from dgse.world.case import Case
 
-__all__ = ["DEFAULT_DWELL", "DEFAULT_SPEED", "Robot", "random_start_cell"]
-
-#: Robot speed in m/s.
-DEFAULT_SPEED = 0.5
-#: Time spent at a cell for one measurement, s.
-DEFAULT_DWELL = 3.0
+__all__ = ["Robot", "random_start_cell"]
 
 
 def random_start_cell(
@@ -112,8 +108,8 @@ class Robot:
         *,
         start: Sequence[int] | None = None,
         rng: np.random.Generator | int | None = None,
-        speed: float = DEFAULT_SPEED,
-        dwell: float = DEFAULT_DWELL,
+        speed: float = PROTOCOL.speed,
+        dwell: float = PROTOCOL.dwell,
         noise_model: NoiseModel | None = None,
         noise_params: NoiseParams | None = None,
         use_frames: bool = True,
