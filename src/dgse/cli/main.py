@@ -480,13 +480,7 @@ def scenario_cmd(
     ] = (5.0, 10.0),
     figures: Annotated[bool, typer.Option("--figures/--no-figures", help="Write a figure per case.")] = True,
 ) -> None:
-    from dgse.physics.scenario import solve_cases
-    from dgse.world.generate import (
-        as_generator,
-        random_inlet_velocity,
-        random_layout,
-        random_sources,
-    )
+    from dgse.physics.scenario import random_scenario, solve_cases
 
     if sources < 1:
         raise InputDataError(f"--sources must be at least 1, got {sources}")
@@ -494,11 +488,9 @@ def scenario_cmd(
     eng = _engine(engine)
     seed = _new_seed() if seed is None else seed
     t0 = time.perf_counter()
-    # the same draws, in the same order, as dgse.physics.scenario.random_cases
-    rng = as_generator(seed)
-    layout = random_layout(rng, width_range=size, height_range=size, name=f"random-{seed}")
-    v_in = random_inlet_velocity(rng)
-    srcs = random_sources(layout, rng, n=sources)
+    layout, v_in, srcs = random_scenario(
+        seed, sources, width_range=size, height_range=size, name=f"random-{seed}"
+    )
     console.print(
         f"[bold]{escape(layout.name)}[/] (seed {seed}): {escape(_layout_summary(layout))}; "
         f"inlet velocity {v_in:.2f} m/s"

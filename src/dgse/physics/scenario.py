@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -72,10 +72,11 @@ def resolve_case(case: Case, engine: str | Engine = "builtin") -> Case:
     return Case(out.occupancy, out.wind, out.concentration, out.source, out.resolution, meta)
 
 
-def random_cases(
-    rng_or_seed: RngLike = None, n_sources: int = 4, engine: str | Engine = "builtin", **layout_kw
-) -> list[Case]:
-    """A random training-distribution layout (spec section 3) solved for ``n_sources`` sources."""
+def random_scenario(
+    rng_or_seed: RngLike = None, n_sources: int = 4, **layout_kw: Any
+) -> tuple[Layout, float, list[Source]]:
+    """A random training-distribution scenario (spec section 3), unsolved: the layout, the inlet
+    velocity (m/s) and ``n_sources`` sources, drawn in that order from one generator."""
     # imported here: the generators load scipy.ndimage, which solving a given case never needs
     from dgse.world.generate import as_generator, random_inlet_velocity, random_layout
     from dgse.world.generate import random_sources as _random_sources
@@ -83,5 +84,12 @@ def random_cases(
     rng = as_generator(rng_or_seed)
     layout = random_layout(rng, **layout_kw)
     v = random_inlet_velocity(rng)
-    sources = _random_sources(layout, rng, n=n_sources)
+    return layout, v, list(_random_sources(layout, rng, n=n_sources))
+
+
+def random_cases(
+    rng_or_seed: RngLike = None, n_sources: int = 4, engine: str | Engine = "builtin", **layout_kw: Any
+) -> list[Case]:
+    """:func:`random_scenario` solved for its sources."""
+    layout, v, sources = random_scenario(rng_or_seed, n_sources, **layout_kw)
     return solve_cases(layout, v, sources, engine)
