@@ -1,28 +1,17 @@
-"""benchmarks/phys_gsl.py --workers: one case and count per process, journal parts joined."""
+"""dgse.bench.parallel: one case and count per process, journal parts joined."""
 
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from dgse.bench.parallel import evaluate_parallel, join_journal
+from dgse.errors import InputDataError
 from dgse.evaluation.evaluate import evaluate
 from dgse.world.case import Case
-
-BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
-
-
-@pytest.fixture()
-def phys_gsl(monkeypatch):
-    monkeypatch.syspath_prepend(str(BENCHMARKS))  # spawned workers import it by name too
-    import phys_gsl
-
-    monkeypatch.setattr(phys_gsl, "COUNTS", [5, 10])
-    yield phys_gsl
-    sys.modules.pop("phys_gsl", None)
 
 
 def _cases(folder: Path) -> Path:
@@ -42,11 +31,11 @@ def _cases(folder: Path) -> Path:
     return folder
 
 
-def test_parallel_run_keeps_the_serial_runs_estimates(phys_gsl, tmp_path):
+def test_parallel_run_keeps_the_serial_runs_estimates(tmp_path):
     cases = _cases(tmp_path / "cases")
     out = tmp_path / "out"
     out.mkdir()
-    done = phys_gsl.run_parallel([("kdmv", "map")], {"tiny": cases}, out, 3, 2, 2, None)
+    done = evaluate_parallel([("kdmv", "map")], {"tiny": cases}, out, [5, 10], 3, 2, 2, None)
     assert done and not list((out / "_parts").iterdir())
     journal = out / "tiny_kdmv_map.journal.jsonl"
     lines = journal.read_text().splitlines()
@@ -63,7 +52,7 @@ def test_parallel_run_keeps_the_serial_runs_estimates(phys_gsl, tmp_path):
     assert len(journal.read_text().splitlines()) == len(lines)  # nothing was estimated again
 
 
-def test_join_drops_torn_lines_and_duplicates_and_refuses_other_settings(phys_gsl, tmp_path):
+def test_join_drops_torn_lines_and_duplicates_and_refuses_other_settings(tmp_path):
     header = {"format": "dgse-journal", "identity": {"method": "m"}}
 
     def entry(trial: int) -> str:
@@ -72,8 +61,8 @@ def test_join_drops_torn_lines_and_duplicates_and_refuses_other_settings(phys_gs
     journal, part = tmp_path / "j.jsonl", tmp_path / "p.jsonl"
     journal.write_text(json.dumps(header) + "\n" + entry(0) + "\n")
     part.write_text(json.dumps(header) + "\n" + entry(0) + "\n" + entry(1) + '\n{"record": {"ca')
-    assert phys_gsl._join(journal, [part]) == 2 and not part.exists()
+    assert join_journal(journal, [part]) == 2 and not part.exists()
     other = tmp_path / "o.jsonl"
     other.write_text(json.dumps({**header, "identity": {"method": "x"}}) + "\n" + entry(2) + "\n")
-    with pytest.raises(SystemExit, match="other settings"):
-        phys_gsl._join(journal, [other])
+    with pytest.raises(InputDataError, match="other settings"):
+        join_journal(journal, [other])
