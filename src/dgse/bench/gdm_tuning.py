@@ -1,58 +1,51 @@
-"""Tune the free parameters of the GDM baselines on the VALIDATION split of a dataset store.
+"""Tuning of the GDM baselines' free parameters on the validation split of a dataset store.
 
-Grid search, one method at a time, over a few parameters each (defaults below,
-``--grid`` to replace them): the kernel width (and wind stretch) of Kernel
-DM+V(/W), the smoothness (and observation) sigma of the GMRFs, GaBP+'s
-smoothness precision.  Every parameter not searched keeps its published value.
-Each setting maps every validation sample; the chosen setting minimizes the
-mean concentration RMSE in ppm over the free cells (``--criterion nll``: the
-mean Gaussian NLL in ppm, for the methods whose variance is a predictive one,
-G-GMRF and GW-GMRF; the others always use RMSE).
+:func:`tune` runs a grid search, one method at a time, over a few parameters each
+(:data:`DEFAULT_GRIDS`): the kernel width (and wind stretch) of Kernel DM+V(/W), the smoothness
+(and observation) sigma of the GMRFs, GaBP+'s smoothness precision.  Every parameter not
+searched keeps its published value.  Each setting maps every validation sample; the chosen
+setting minimizes the mean concentration RMSE in ppm over the free cells (``criterion="nll"``:
+the mean Gaussian NLL in ppm, for the methods whose variance is a predictive one, G-GMRF and
+GW-GMRF; the others always use RMSE).
 
-Samples: every case of the ``val`` split (``--max-cases`` to limit) with the
-store's fixed validation sensor configurations (``--observations fixed``, the
-first ``--configs-per-env`` per environment, noise as
-:class:`dgse.data.torch_dataset.FixedSet` draws it) or seeded random ones
-(``--observations random``: ``--counts`` sensors per sample, Table I noise,
-seeded by ``--seed`` and the case's position in the split).  The test split
-and the reference cases are never read: they are for honest evaluation.
+Samples: every case of the ``val`` split (``max_cases`` to limit) with the store's fixed
+validation sensor configurations (``mode="fixed"``, the first ``configs_per_env`` per
+environment, noise as :class:`dgse.data.torch_dataset.FixedSet` draws it) or seeded random
+ones (``mode="random"``: ``counts`` sensors per sample, Table I noise, seeded by ``seed`` and
+the case's position in the split).  The test split and the reference cases are never read.
 
-    python benchmarks/tune_gdm.py data/store.h5                        # all methods
-    python benchmarks/tune_gdm.py data/store.h5 --methods ggmrf --max-cases 50
+Every method's published defaults (its parameter class's values of the searched parameters)
+are scored on the same samples.  A setting replaces them only when the change is justified on
+the validation samples: its mean score is at least ``min_gain`` (default 5 %) better than the
+defaults' AND it beats the defaults on more than half of the samples (paired, same readings).
+Otherwise the defaults are kept.
 
-Every method's published defaults (its parameter class's values of the searched
-parameters) are scored on the same samples.  A setting replaces them only when
-the change is justified on the validation samples: its mean score is at least
-``--min-gain`` (default 5 %) better than the defaults' AND it beats the defaults
-on more than half of the samples (paired, same readings).  Otherwise the
-defaults are kept.
-
-Writes ``benchmarks/results/gdm_tuning.json`` (``--out``): ``methods`` holds the
-chosen values per method (what ``tuning=`` of the estimators reads: the best
-setting where justified, else the published defaults), ``best`` the best
-setting per method whether justified or not, ``decision`` per method the
-default's and the best setting's scores, the relative gain, the paired win
-fraction and whether the defaults were replaced, and ``search`` every
-setting's scores.
+The returned document (``benchmarks/results/gdm_tuning.json``, written by ``python
+benchmarks/training.py gdm STORE``): ``methods`` holds the chosen values per method (what
+``tuning=`` of the estimators reads, :func:`dgse.mapping.load_tuning`: the best setting where
+justified, else the published defaults), ``best`` the best setting per method whether
+justified or not, ``decision`` per method the default's and the best setting's scores, the
+relative gain, the paired win fraction and whether the defaults were replaced, and ``search``
+every setting's scores.
 """
 
 from __future__ import annotations
 
-import argparse
 import datetime as _dt
 import itertools
-import json
 import math
-import sys
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
-DEFAULT_OUT = REPO / "benchmarks" / "results" / "gdm_tuning.json"
+from dgse.errors import InputDataError
+
+__all__ = ["DEFAULT_GRIDS", "MIN_GAIN", "NLL_METHODS", "SPLIT", "tune"]
+
+#: The only split the tuning reads.
 SPLIT = "val"
 
 #: Default search grids: method -> parameter -> values (published value included).
@@ -82,7 +75,7 @@ def _samples(
         entries = list(s.iter_cases(SPLIT))
         fixed = s.fixed_configurations(SPLIT) if mode == "fixed" else None
     if not entries:
-        raise SystemExit(f"{store_path}: no cases in split {SPLIT!r}")
+        raise InputDataError(f"{store_path}: no cases in split {SPLIT!r}")
     if max_cases is not None:
         entries = entries[:max_cases]
     for e, (layout_id, k, case) in enumerate(entries):
@@ -165,10 +158,11 @@ def tune(
     seed: int = 0,
     max_cases: int | None = None,
     criterion: str = "rmse",
-    log: Any = print,
+    log: Callable[[str], None] = lambda _: None,
     min_gain: float = MIN_GAIN,
 ) -> dict[str, Any]:
-    """Run the grid search; returns the tuning document (see the module docstring)."""
+    """Run the grid search; returns the tuning document (module doc).  ``log`` is told each
+    setting's scores and each method's decision as they are made."""
     from dgse.estimators.registry import ESTIMATORS
     from dgse.mapping import TUNING_FORMAT
 
@@ -176,7 +170,7 @@ def tune(
 
     unknown = sorted(set(methods) - set(GDM_ESTIMATORS))
     if unknown:
-        raise SystemExit(f"unknown method(s) {unknown}; known: {sorted(GDM_ESTIMATORS)}")
+        raise InputDataError(f"unknown method(s) {unknown}; known: {sorted(GDM_ESTIMATORS)}")
     samples = list(_samples(store_path, mode, configs_per_env, counts, seed, max_cases))
     log(f"{len(samples)} validation samples from {store_path}")
     chosen: dict[str, dict[str, Any]] = {}
@@ -217,7 +211,7 @@ def tune(
         key = "nll" if criterion == "nll" and method in NLL_METHODS else "rmse"
         finite = [r for r in rows if r[key] is not None and math.isfinite(r[key])]
         if not finite:
-            raise SystemExit(f"{method}: no setting gave a finite {key}")
+            raise InputDataError(f"{method}: no setting gave a finite {key}")
         best = min(finite, key=lambda r: r[key])
         default_row = next(r for r in rows if r["default"])
         decision = _decide(default_row, best, key, min_gain)
@@ -251,56 +245,3 @@ def tune(
         "decision": decisions,
         "search": search,
     }
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    from dgse.files import write_text
-
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("store", type=Path, help="dataset store (.h5); only its 'val' split is read")
-    ap.add_argument("--out", type=Path, default=DEFAULT_OUT)
-    ap.add_argument("--methods", nargs="+", default=list(DEFAULT_GRIDS), choices=list(DEFAULT_GRIDS))
-    ap.add_argument("--observations", choices=("fixed", "random"), default="fixed")
-    ap.add_argument("--configs-per-env", type=int, default=3)
-    ap.add_argument("--counts", type=int, nargs="+", default=[50, 100, 150, 200, 250])
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--max-cases", type=int, default=None)
-    ap.add_argument("--criterion", choices=("rmse", "nll"), default="rmse")
-    ap.add_argument(
-        "--min-gain",
-        type=float,
-        default=MIN_GAIN,
-        help="relative gain over the defaults that justifies replacing them (also needs > 50 %% wins)",
-    )
-    ap.add_argument(
-        "--grid",
-        type=Path,
-        default=None,
-        help="JSON {method: {param: [values]}} replacing the default grids of those methods",
-    )
-    args = ap.parse_args(argv)
-    if not args.store.is_file():
-        raise SystemExit(f"{args.store}: no such store file")
-    grids = {k: dict(v) for k, v in DEFAULT_GRIDS.items()}
-    if args.grid is not None:
-        grids.update(json.loads(args.grid.read_text()))
-    doc = tune(
-        args.store,
-        args.methods,
-        grids,
-        args.observations,
-        args.configs_per_env,
-        args.counts,
-        args.seed,
-        args.max_cases,
-        args.criterion,
-        min_gain=args.min_gain,
-    )
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    write_text(args.out, json.dumps(doc, indent=1) + "\n")
-    print(f"wrote {args.out}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
