@@ -11,7 +11,7 @@ openings.  The ROS format carries no openings: the YAML lists them in comments,
 and the command printed for each map imports it with one inlet and one outlet
 (the CLI takes one of each)::
 
-    python benchmarks/make_floorplans.py
+    python scripts/make_floorplans.py
     dgse import-floorplan benchmarks/floorplans/office-3.yaml --inlet west 9.4 10.3 \\
         --outlet east 13.3 14.5 -o office-3.npz
 """
@@ -42,7 +42,9 @@ def round_trip(layout: Layout, yaml_path: Path) -> Layout:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("-o", "--out", type=Path, default=Path(__file__).parent / "floorplans")
+    ap.add_argument(
+        "-o", "--out", type=Path, default=Path(__file__).resolve().parents[1] / "benchmarks" / "floorplans"
+    )
     args = ap.parse_args()
     for seed in SEEDS:
         layout = random_office_floor(seed)
