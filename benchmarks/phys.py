@@ -24,13 +24,17 @@ only these), 2000-2019 test scenarios (never tuned on); ``../shared/reference-ca
   ``phys_gsl_20_map_sqrt`` is ``dgse evaluate`` on the same cases: ``dgse evaluate
   benchmarks/results/phys_gsl_20_tilt/_test_cases -m dgse-phys --knowledge map -n N --trials 20
   --seed 0 --threads 1 --json benchmarks/results/phys_gsl_20_map_sqrt/test_dgse-phys_map_N.json``
-  (and ``../shared/reference-cases`` for ``reference_...``).
+  (and ``../shared/reference-cases`` for ``reference_...``).  The folders with a
+  ``summary.json`` keep their gzipped journals, not the per-row JSONs: ``gunzip`` them and
+  run the folder's command again, which finds every estimate in the journals and writes
+  the JSONs and the summary without estimating again.
 * ``robustness``: dgse-phys where its physics is wrong, the same random readings with the
   physics off in one way at a time (:data:`dgse.bench.scenarios.VARIANTS`: filament readings;
   the wind told at ``wind`` rotated, smoothed or twice too fast); mean and median SL error,
   mean CE and the credible sets' calibration error per variant, method and count; every
   estimate journaled (``OUT/journal[-TAG].jsonl``), ``--paired DIR`` compares two runs on the
-  estimates both made (``OUT/paired.md``)::
+  estimates both made (``OUT/paired.md``).  ``benchmarks/results/phys_robustness/`` is its
+  default folder (``--seeds 2000-2005 --trials 1``), whose ``_cases`` the other runs share::
 
       python benchmarks/phys.py robustness --seeds 2000-2019 --counts 50 --trials 5 \\
           --variants steady filament --methods METHOD --tag TAG \\

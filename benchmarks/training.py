@@ -75,6 +75,13 @@ under ``benchmarks/results/`` (``benchmarks/gpu_train.sh`` is the one-lease GPU 
       python benchmarks/training.py gdm data/store.h5
       python benchmarks/training.py gdm data/store.h5 --methods ggmrf --max-cases 50
 
+The results beside these that the ``dgse`` command made (their commands are in the README
+where it cites them): ``dataset_stats.{json,png}`` (``dgse data stats STORE --plot``),
+``dgse-s_*.json`` and ``dgse-s-equal-steps_test60.json`` (``dgse evaluate``),
+``search_2threads_test6.json`` (``dgse search``), and the ``history.csv`` of the shipped
+models' ``dgse train`` runs (``dgse-{o,p,s}-small_history.csv``,
+``dgse-s-equal-steps_history.csv``, ``size_error/dgse-s-sizes_history.csv``).
+
 PyTorch and matplotlib are imported by the commands that use them.
 """
 
