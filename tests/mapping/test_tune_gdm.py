@@ -1,28 +1,23 @@
-"""benchmarks/tune_gdm.py on a tiny store: validation split only, a loadable tuning file."""
+"""GDM tuning on a tiny store (dgse.bench.gdm_tuning, `benchmarks/training.py gdm`): validation
+split only, a loadable tuning file."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
+import runpy
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from dgse.bench.gdm_tuning import tune
 from dgse.data.store import DatasetStore
+from dgse.errors import InputDataError
 from dgse.mapping import load_tuning
 from dgse.mapping.gmrf import GGMRF
 from dgse.world.case import Case
 
-SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "tune_gdm.py"
-
-
-def _load_script():
-    spec = importlib.util.spec_from_file_location("tune_gdm", SCRIPT)
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "training.py"
 
 
 def _layout(name: str) -> list[Case]:
@@ -65,7 +60,7 @@ def store(tmp_path_factory) -> Path:
 
 
 def test_tuning_writes_a_loadable_file_from_the_validation_split(store, tmp_path):
-    mod = _load_script()
+    script = runpy.run_path(str(SCRIPT), run_name="training")
     grid = {
         "kdmv": {"sigma": [0.1, 0.38]},
         "kdmvw": {"sigma": [0.38], "gamma": [0.33]},
@@ -76,7 +71,7 @@ def test_tuning_writes_a_loadable_file_from_the_validation_split(store, tmp_path
     (tmp_path / "grid.json").write_text(json.dumps(grid))
     out = tmp_path / "gdm_tuning.json"
     args = [str(store), "--out", str(out), "--grid", str(tmp_path / "grid.json"), "--configs-per-env", "1"]
-    assert mod.main(args) == 0
+    assert script["main"](["gdm", *args]) == 0
     doc = json.loads(out.read_text())
     assert doc["split"] == "val" and doc["n_samples"] == 2  # 2 val environments x 1 configuration
     assert set(doc["methods"]) == set(grid)
@@ -88,14 +83,13 @@ def test_tuning_writes_a_loadable_file_from_the_validation_split(store, tmp_path
 
 
 def test_random_observations_are_seeded(store):
-    mod = _load_script()
     grid = {"ggmrf": {"sigma_r": [1.128]}}
-    kw = dict(mode="random", counts=(10, 20), seed=4, log=lambda *_: None)
-    a = mod.tune(store, ["ggmrf"], grid, **kw)
-    b = mod.tune(store, ["ggmrf"], grid, **kw)
+    kw = dict(mode="random", counts=(10, 20), seed=4)
+    a = tune(store, ["ggmrf"], grid, **kw)
+    b = tune(store, ["ggmrf"], grid, **kw)
     assert a["n_samples"] == 4
     assert [(r["rmse"], r["nll"]) for r in a["search"]["ggmrf"]] == [
         (r["rmse"], r["nll"]) for r in b["search"]["ggmrf"]
     ]
-    with pytest.raises(SystemExit, match="unknown method"):
-        mod.tune(store, ["nope"], grid, log=lambda *_: None)
+    with pytest.raises(InputDataError, match="unknown method"):
+        tune(store, ["nope"], grid)

@@ -133,7 +133,7 @@ def test_ros_map_round_trip(tmp_path, floors, seed):
 
 @pytest.mark.parametrize("seed", [3, 6])
 def test_committed_floorplans_are_the_generated_floors(seed):
-    """benchmarks/floorplans/ is what benchmarks/make_floorplans.py makes with today's generator."""
+    """benchmarks/floorplans/ is what scripts/make_floorplans.py makes with today's generator."""
     fp = load_ros_map(FLOORPLANS / f"office-{seed}.yaml")
     assert np.array_equal(fp.occupancy, random_office_floor(seed).occupancy)
     assert (FLOORPLANS / f"office-{seed}.pgm").stat().st_size < 200_000

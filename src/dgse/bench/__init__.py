@@ -1,8 +1,11 @@
 """Benchmark suites that reproduce the paper's experiments, and the HTML report.
 
 ``dgse bench SUITE [--quick] --out DIR`` runs :func:`run_suite`; ``dgse report
-DIR`` turns the results into one self-contained HTML page
-(:func:`dgse.bench.report.write_report`).  Each suite writes JSON, CSV and PNG
+DIR`` writes ``DIR/summary.md`` from the suites' result files
+(:func:`dgse.bench.summary.write_summary`) and turns the results into one self-contained
+HTML page (:func:`dgse.bench.report.write_report`).  Beside the suites, the package holds
+what the measurement scripts of ``benchmarks/`` share: :mod:`dgse.bench.scenarios`,
+:mod:`dgse.bench.parallel` and :mod:`dgse.bench.gdm_tuning`.  Each suite writes JSON, CSV and PNG
 files plus a manifest ``suite.json`` into ``DIR/<suite>/``
 (:mod:`dgse.bench.core`).
 

@@ -10,7 +10,8 @@ file (``DIR/report.html`` by default) that needs nothing else:
   significant digits), with their captions;
 * each suite shows its title, description, the exact command, wall time,
   versions and hardware, notes, and its sections (text, figures, tables);
-* ``DIR/summary.md``, when it exists, is rendered at the top of the page.
+* ``DIR/summary.md`` is rendered at the top of the page: it is written first, from the
+  suites' result files (:func:`dgse.bench.summary.write_summary`), so it is never typed by hand.
 
 Text (descriptions, section text, notes, captions and ``summary.md``) is
 read as a small subset of Markdown (:func:`markdown_to_html`): paragraphs,
@@ -45,7 +46,7 @@ __all__ = ["format_value", "markdown_to_html", "write_report"]
 
 #: The file the report is written to inside the results directory by default.
 REPORT_NAME = "report.html"
-#: Markdown rendered at the top of the page when it exists in the results directory.
+#: Markdown rendered at the top of the page (written by :func:`dgse.bench.summary.write_summary`).
 SUMMARY_NAME = "summary.md"
 
 _MIME = {
@@ -645,12 +646,20 @@ def _load(directory: Path) -> list[dict[str, Any]]:
     return _order(manifests)
 
 
-def write_report(directory: str | os.PathLike[str], output: str | os.PathLike[str] | None = None) -> Path:
-    """Write the HTML page of every suite's results under ``directory``; return its path.
+def write_report(
+    directory: str | os.PathLike[str],
+    output: str | os.PathLike[str] | None = None,
+    *,
+    summary: bool = True,
+) -> Path:
+    """Write ``DIR/summary.md`` and the HTML page of every suite's results under ``directory``;
+    return the page's path.
 
     Args:
         directory: the output directory of ``dgse bench`` (``DIR/<suite>/suite.json``).
         output: the HTML file (default ``DIR/report.html``).
+        summary: write ``DIR/summary.md`` from the suites' result files first
+            (:func:`dgse.bench.summary.write_summary`); False renders the one that is there.
 
     Raises:
         InputDataError: ``directory`` does not exist or holds no suite results.
@@ -658,6 +667,10 @@ def write_report(directory: str | os.PathLike[str], output: str | os.PathLike[st
     root = Path(directory)
     manifests = _load(root)
     out = Path(output) if output is not None else root / REPORT_NAME
+    if summary:
+        from dgse.bench.summary import write_summary
+
+        write_summary(root, root / SUMMARY_NAME)
 
     count = _Counter()
     anchors = []
@@ -687,11 +700,10 @@ def write_report(directory: str | os.PathLike[str], output: str | os.PathLike[st
     if quick:
         sub.append("includes quick (CI-sized) runs")
     body.append('<p class="sub">' + " \u00b7 ".join(sub) + "</p></header>")
-    summary = root / SUMMARY_NAME
-    if summary.is_file():
-        body.append(
-            f'<section class="summary">{markdown_to_html(summary.read_text(errors="replace"), 2)}</section>'
-        )
+    summary_file = root / SUMMARY_NAME
+    if summary_file.is_file():
+        html_text = markdown_to_html(summary_file.read_text(errors="replace"), 2)
+        body.append(f'<section class="summary">{html_text}</section>')
     body.append(_toc_html(manifests, anchors))
     if unfinished:
         body.append(

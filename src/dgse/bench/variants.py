@@ -83,7 +83,7 @@ def _training_text() -> str:
     if len(steps) < len(METHODS) or max(steps) > 1.1 * min(steps):
         text += (
             " Their training budgets differ by more than 10 %: compare them at equal steps with the "
-            "validation curves of benchmarks/training_curves.py."
+            "validation curves of benchmarks/training.py curves."
         )
     return text
 

@@ -2,8 +2,9 @@
 
 ``dgse bench SUITE [SUITE ...] [--quick] --out DIR [--data STORE] [--seed S]``
 runs suites (:mod:`dgse.bench`; ``all`` for every one) into ``DIR/<suite>/``;
-``dgse report DIR [-o FILE]`` writes the self-contained HTML page
-(``DIR/report.html`` by default).
+``dgse report DIR [-o FILE]`` writes ``DIR/summary.md`` from the suites' result files
+(:mod:`dgse.bench.summary`) and the self-contained HTML page (``DIR/report.html`` by default)
+that shows it first.
 """
 
 from __future__ import annotations
@@ -56,7 +57,9 @@ def bench_cmd(
     ] = None,
     seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of scenarios and trials.")] = 0,
     threads: Annotated[int | None, typer.Option("--threads", help="PyTorch CPU threads.")] = None,
-    report: Annotated[bool, typer.Option("--report/--no-report", help="Also write DIR/report.html.")] = True,
+    report: Annotated[
+        bool, typer.Option("--report/--no-report", help="Also write DIR/summary.md and DIR/report.html.")
+    ] = True,
     progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Progress bars.")] = True,
     knowledge: KnowledgeOption = "map",
 ) -> None:
@@ -112,7 +115,7 @@ def report_cmd(
         Path | None, typer.Option("--out", "-o", "--output", help="HTML file (default DIR/report.html).")
     ] = None,
 ) -> None:
-    """Write one self-contained HTML page (figures embedded) from the results in DIR."""
+    """Write DIR/summary.md and one self-contained HTML page (figures embedded) from the results in DIR."""
     from dgse.bench.report import write_report
 
     check_output_file(output, "report")

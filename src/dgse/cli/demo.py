@@ -79,7 +79,7 @@ def demo_cmd(
         typer.Option(
             "--eta",
             help="Entropy termination H <= eta log N.  Default: 0.78 for the shipped DGSE-S, tuned on "
-            "the validation split (benchmarks/tune_eta.py; its posteriors are broader than the paper's), "
+            "the validation split (benchmarks/training.py eta; its posteriors are broader than the paper's), "
             "else the paper's 0.65.",
         ),
     ] = None,

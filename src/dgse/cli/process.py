@@ -8,7 +8,7 @@ the interpreter shuts down (0.15 s).  :func:`start` raises the
 first-generation threshold so that those passes are rare, :func:`finish`
 moves every live object to the collector's permanent generation
 (:func:`gc.freeze`) so that the shutdown does not scan them: 1.37 s for the
-same solve (``python benchmarks/process_startup.py``,
+same solve (``python benchmarks/solver.py startup``,
 ``benchmarks/results/process_startup.md``).
 
 Only the console script calls them (:func:`dgse.cli.main.run`), never a

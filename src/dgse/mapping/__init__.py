@@ -46,7 +46,7 @@ Conventions shared by every method here
 * **Parameters** are the published defaults (spec ``baselines.md``) in units of
   the 0.1 m grid; they are used unchanged at other resolutions (no rescaling).
   A tuning file (``benchmarks/results/gdm_tuning.json``, written by
-  ``benchmarks/tune_gdm.py`` from the validation split) overrides them when
+  ``python benchmarks/training.py gdm`` from the validation split) overrides them when
   passed as ``tuning=path`` to an estimator; explicit keyword arguments override
   both (:func:`resolve_params`).
 

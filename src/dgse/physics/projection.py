@@ -36,9 +36,9 @@ turbulence fields the transport needs.  This module turns it into
    long before they have (test scenario 2005, a nearly laminar flow: median
    ``nu_t`` 21 times the coupled solve's at 1e-4, 1.7 times at 1e-6; the
    plume on its own flow 1.23 off in log(1 + ppm) RMSE against 0.15;
-   ``python benchmarks/frozen_turbulence.py``).
+   ``python benchmarks/phys.py turbulence``).
 
-On validation scenarios 900-907 (``python benchmarks/tune_projection.py``)
+On validation scenarios 900-907 (``python benchmarks/phys.py projection``)
 the tighter tolerance took the plume on the projected wind from 0.024 to
 0.021 in log(1 + ppm) RMSE with the openings known and from 0.047 to 0.044
 with them taken from the wind, for about twice the time (2.0-2.5 s a map
@@ -90,7 +90,7 @@ LENGTH_FRACTION = 0.07
 #: Open boundary faces (before they are split into inlets and outlets by the flow).
 OPEN = INLET
 #: Without the openings, an edge face is open where the normal wind is at least this fraction
-#: of the mean speed: chosen on generated validation scenarios (benchmarks/tune_projection.py).
+#: of the mean speed: chosen on generated validation scenarios (``python benchmarks/phys.py projection``).
 DEFAULT_OPEN_FRACTION = 0.75
 #: Residual criterion of the frozen k-epsilon (module docstring, point 4).
 TURBULENCE_TOLERANCE = 1e-6

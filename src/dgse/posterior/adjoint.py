@@ -88,7 +88,7 @@ noise weights.
 
 Responses are clipped at 0 (:meth:`FlowModel.responses`): the second-order
 upwind operator's rows dip below zero just downstream of the sensor (down to
-minus 0.18 of their peak: ``benchmarks/phys_diagnostics.py``), and a zero
+minus 0.18 of their peak: ``python benchmarks/phys.py diagnostics``), and a zero
 reading then favoured exactly those candidates.
 
 Wind
@@ -668,7 +668,8 @@ def censored_correction(
     ``ranking`` (default :data:`CENSORED_RANKING`): ``"plug-in"`` ranks by that plug-in
     value.  It is an approximation: after few positive readings the noise posterior is
     broad and the plug-in factor of a candidate the zeros see well can sit hundreds of nats
-    below the integrated one, so the cut leaves out mass (``benchmarks/censored_cut.py``:
+    below the integrated one, so the cut leaves out mass (``benchmarks/censored_cut.py`` at
+    commit 86ae264:
     up to 74 % of the posterior after 3 readings of a search).  ``"bound"`` ranks by an
     upper bound (the positive readings' evidence times ``1/2`` per zero the response
     reaches) and so leaves out at most ``tail`` of the mass (why it is not the default:

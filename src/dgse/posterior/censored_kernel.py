@@ -22,8 +22,8 @@ the zeros' ``log Phi`` (:func:`_log_phi_sum`, and the Mills ratio of the Newton 
 cubic Hermite between nodes 1/64 apart, values and slopes from SciPy, within 1e-10 nats):
 3.5 ns a value against 24 ns for ``erfc`` and ``log``, which took 4-8 % off the kernel's
 time on the recorded calls of two search episodes (2026-11-28, timed by throwaway scripts
-that are not kept; ``benchmarks/phys_step_time.py`` is the kept measure of a search
-step).  The quantiles of the rate nodes (:func:`_rate_nodes`) are the larger share and keep
+that are not kept; ``python benchmarks/search.py step-time`` is the kept measure of a
+search step).  The quantiles of the rate nodes (:func:`_rate_nodes`) are the larger share and keep
 the exact functions.
 
 Most zeros hardly reach most candidates (a sensor upwind or behind a wall): those whose
@@ -33,15 +33,15 @@ pass visits only the zeros the candidate reaches.  With that, and Newton's step 
 node's quantile only where Acklam's error could exceed 1e-5 of the nodes' spread
 (:data:`_QUANTILE_SHIFT`), the kernel took 13.9 instead of 27.1 microseconds a candidate on
 calls recorded in test 2005's search (2026-11-29), its factors within 5e-8 nats of the
-kernel before (``benchmarks/censored_kernel_time.py``).
+kernel before (``benchmarks/censored_kernel_time.py``, in git history at commit 86ae264).
 
 The integral over ``log tau`` is Gauss-Hermite around a Newton mode found with the rate at
 its estimate from the positive readings.  Where those leave a rate near 0 plausible (few
 of them, or an estimate above ``q_max``) and the zeros see the candidate, the mass sits at
 a small rate, away from that mode; a probe of the integrand near the positive readings'
 noise precision detects it, and :func:`_scan_log_integral` integrates such a candidate
-without a guessed mode (``benchmarks/censored_accuracy.py`` measures both against a
-brute-force integral).
+without a guessed mode (``benchmarks/censored_accuracy.py``, in git history at commit
+86ae264, measured both against a brute-force integral).
 
 Given ``tau``, the rate's nodes sit at quantiles of the positive readings' normal
 posterior of it.  With a noise floor far above the plume, half the readings are zeros
@@ -85,7 +85,7 @@ _PROBES = np.array([0.0, -2.0])
 #: A rate estimate outside ``[0, q_max]`` is scanned only up to ``_SCAN_OUTSIDE_ALPHA``
 #: (about 9 positive readings): later, such candidates are many and the zeros too (a
 #: scan costs ``O(zeros)`` per evaluation), and the probe alone catches most misses
-#: (``benchmarks/censored_accuracy.py``).
+#: (``benchmarks/censored_accuracy.py`` at commit 86ae264).
 _SCAN_REACH = 8.0
 _FD = 1e-2
 _SCAN_DROP = 20.0
@@ -102,7 +102,7 @@ _TILT_NARROW = 0.5
 #: puts it right (:func:`_rate_nodes`).  At 1e-7 (2026-11-28) the steps took about a quarter
 #: of the kernel's time (a throwaway replay, not kept); at 1e-5, with the faint zeros' series,
 #: the factors moved by at most 5e-8 nats on test 2005's recorded calls
-#: (``benchmarks/censored_kernel_time.py``).
+#: (``benchmarks/censored_kernel_time.py`` at commit 86ae264).
 _QUANTILE_SHIFT = 1e-5
 #: The most Newton steps to that rate's mode, and how close (in its spreads) they get.
 _TILT_NEWTON = 30
@@ -392,7 +392,7 @@ def _log_ndtr_series(order: int) -> np.ndarray:
 #: ``[0, 0.2]``, checked by a test): their power sums ``sum b^k`` stand for them, so a pass
 #: over the zeros visits only those the candidate reaches.  Late in a search most zeros
 #: are far upwind or across walls of most candidates (88 % of the (candidate, zero) pairs of
-#: test 2005's recorded calls, ``benchmarks/censored_kernel_time.py``).  Above the cap the
+#: test 2005's recorded calls, ``benchmarks/censored_kernel_time.py`` at commit 86ae264).  Above the cap the
 #: sums take every zero.
 _SERIES_ORDER = 8
 _SERIES_X = 0.2

@@ -132,7 +132,7 @@ def mix_posteriors(
 WIND_HOPELESS_NATS = 30.0
 #: The given field's prior weight at knowledge ``wind`` (``given_wind_prior``); the built-in
 #: RANS flows of its openings share the rest.  Chosen on validation 900-923 (2026-11-29;
-#: ``python benchmarks/phys_robustness.py --seeds 900-923 --counts 50 150 --trials 2 --variants
+#: ``python benchmarks/phys.py robustness --seeds 900-923 --counts 50 150 --trials 2 --variants
 #: steady wind_smoothed wind_x2 wind_rotated filament --methods dgse-phys@wind -E
 #: given_wind_prior=P``, 48 estimates a cell, chance calibration error 0.043), 0.5 against 1 (the
 #: given field alone): mean SL error equal or lower in all 10 cells (smoothed field at 150
