@@ -180,11 +180,6 @@ class Knowledge:
             return cls("openings", **base)
         return cls("wind", wind=case.wind, inlet_velocity=case.inlet_velocity, **base)
 
-    @classmethod
-    def from_map(cls, occupancy: np.ndarray, resolution: float, name: str = "") -> Knowledge:
-        """The paper's setting: the map alone."""
-        return cls("map", occupancy, resolution, name=name)
-
     # -- queries -----------------------------------------------------------------------------
     @property
     def has_openings(self) -> bool:
