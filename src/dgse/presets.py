@@ -146,11 +146,14 @@ PRESETS: dict[str, Preset] = {
         Preset(
             "dgse-phys",
             "dgse-phys",
-            search_estimator_options={"noise_weights": "mixture", "learned_floor": 0.0},
+            search_estimator_options={"fusion.floor": 0.0},
             planner_options=PHYS_SEARCH_PLANNER,
             at_level={
                 "map": {
-                    "search_estimator": {"effective_readings": 30.0},
+                    "search_estimator": {
+                        "evidence.effective_readings": 30.0,
+                        "evidence.effective_growth": 0.0,
+                    },
                     "planner": {"max_wind_misfit": 0.7, "deadline_estimate_radius_m": 1.0},
                 }
             },

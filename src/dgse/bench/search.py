@@ -736,8 +736,8 @@ def _level_extras(level: str) -> str:
     """The report's words for what dgse-phys's preset adds at ``level`` ('' for nothing)."""
     extra = {k: v for part in PRESETS["dgse-phys"].at_level.get(level, {}).values() for k, v in part.items()}
     words = []
-    if "effective_readings" in extra:
-        words.append(f"the gas evidence counts at most {extra['effective_readings']:g} readings")
+    if "evidence.effective_readings" in extra:
+        words.append(f"the gas evidence counts at most {extra['evidence.effective_readings']:g} readings")
     if "max_wind_misfit" in extra:
         share = f"{extra['max_wind_misfit']:.0%}"
         words.append(f"no stop while the best flow leaves over {share} of the wind unexplained")

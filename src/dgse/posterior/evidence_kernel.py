@@ -6,7 +6,7 @@ needs, per noise-weight hypothesis ``kappa``, the sums ``sum_i w a_is^2``, ``sum
 Done with NumPy, the positive readings' rows are first copied out of the ``(m, N)`` responses,
 squared, and (with each candidate's own noise weights) multiplied into the ``(m, N)`` weights
 ``r`` and ``1 / r^2``: in a search step most of that time went into writing those
-temporaries, not into the sums (issue 12).  The kernels here read the rows in place, once, and
+temporaries, not into the sums.  The kernels here read the rows in place, once, and
 keep only the sums:
 
 - :func:`row_sums`: weights shared by every candidate (homoscedastic, ``w = 1``, or the
@@ -83,9 +83,8 @@ def candidate_sums_many(
     Args:
         A: ``(m, N)`` responses; rows: indices of the readings to sum; q: ``(N,)`` each
             candidate's rate (``>= 0``); floor: ``(m,)`` the least concentration a reading's weight
-            scales with (zeros: a candidate's own prediction, ``noise_weights="candidate"``; the
-            plug-in concentrations: the larger of the two, ``"larger"``); z: ``(m,)`` readings;
-            cs: ``(K,)`` the ``kappa / cbar`` (``>= 0``).
+            scales with (zeros: a candidate's own prediction, ``noise_weights="candidate"``);
+            z: ``(m,)`` readings; cs: ``(K,)`` the ``kappa / cbar`` (``>= 0``).
 
     Every ``c`` gets the same arithmetic (and bits) as it would alone.  Each reading's row is
     read once; the loop over the candidates is innermost, so that it runs in vector registers.
