@@ -26,7 +26,7 @@ import numpy as np
 from phys_search import journal_episodes, map_estimator_at_end, step_observations  # this folder's
 
 from dgse.files import write_text
-from dgse.planning.planners import UtilityPlanner, declared_source
+from dgse.planning.planners import Deadline, UtilityPlanner, declared_source
 from dgse.presets import PRESETS
 from dgse.world.case import Case
 
@@ -51,7 +51,7 @@ def episode_row(case: Case, row: dict) -> dict:
         "wind_misfit": belief.info["wind_misfit"],
     }
     for r in RADII:
-        planner = UtilityPlanner(deadline_estimate_radius_m=r)
+        planner = UtilityPlanner(deadline=Deadline(estimate_radius_m=r))
         out[f"disk{r:g}m"] = error(declared_source(planner, belief, True))
     if abs(out["mean"] - row["error_m"]) > 1e-6:
         raise SystemExit(f"rebuilt mean {out['mean']:.3f} m off, the search's {row['error_m']:.3f} m")

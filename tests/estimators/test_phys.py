@@ -499,11 +499,12 @@ def test_search_planner_at_map_holds_stops_and_declares_the_heaviest_disk():
     from dgse.planning.planners import get_planner
 
     at_map = get_planner("utility", **search_planner("map"))
-    assert at_map.max_wind_misfit == pytest.approx(0.7)
-    assert at_map.deadline_estimate_radius_m == pytest.approx(1.0) and at_map.deadline_estimate == "disk"
+    assert at_map.stop.max_wind_misfit == pytest.approx(0.7)
+    assert at_map.deadline.estimate_radius_m == pytest.approx(1.0)
     for level in ("openings", "wind"):
         planner = get_planner("utility", **search_planner(level))
-        assert planner.max_wind_misfit is None and planner.deadline_estimate_radius_m is None
+        assert planner.stop.max_wind_misfit is None and planner.deadline.estimate_radius_m is None
+        assert planner.stop.mass_radius_m == at_map.stop.mass_radius_m == 1.0
 
 
 def test_gas_evidence_tempering_follows_the_level_and_searches_keep_theirs(case):
