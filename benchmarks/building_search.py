@@ -114,7 +114,7 @@ def main() -> None:
     cases = make_cases(args.out, args.cases, args.resolution, tuple(args.size))
     stem = f"building{args.cases}_{args.resolution:g}m_dgse-phys_openings"
     stem += f"_{args.tag}" if args.tag else ""
-    planner = {"min_observations": 5, **PRESETS["dgse-phys"].planner_options_at("openings")}
+    planner = {"stop.min_observations": 5, **PRESETS["dgse-phys"].planner_options_at("openings")}
     estimator = PRESETS["dgse-phys"].estimator_options_at("openings", search=True)
     settings = {
         "cases_dir": str(cases),

@@ -1,17 +1,17 @@
-"""How much of the source posterior the zeros' cut moves (issue 12): the censored correction
-with its default ``tail``, ranked by the plug-in value and by an upper bound, against the
-same correction computed for every candidate.
+"""How much of the source posterior the zeros' cut moves: the censored correction with its
+default ``tail`` (candidates ranked by the plug-in value) against the same correction
+computed for every candidate.
 
-Runs one dgse-phys search episode (knowledge ``openings``, ``SEARCH_PLANNER``) on a test
+Runs one dgse-phys search episode (knowledge ``openings``, the preset's planner) on a test
 scenario, keeps the arguments of every ``every``-th call of
 :func:`dgse.posterior.adjoint.censored_correction`, and for each reports the total
-variation between each ranking's posterior and the full one, and how many candidates got
+variation between the cut posterior and the full one, and how many candidates got
 the integrated factor::
 
     python benchmarks/censored_cut.py --case test2001_src0
 
-Writes ``benchmarks/results/censored_cut.json``.  The episode runs with the default
-ranking (:data:`dgse.posterior.adjoint.CENSORED_RANKING`).
+Writes ``benchmarks/results/censored_cut.json``.  (An exact ranking by an upper bound was
+compared here too and removed: ``docs/decisions.md``.)
 """
 
 from __future__ import annotations
@@ -23,9 +23,8 @@ from pathlib import Path
 import numpy as np
 from phys_search import cases_dir, record_calls
 
-import dgse.estimators.phys as phys
 from dgse.files import write_text
-from dgse.posterior import adjoint
+from dgse.posterior import adjoint, mixture
 
 
 def _posterior(logl: np.ndarray, factor: np.ndarray) -> np.ndarray:
@@ -41,9 +40,9 @@ def main() -> None:
     ap.add_argument("-o", "--out", type=Path, default=Path("benchmarks/results"))
     args = ap.parse_args()
     path = cases_dir(args.out / "phys_search", "test", None) / f"{args.case}.npz"
-    # the estimator calls it by keyword; the ranking and the tail are what is compared here
-    calls = record_calls(phys, "censored_correction", path, args.every)
-    kept = [{k: v for k, v in kw.items() if k not in ("ranking", "tail")} for _, kw in calls]
+    # the estimator calls it by keyword (through dgse.posterior.mixture); the tail is what is compared
+    calls = record_calls(mixture, "censored_correction", path, args.every)
+    kept = [{k: v for k, v in kw.items() if k not in ("tail", "memo")} for _, kw in calls]
     evaluated = [0]
     factor = adjoint._censored_log_factor
 
@@ -59,30 +58,28 @@ def main() -> None:
             p_full = _posterior(kw["logl"], full)
             z = kw["z"]
             row = {"readings": int(z.size), "zeros": int((z <= 0).sum()), "candidates": int(kw["logl"].size)}
-            for ranking in ("plug-in", "bound"):
-                evaluated[0] = 0
-                cut = adjoint.censored_correction(**kw, ranking=ranking)
-                row[ranking] = {
-                    "integrated": evaluated[0],
-                    "total_variation": float(0.5 * np.abs(_posterior(kw["logl"], cut) - p_full).sum()),
-                }
+            evaluated[0] = 0
+            cut = adjoint.censored_correction(**kw)
+            row["plug-in"] = {
+                "integrated": evaluated[0],
+                "total_variation": float(0.5 * np.abs(_posterior(kw["logl"], cut) - p_full).sum()),
+            }
             rows.append(row)
     finally:
         adjoint._censored_log_factor = factor
     for r in rows:
-        a, b = r["plug-in"], r["bound"]
+        a = r["plug-in"]
         print(
             f"{r['readings']:4d} readings ({r['zeros']:3d} zeros) of {r['candidates']} candidates: "
-            f"plug-in ranking: {a['integrated']:5d} integrated, TV {a['total_variation']:.3f}; "
-            f"bound: {b['integrated']:5d}, TV {b['total_variation']:.3f}"
+            f"{a['integrated']:5d} integrated, TV {a['total_variation']:.3f}"
         )
     out = args.out / "censored_cut.json"
-    summary = {k: max(r[k]["total_variation"] for r in rows) if rows else None for k in ("plug-in", "bound")}
+    summary = {"plug-in": max(r["plug-in"]["total_variation"] for r in rows) if rows else None}
     print("largest TV:", summary)
     write_text(
         out,
         json.dumps(
-            {"case": args.case, "tail": adjoint.CENSORED_TAIL, "ranking": adjoint.CENSORED_RANKING,
+            {"case": args.case, "tail": adjoint.CENSORED_TAIL, "ranking": "plug-in",
              "largest_total_variation": summary, "calls": rows},
             indent=1,
         ),

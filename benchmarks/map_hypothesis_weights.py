@@ -10,7 +10,7 @@ scenario's (centre within 1 m, same side: ``T`` both, ``i`` inlet only,
 
     python benchmarks/map_hypothesis_weights.py \\
         benchmarks/results/phys_search/validation3-files23_*_prop15-s0-partial.journal.jsonl \\
-        --cases 953 954 -E map_proposals=15 -E noise_weights='"mixture"' \\
+        --cases 953 954 -E flows.map_proposals=15 \\
         -o benchmarks/results/phys_search/map_hypothesis_weights_prop15.json
 """
 

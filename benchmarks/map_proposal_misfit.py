@@ -55,7 +55,7 @@ def episode_row(name: str, case: Case, row: dict) -> dict:
     hyps = est.hypotheses(obs)  # proposed from these readings
     # the same call the estimator makes, for the openings themselves (its hypotheses keep labels)
     props = potential_flow_proposals(
-        case.occupancy, case.resolution, obs.cells, obs.wind, top=est.map_proposals
+        case.occupancy, case.resolution, obs.cells, obs.wind, top=est.flows.map_proposals
     )
     if [p.label() for p in props] != [h.label for h in hyps]:
         raise SystemExit(f"{name}: the proposals differ from dgse-phys's hypotheses")

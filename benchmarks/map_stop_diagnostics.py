@@ -1,4 +1,4 @@
-"""What a mass stop at knowledge ``map`` knew when it fired (issue 12: 95 % of stops within 2 m).
+"""What a mass stop at knowledge ``map`` knew when it fired (the aim: 95 % of stops within 2 m).
 
 For every episode of searches journaled with ``--steps`` (``benchmarks/phys_search.py``) that
 ended with a mass stop, the belief the stop saw is rebuilt from the recorded readings
@@ -10,10 +10,10 @@ stop's error:
 - ``readings``; the flow hypotheses' largest weight and how many hold at least 1 %;
 - ``agreement``: the weight of the hypotheses whose own source mode lies within 1 m of the
   mixture's most probable cell (1: every weighty flow puts the source there);
-- ``wind_misfit`` (the best flow's, as the ``max_wind_misfit`` hold reads it), ``gas_misfit``;
+- ``wind_misfit`` (the best flow's, as the ``stop.max_wind_misfit`` hold reads it), ``gas_misfit``;
 - ``network_mass_1m``: the mass DGSE-S's own source belief (from the same readings) puts
-  within 1 m of the mixture's most probable cell (what the planner's ``min_learned_mass`` hold
-  reads), ``network_peak_mass_1m``: the most it puts
+  within 1 m of the mixture's most probable cell (what a hold on the network's agreement would
+  read; ``docs/decisions.md``), ``network_peak_mass_1m``: the most it puts
   within 1 m of any free cell, and ``network_mode_m``: how far its mode is;
   ``network_error_m``: how far DGSE-S's posterior mean is from the source (for the record: a
   rule cannot see it).

@@ -6,9 +6,9 @@ readings: does a proposal pair an inlet and an outlet whose centres lie within
 
 * ``potential_flow``: :func:`dgse.physics.openings.potential_flow_proposals` from the
   readings, the best 5 pairs (what ``dgse-phys --knowledge map`` uses);
-* ``dgse_s_wind``: :func:`dgse.physics.openings.wind_field_proposals` on DGSE-S's
-  mean wind from the same readings (``--model``: the shipped network by default, or a
-  weights file; up to 5 x 5 pairs).
+* ``dgse_s_wind``: :func:`wind_field_proposals` (this script's: the pairs of
+  :func:`dgse.physics.openings.propose_openings`) on DGSE-S's mean wind from the same
+  readings (``--model``: the shipped network by default, or a weights file; up to 5 x 5 pairs).
 
     python benchmarks/opening_proposals.py -o benchmarks/results/opening_proposals.json
     python benchmarks/opening_proposals.py --model benchmarks/results/gpu_training/dgse-s-gpu.safetensors \
@@ -21,14 +21,39 @@ import argparse
 import json
 from pathlib import Path
 
+import numpy as np
+
+from dgse.errors import InputDataError
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.evaluate import draw_observations
 from dgse.files import write_text
-from dgse.physics.openings import potential_flow_proposals, wind_field_proposals
+from dgse.physics.openings import OpeningProposal, potential_flow_proposals, propose_openings
 from dgse.physics.scenario import random_cases
 
 SEEDS = range(900, 916)
 COUNTS = (20, 50, 150)
+
+
+def wind_field_proposals(
+    occupancy: np.ndarray,
+    resolution: float,
+    wind: np.ndarray,
+    cells: np.ndarray,
+    readings: np.ndarray,
+    top: int,
+) -> list[OpeningProposal]:
+    """The best ``top`` pairs of :func:`~dgse.physics.openings.propose_openings` on a belief's mean
+    wind (``(2, H, W)``) with the readings (``(m, 2)`` m/s at ``cells``) put in where they were
+    taken: up to 5 inflow and 5 outflow runs of at least a tenth of the strongest crossing wind,
+    strongest pair first; none where the wind crosses the edge nowhere."""
+    w = np.array(wind, dtype=np.float64, copy=True)
+    c = np.asarray(cells, dtype=np.int64).reshape(-1, 2)
+    w[:, c[:, 0], c[:, 1]] = np.asarray(readings, dtype=np.float64).reshape(-1, 2).T
+    try:
+        props = propose_openings(occupancy, resolution, w, min_fraction=0.1, max_inlets=5, max_outlets=5)
+    except InputDataError:  # no air crosses the edge, or no separate inflow and outflow
+        return []
+    return props[:top]
 
 
 def _near(proposed, true) -> bool:

@@ -9,8 +9,8 @@
   given, from the same random readings (Table I noise) of one scenario: dgse-phys
   with the openings known and a single candidate speed, for each of ``--speeds``.
 * ``warm_start``: dgse-phys with its full speed grid from the same readings, each
-  speed warm-started from the one below (``warm_start=True``, the default) and solved
-  cold from the coarse grid (``warm_start=False``), and how far the two flows at 1 m/s
+  speed warm-started from the one below (``flows.warm_start=True``, the default) and solved
+  cold from the coarse grid (``flows.warm_start=False``), and how far the two flows at 1 m/s
   differ: wind and ``nu_t`` (relative L2 and the median over free cells of the
   relative difference).
 
@@ -57,7 +57,9 @@ def speed(case: Case, speeds: list[float], readings: int, seed: int) -> list[dic
     knowledge = Knowledge.from_case(case, "openings")
     rows = []
     for v in speeds:
-        est = get_estimator("dgse-phys", knowledge=knowledge, speeds=(v,), refine_speeds=0)
+        est = get_estimator(
+            "dgse-phys", knowledge=knowledge, **{"flows.speeds": (v,), "flows.refine_speeds": 0}
+        )
         b = est.estimate(case.occupancy, case.resolution, obs)
         rows.append({"speed": v, "error_m": b.localization_error(case.source)})
         print(f"v_in {v:g} m/s: {rows[-1]['error_m']:.2f} m off")
@@ -71,7 +73,8 @@ def warm_start(case: Case, readings: int, seed: int) -> dict:
     row: dict = {}
     flows = {}
     for warm in (False, True):
-        est = get_estimator("dgse-phys", knowledge=knowledge, refine_speeds=0, warm_start=warm)
+        opts = {"flows.refine_speeds": 0, "flows.warm_start": warm}
+        est = get_estimator("dgse-phys", knowledge=knowledge, **opts)
         b = est.estimate(case.occupancy, case.resolution, obs)
         tag = "warm" if warm else "cold"
         row[f"{tag}_error_m"] = b.localization_error(case.source)

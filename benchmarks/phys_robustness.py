@@ -267,7 +267,7 @@ def main() -> None:
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="a dgse-phys option, e.g. -E hypothesis_readings=10 (repeatable; give the run its own -o)",
+        help="a dgse-phys option, e.g. -E evidence.effective_readings=50 (repeatable; its own -o)",
     )
     ap.add_argument("--summary-only", action="store_true", help="summarize the journal, estimate nothing")
     ap.add_argument(

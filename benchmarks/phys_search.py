@@ -1,4 +1,4 @@
-"""Active search with dgse-phys (issue 12, part 5): success, error, stops that mean something.
+"""Active search with dgse-phys: success, error, stops that mean something.
 
 Runs the utility planner on generated scenarios with a method at a knowledge
 level and a stop rule, and writes the search metrics plus the share of
@@ -12,38 +12,35 @@ something).  Case sets (made once, into ignored ``_cases_<set>/`` folders):
   hide on 24); a seed whose flow does not converge is left out (a ``.unconverged`` note);
 * ``test``: seeds 2000-2019 (never used for tuning).
 
-Stop rules (``--rule``):
+Stop rules (``--rule``; the utility planner's settings, :mod:`dgse.planning.planners`):
 
-* ``paper``: the entropy test from the 5th reading (``min_observations=5``);
+* ``paper``: the entropy test from the 5th reading (``stop.min_observations=5``);
 * ``paper-eta0.78``: the same with the shipped DGSE-S's threshold (``dgse demo``'s, tuned on
   the validation split by ``benchmarks/tune_eta.py``);
 * ``confirm``: the same, and a stop needs 2 readings within 1 m of the posterior's
-  mode (``confirm_radius_m=1``, ``confirm_readings=2``);
+  mode (``stop.confirm_radius_m=1``, ``stop.confirm_readings=2``);
 * ``mass1m90`` / ``mass2m95``: instead of the entropy test, stop once the posterior
-  holds 90 % within 1 m (95 % within 2 m) of its mode (``mass_radius_m``, ``mass_level``);
+  holds 90 % within 1 m (95 % within 2 m) of its mode (``stop.mass_radius_m``, ``stop.mass_level``);
 * ``mass1m90-disk1m`` / ``mass1m90-disk0.5m``: ``mass1m90``, and the utility's source term
-  is the posterior mass within 1 m (0.5 m) of a cell (``source_radius_m``), not the cell's own;
+  is the posterior mass within 1 m (0.5 m) of a cell (``weights.source_radius_m``), not the cell's own;
 * ``mass1m90-disk1m-deadline60s``: and the search stops with its estimate once less than 60 s
-  of the time limit is left (``deadline_margin_s``); such stops are counted apart
+  of the time limit is left (``deadline.margin_s``); such stops are counted apart
   (``deadline_stops``);
 * ``mass1m90-disk1m-deadline60s-revisit0.5m``: and the variance terms of a cell are divided by
-  one plus the cells measured within 0.5 m of it (``revisit_radius_m``);
-* ``...-revisit0.5m-twice``: and the mass test must pass at two readings in a row, the mode
-  staying within 1 m (``stop_readings=2``);
+  one plus the cells measured within 0.5 m of it (``weights.revisit_radius_m``);
 * ``...-revisit0.5m-confirm1m``: and a stop needs 2 readings within 1 m of the mode (as ``confirm``);
 * ``...-revisit0.5m-gas1m``: and a stop needs 1 reading within 1 m of the mode above twice the
-  estimator's noise floor (``confirm_readings=1``, ``confirm_sigmas=2``): gas smelt there.
+  estimator's noise floor (``stop.confirm_readings=1``, ``stop.confirm_sigmas=2``): gas smelt there.
   Every trial records the stops the confirmation held (``held_stops``) and the error of the
   first (``first_held_error_m``): what the rule without it would have reported, in the same run.
-  This rule is :data:`dgse.estimators.phys.SEARCH_PLANNER` (since 2026-11-27 d); at knowledge
-  ``map`` a search adds ``max_wind_misfit=0.7`` and ``deadline_estimate_radius_m=1``
-  (``SEARCH_PLANNER_AT_LEVEL``, since 2026-11-27 g): run it with ``-P max_wind_misfit=0.7 -P
-  deadline_estimate_radius_m=1.0`` (files tagged ``fit0.7-disk1``).
+  This rule is the dgse-phys preset's planner (:data:`dgse.presets.PRESETS`); at knowledge
+  ``map`` the preset adds ``stop.max_wind_misfit=0.7`` and ``deadline.estimate_radius_m=1``:
+  run it with ``-P stop.max_wind_misfit=0.7 -P deadline.estimate_radius_m=1.0`` (files tagged
+  ``fit0.7-disk1``).
 
-``dgse-phys`` runs with :func:`dgse.estimators.phys.search_estimator` (the options ``dgse demo``
-uses: ``noise_weights="mixture"`` since 2026-11-27; the files recorded before ran the plug-in
-weights, ``-E 'noise_weights="plug-in"'``); ``-E`` overrides it, and ``-P`` a planner option
-of the rule (``-P min_observations=60``: no entropy or mass stop before 60 readings).
+``dgse-phys`` runs with the preset's search options (what ``dgse demo`` uses); ``-E``
+overrides them, and ``-P`` a planner option of the rule (``-P stop.min_observations=60``: no
+entropy or mass stop before 60 readings).
 
 Every finished episode is journaled beside the JSON, so an interrupted run resumes::
 
@@ -74,53 +71,49 @@ SETS = {
     "test": range(2000, 2020),
 }
 RULES: dict[str, dict[str, Any]] = {
-    "paper": {"min_observations": 5},
-    "paper-eta0.78": {"min_observations": 5, "eta": 0.78},
-    "confirm": {"min_observations": 5, "confirm_radius_m": 1.0, "confirm_readings": 2},
-    "mass1m90": {"min_observations": 5, "mass_radius_m": 1.0, "mass_level": 0.9},
-    "mass2m95": {"min_observations": 5, "mass_radius_m": 2.0, "mass_level": 0.95},
+    "paper": {"stop.min_observations": 5},
+    "paper-eta0.78": {"stop.min_observations": 5, "stop.eta": 0.78},
+    "confirm": {"stop.min_observations": 5, "stop.confirm_radius_m": 1.0, "stop.confirm_readings": 2},
+    "mass1m90": {"stop.min_observations": 5, "stop.mass_radius_m": 1.0, "stop.mass_level": 0.9},
+    "mass2m95": {"stop.min_observations": 5, "stop.mass_radius_m": 2.0, "stop.mass_level": 0.95},
     "mass1m90-disk1m": {
-        "min_observations": 5,
-        "mass_radius_m": 1.0,
-        "mass_level": 0.9,
-        "source_radius_m": 1.0,
+        "stop.min_observations": 5,
+        "stop.mass_radius_m": 1.0,
+        "stop.mass_level": 0.9,
+        "weights.source_radius_m": 1.0,
     },
     "mass1m90-disk1m-deadline60s": {
-        "min_observations": 5,
-        "mass_radius_m": 1.0,
-        "mass_level": 0.9,
-        "source_radius_m": 1.0,
-        "deadline_margin_s": 60.0,
+        "stop.min_observations": 5,
+        "stop.mass_radius_m": 1.0,
+        "stop.mass_level": 0.9,
+        "weights.source_radius_m": 1.0,
+        "deadline.margin_s": 60.0,
     },
     "mass1m90-disk1m-deadline60s-revisit0.5m": {
-        "min_observations": 5,
-        "mass_radius_m": 1.0,
-        "mass_level": 0.9,
-        "source_radius_m": 1.0,
-        "deadline_margin_s": 60.0,
-        "revisit_radius_m": 0.5,
+        "stop.min_observations": 5,
+        "stop.mass_radius_m": 1.0,
+        "stop.mass_level": 0.9,
+        "weights.source_radius_m": 1.0,
+        "deadline.margin_s": 60.0,
+        "weights.revisit_radius_m": 0.5,
     },
     "mass1m90-disk0.5m": {
-        "min_observations": 5,
-        "mass_radius_m": 1.0,
-        "mass_level": 0.9,
-        "source_radius_m": 0.5,
+        "stop.min_observations": 5,
+        "stop.mass_radius_m": 1.0,
+        "stop.mass_level": 0.9,
+        "weights.source_radius_m": 0.5,
     },
-}
-RULES["mass1m90-disk1m-deadline60s-revisit0.5m-twice"] = {
-    **RULES["mass1m90-disk1m-deadline60s-revisit0.5m"],
-    "stop_readings": 2,
 }
 RULES["mass1m90-disk1m-deadline60s-revisit0.5m-confirm1m"] = {
     **RULES["mass1m90-disk1m-deadline60s-revisit0.5m"],
-    "confirm_radius_m": 1.0,
-    "confirm_readings": 2,
+    "stop.confirm_radius_m": 1.0,
+    "stop.confirm_readings": 2,
 }
 RULES["mass1m90-disk1m-deadline60s-revisit0.5m-gas1m"] = {
     **RULES["mass1m90-disk1m-deadline60s-revisit0.5m"],
-    "confirm_radius_m": 1.0,
-    "confirm_readings": 1,
-    "confirm_sigmas": 2.0,
+    "stop.confirm_radius_m": 1.0,
+    "stop.confirm_readings": 1,
+    "stop.confirm_sigmas": 2.0,
 }
 
 
@@ -230,7 +223,7 @@ def record_calls(
     try:
         run_trials(
             path, "dgse-phys", "utility", trials=1, knowledge="openings",
-            planner_options={"min_observations": 5, **PRESETS["dgse-phys"].planner_options},
+            planner_options={"stop.min_observations": 5, **PRESETS["dgse-phys"].planner_options},
             estimator_options=estimator_options,
         )  # fmt: skip
     finally:
@@ -307,7 +300,7 @@ def write_result(path: Path, result: dict[str, Any], label: str, extra: str = ""
 #: ``max_wind_misfit`` only holds stops (a stop test that passed returns False instead), so an
 #: episode that ended at its deadline is the same with it; ``deadline_estimate_radius_m`` only
 #: changes what a deadline stop declares, so an episode that stopped before is the same.
-FILL_OPTIONS = {"max_wind_misfit": "deadline", "deadline_estimate_radius_m": "converged"}
+FILL_OPTIONS = {"stop.max_wind_misfit": "deadline", "deadline.estimate_radius_m": "converged"}
 
 
 def _without(settings: dict[str, Any], option: str | None) -> dict[str, Any]:
@@ -385,7 +378,7 @@ def main() -> None:
         action="append",
         default=[],
         metavar="KEY=JSON",
-        help="an estimator option, e.g. -E refine_speeds=0 (repeatable)",
+        help="an estimator option, e.g. -E flows.refine_speeds=0 (repeatable)",
     )
     ap.add_argument(
         "-P",
@@ -393,7 +386,7 @@ def main() -> None:
         action="append",
         default=[],
         metavar="KEY=JSON",
-        help="a planner option over the rule's, e.g. -P min_observations=60 (repeatable)",
+        help="a planner option over the rule's, e.g. -P stop.min_observations=60 (repeatable)",
     )
     ap.add_argument(
         "--steps",

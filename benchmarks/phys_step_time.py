@@ -41,7 +41,7 @@ def main() -> None:
             "utility",
             trials=1,
             planner_options={
-                "min_observations": 5,
+                "stop.min_observations": 5,
                 **PRESETS["dgse-phys"].planner_options_at(args.knowledge),
             },
             estimator_options=PRESETS["dgse-phys"].estimator_options_at(args.knowledge, search=True),

@@ -28,12 +28,13 @@ import numpy as np
 from validation_tuning import checked_options, pooled, scores, tuning_parser, validation_readings
 
 from dgse.belief.knowledge import Knowledge
+from dgse.errors import InputDataError
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.calibration import (
     chance_calibration_error,
 )
 from dgse.files import write_text
-from dgse.posterior.mixture import flattened, neighbour_correlation, standardized_residuals
+from dgse.posterior.mixture import standardized_residuals
 from dgse.world.grid import Grid
 
 TAUS = (1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0)
@@ -45,8 +46,38 @@ CORRELATION_RADII = (0.5, 1.0, 2.0)
 CORRELATIONS = (0.2, 0.3, 0.4, 0.5)
 
 
+def flattened(probs: np.ndarray, tau: float) -> np.ndarray:
+    """``probs ** (1 / tau)``, normalized (zeros stay zero): the same mode, less sure."""
+    p = np.asarray(probs, dtype=np.float64)
+    lp = np.full(p.shape, -np.inf)
+    pos = p > 0
+    lp[pos] = np.log(p[pos]) / float(tau)
+    q = np.exp(lp - lp.max())
+    return q / q.sum()
+
+
+def neighbour_correlation(xy: np.ndarray, residuals: np.ndarray, radius: float) -> float:
+    """How alike the residuals of readings at most ``radius`` apart are: ``mean(r_i r_j)`` over
+    such pairs ``i < j`` (at different places) over ``mean(r^2)``: about 0 for independent
+    noise, toward 1 where a model error shared by neighbouring places makes them.  ``xy``:
+    ``(m, 2)`` positions, ``radius`` in their unit; 0 when no such pair exists or every
+    residual is 0."""
+    p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    r = np.asarray(residuals, dtype=np.float64).reshape(-1)
+    if p.shape[0] != r.size:
+        raise InputDataError(f"{p.shape[0]} positions for {r.size} residuals")
+    scale = float(np.mean(r * r))
+    if r.size < 2 or not scale > 0:
+        return 0.0
+    d2 = ((p[:, None, :] - p[None, :, :]) ** 2).sum(axis=-1)
+    i, j = np.nonzero(np.triu((d2 <= radius * radius) & (d2 > 0), k=1))
+    if i.size == 0:
+        return 0.0
+    return float(np.mean(r[i] * r[j]) / scale)
+
+
 def residual_statistics(belief: Any, observations: Any, resolution: float) -> dict[str, float]:
-    """The neighbour correlation (:func:`~dgse.posterior.mixture.neighbour_correlation`) of the
+    """The neighbour correlation (:func:`neighbour_correlation`) of the
     gas readings' standardized residuals about the belief's most probable source, per radius
     of :data:`CORRELATION_RADII` (``"corr1"``: 1 m)."""
     model = belief.info["response_model"]
@@ -139,8 +170,8 @@ def write_summary(out: Path) -> None:
 def main() -> None:
     ap = tuning_parser(__doc__, "benchmarks/results/phys_calibration_tuning", [50, 150])
     args = ap.parse_args()
-    # the posterior as it is before any flattening: the rules are applied afterwards
-    options = checked_options(ap, args, {"misfit_threshold": None})
+    # the estimator's posterior (it flattens nothing): the rules are applied afterwards
+    options = checked_options(ap, args, {})
     args.out.mkdir(parents=True, exist_ok=True)
     if args.summary_only:
         write_summary(args.out)

@@ -47,7 +47,8 @@ def collect(level: str, seeds: list[int], counts: list[int]) -> dict[int, dict[s
     for seed in seeds:
         t0 = time.perf_counter()
         case = random_cases(seed, n_sources=1)[0]
-        est = get_estimator("dgse-phys", knowledge=Knowledge.from_case(case, level), field_error=(0, 0, 0, 0))
+        k = Knowledge.from_case(case, level)
+        est = get_estimator("dgse-phys", knowledge=k, **{"fields.model_error": (0, 0, 0, 0)})
         free = np.argwhere(case.occupancy == 0)
         rng = np.random.default_rng(seed)
         pick = free[rng.choice(len(free), size=min(CELLS, len(free)), replace=False)]

@@ -1,8 +1,8 @@
 """How much of DGSE-S's source belief to keep in dgse-phys's, by level and count: validation only.
 
 dgse-phys mixes the network's source posterior into its own at ``map`` with weight
-``max(learned_floor, 0.9 (1 - m / 50))`` for ``m`` readings (``learned_weight``,
-``learned_readings``, ``learned_floor``; none at the other levels).  A floor above 0
+``max(floor, 0.9 (1 - m / 50))`` for ``m`` readings (``fusion.weight``, ``fusion.readings``,
+``fusion.floor``; weight 0 at the other levels).  A floor above 0
 keeps a little of the network from 50 readings on, which bounds how sure of a wrong
 spot the physics can be (the source CE) at some cost in sharpness.  This benchmark
 records, for every estimate of the validation scenarios (seeds 900-923 by default,
@@ -74,7 +74,7 @@ def main() -> None:
     ap = tuning_parser(__doc__, "benchmarks/results/phys_fusion_tuning", [20, 50, 150])
     args = ap.parse_args()
     # the physics alone: the mixtures are formed here
-    options = checked_options(ap, args, {"learned_levels": (), "learned_floor": 0.0})
+    options = checked_options(ap, args, {"fusion.weight": 0.0, "fusion.floor": 0.0})
     args.out.mkdir(parents=True, exist_ok=True)
     if args.summary_only:
         write_summary(args.out)

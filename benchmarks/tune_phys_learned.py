@@ -2,11 +2,11 @@
 
 At ``map`` with few readings the physics flows rest on openings proposed from
 a handful of wind readings, and DGSE-S localizes better.  ``dgse-phys`` mixes
-the two posteriors with DGSE-S's weight ``learned_weight * max(0, 1 - m /
-learned_readings)``.  Source-localization error and cross-entropy from 5, 10,
-20 and 40 random readings, one trial on each of 8 generated scenarios (seeds
-900-907, kept for validation); the opening proposals and flows are shared by
-every setting of a reading set.
+the two posteriors with DGSE-S's weight ``fusion.weight * max(0, 1 - m /
+fusion.readings)`` (no floor at weight 0, as this was measured).  Source-localization
+error and cross-entropy from 5, 10, 20 and 40 random readings, one trial on each of 8
+generated scenarios (seeds 900-907, kept for validation); the opening proposals and flows
+are shared by every setting of a reading set.
 
     python benchmarks/tune_phys_learned.py -o benchmarks/results/phys_learned_tuning.json
 """
@@ -23,7 +23,7 @@ from dgse.estimators.registry import get_estimator
 
 SEEDS = range(900, 908)
 COUNTS = (5, 10, 20, 40)
-#: (learned_weight, learned_readings)
+#: (fusion.weight at map, fusion.readings)
 SETTINGS = ((0.0, 20.0), (0.5, 20.0), (0.9, 20.0), (0.5, 50.0), (0.9, 50.0), (1.0, 1e9))
 
 
@@ -39,7 +39,11 @@ def main() -> None:
     err, ce = sweep(
         "map",
         SETTINGS,
-        lambda s: {"learned_weight": s[0], "learned_readings": s[1]},
+        lambda s: {
+            "fusion.weight.map": s[0],
+            "fusion.readings": s[1],
+            **({"fusion.floor": 0.0} if s[0] == 0 else {}),
+        },
         SEEDS,
         COUNTS,
         prepare=share_network,
