@@ -27,7 +27,6 @@ from dgse.physics.rans import FlowSettings
 from dgse.physics.transport import TransportSolver
 from dgse.posterior.adjoint import (
     DEFAULT_KAPPAS,
-    DEFAULT_SPEEDS,
     AdjointResponseModel,
     FlowModel,
     adjoint_log_evidence,
@@ -81,7 +80,7 @@ class AdjointEstimator(KnowledgeUser):
     sigma0_fraction: float = 0.25
     noise_weights: Literal["plug-in", "candidate"] = "plug-in"
     censored: bool = True
-    candidate_speeds: Sequence[float] = DEFAULT_SPEEDS
+    candidate_speeds: Sequence[float] = (0.5, 1.0, 2.0, 3.5, 5.0)
     refine_speed: bool = True
     speed_step: float = 0.1
     conc_components: int = 32

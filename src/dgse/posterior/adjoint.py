@@ -65,7 +65,7 @@ says only that the noisy concentration was at most 0: its likelihood is
 ``Phi(-q a_i(s) / (sigma r_i))``, not a Gaussian density at 0 (``censored``,
 the default).  Read as exact zeros, clipped noise in clean air (0, 8, 33, 74
 ppm where the truth is 0) has a positive mean and looks like a weak source
-nearby: the failure of issue 12's searches.  The positive readings keep the
+nearby, and searches stop confidently on it.  The positive readings keep the
 closed form above; the zeros multiply it by ``E[prod Phi(...)]`` under the
 posterior of ``(q, tau)`` given the positive readings
 (:func:`censored_correction`: an adaptive Gauss-Hermite rule over ``log tau``
@@ -76,8 +76,8 @@ integration in the tests).  Where the zeros pull the rate far from the positive
 readings' estimate (a noise floor far above the plume reads half zeros and half
 noise, and the positive readings alone then put the rate many of its spreads too
 high), the rate's nodes follow a normal fitted to the product and carry importance
-weights (``censored_kernel._rate_nodes``): without that, test 2008 of the searches
-missed the true source's factor by 21 nats.  Candidates whose positive-readings evidence
+weights (``censored_kernel._rate_nodes``): nodes at the positive readings' rate alone
+can miss the true source's factor by tens of nats.  Candidates whose positive-readings evidence
 leaves less than ``CENSORED_TAIL`` of the mass are left at the factor's
 plug-in value, and so are those the zero sensors cannot see (``q sqrt(tau)
 sum_i a_i / (sigma r_i)`` below ``CENSORED_FAINT`` even at the rate prior's
@@ -177,9 +177,9 @@ FLOW_CACHE_SIZE = 16
 MAX_CACHED_ROWS = 1024
 #: Forward fields per unit release kept per flow model (one float per free cell each).
 MAX_CACHED_FIELDS = 256
-DEFAULT_SPEEDS = (0.5, 1.0, 2.0, 3.5, 5.0)
 #: Candidates this many nats below the best one skip the evidence's truncation term.
 TRUNC_NATS = 60.0
+#: The grid of the proportional noise's weight ``kappa`` (equal prior weights; module docstring).
 DEFAULT_KAPPAS = (0.0, 0.5, 2.0, 8.0, 32.0)
 
 
@@ -225,13 +225,13 @@ class FlowModel:
         :data:`MAX_CACHED_ROWS` cells used), clipped at 0: a release cannot lower a
         reading, but the second-order upwind scheme undershoots next to a
         point source: a row dips below zero for sources a cell or two
-        downstream of the sensor (to minus 0.18 of its peak on test 2005).  Left
+        downstream of the sensor (to a fifth of its peak below zero).  Left
         in, such lobes made a zero reading *favour* the candidates just
         downstream of it (``Phi(-q a / sigma) > 1/2`` for ``a < 0``).
 
         ``growing``: the cells of a search's readings, which only grow.  The rows go into
         one buffer, and a call whose cells extend the last growing call's copies only the
-        new rows (stacking every row afresh was a few per cent of a search step); a call
+        new rows (stacking every row afresh costs a few per cent of a search step); a call
         that does not extend it starts the buffer again.  The answer is then a read-only
         view of that buffer, valid until the next growing call.
         """
@@ -422,11 +422,9 @@ CENSORED_TAU_NODES = 4
 CENSORED_NEWTON_STEPS = 5
 #: Gauss-Legendre nodes per piece over the release rate (pieces refine towards the low end).
 CENSORED_Q_NODES = 4
-#: Breakpoints of those pieces in the rate's conditional CDF: the censored readings' factor
-#: ``prod Phi(-q a / sigma)`` can fall steeply from ``q = 0``, so the pieces shrink towards it.
+#: Breakpoints of those pieces in the rate's CDF, closer near ``q = 0`` where the factor falls steeply.
 CENSORED_Q_PIECES = (0.0, 1.0 / 512, 1.0 / 64, 1.0 / 8, 1.0)
-#: Candidates outside the top of the posterior that hold all but this share of the mass keep
-#: the zeros' plug-in factor instead of the integrated one.
+#: The share of the posterior mass the candidates left at the zeros' plug-in factor may hold.
 CENSORED_TAIL = 1e-4
 
 
@@ -506,9 +504,7 @@ def _censored_log_factor(
 
 #: The zeros' factor (nats) of a candidate whose integrand underflows everywhere.
 CENSORED_FLOOR = -1e4
-#: Where a probe of the zeros' integrand at the positive readings' noise precision says the
-#: Gauss-Hermite value misses this much (nats), the candidate's integral is scanned instead
-#: (see :func:`dgse.posterior.censored_kernel.censored_log_factor`).
+#: The miss (nats) of the Gauss-Hermite value, by a probe, above which a candidate is scanned instead.
 CENSORED_SCAN_MARGIN = 0.5
 #: Chebyshev points for the zeros' factor as a function of ``lambda = q sqrt(tau)``.
 CENSORED_CHEBYSHEV_POINTS = 10
@@ -708,16 +704,13 @@ def censored_correction(
     return np.minimum(out, ceiling)
 
 
-#: Nats within which the plug-in zeros' factor stands for the integrated one of a candidate the
-#: zero sensors hardly see (:func:`censored_correction`).
+#: The error (nats) of the plug-in factor that stands for a candidate the zero sensors hardly see.
 CENSORED_FAINT = 1e-3
 #: Candidates per chunk of the censored correction (chunks run on :func:`dgse.threads.map_threads`).
 CENSORED_CHUNK = 256
-#: Candidates whose bound (positive readings' evidence, ``(1/2)`` a zero) lies this many nats below
-#: the best plug-in value get no plug-in value (:func:`censored_correction`): their bound stands,
-#: a mass below ``exp(-50)`` of the best candidate's either way.  The plug-in pass goes down
-#: the bounds in blocks of ``CENSORED_PLUG_BLOCK``.
+#: Candidates whose bound lies this many nats below the best plug-in value keep their bound.
 CENSORED_NEGLIGIBLE_NATS = 50.0
+#: Candidates per block of the plug-in pass down the bounds.
 CENSORED_PLUG_BLOCK = 512
 
 

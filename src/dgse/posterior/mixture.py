@@ -120,27 +120,13 @@ def mix_posteriors(
     return post / post.sum(), hw
 
 
-#: A flow whose wind likelihood falls this many nats below the best flow's is not given the gas
-#: evidence (its weight would need the gas readings to favour it by as much; between inlet
-#: speeds of one layout they differ by a few nats, since concentrations scale as ``q / v_in``).
+#: A flow whose wind log likelihood is this many nats below the best flow's gets no gas evidence.
 WIND_HOPELESS_NATS = 30.0
-#: The given field's prior weight at knowledge ``wind`` (``given_wind_prior``); the built-in
-#: RANS flows of its openings share the rest.  Chosen on validation 900-923 (2026-11-29;
-#: ``python benchmarks/phys_robustness.py --seeds 900-923 --counts 50 150 --trials 2 --variants
-#: steady wind_smoothed wind_x2 wind_rotated filament --methods dgse-phys@wind -E
-#: given_wind_prior=P``, 48 estimates a cell, chance calibration error 0.043), 0.5 against 1 (the
-#: given field alone): mean SL error equal or lower in all 10 cells (smoothed field at 150
-#: readings 0.63 against 0.85 m, twice too fast 0.62 against 0.78 m), mean CE lower in 8 (0.02
-#: nats higher with filament readings, the true wind), calibration error with the smoothed field
-#: 0.028 against 0.085 at 50 readings; at 150 readings the perturbed fields' posteriors became
-#: too flat as the true wind's is (the truth's mean credible level 0.39-0.42, calibration error
-#: 0.07-0.10 against 0.055-0.065; the true wind 0.081 against 0.089).
-GIVEN_WIND_PRIOR = 0.5
-#: the noise-weight modes ``noise_weights="mixture"`` averages (the first one's evidence also
-#: gives the predictive fields)
+#: The two noise models whose posteriors dgse-phys averages (the first's evidence also gives
+#: the predictive fields): the proportional noise from the plug-in concentrations, and from
+#: each candidate's own (:func:`~dgse.posterior.adjoint.adjoint_log_evidence`).
 MIXED_NOISE_WEIGHTS = ("plug-in", "candidate")
-#: A hypothesis whose evidence bound falls this many nats below the best one's evidence is
-#: not corrected for the zero readings (its weight is below ``exp(-HOPELESS)`` either way).
+#: A hypothesis whose evidence bound is this many nats below the best one's is left at its bound.
 HOPELESS_NATS = 10.0
 #: The most of its own mass the zeros' correction of a weak hypothesis may leave out (:func:`censor_zeros`).
 CENSORED_TAIL_MAX = 0.5
