@@ -2,14 +2,15 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 import pytest
 
+from dgse.belief.knowledge import PerLevel
 from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators.registry import estimator_names, get_estimator
-from dgse.options import check_options, options_from
+from dgse.options import Settings, accepts, check_options, options_from
 from dgse.planning.planners import get_planner, planner_names
 
 
@@ -50,6 +51,73 @@ def test_check_options_converts_and_rejects():
     for options, message in cases:
         with pytest.raises(InputDataError, match=message):
             check_options("x", _Thing, options)
+
+
+@dataclass(frozen=True)
+class _Noise(Settings):
+    floor: PerLevel[float] = PerLevel(0.5, 0.2, 0.1)
+    levels: tuple[float, ...] = (0.1, 0.5)
+    robust: bool = True
+
+    def __post_init__(self):
+        if not all(v >= 0 for _, v in self.floor.items()):
+            raise InputDataError(f"noise.floor must be >= 0, got {self.floor}")
+        self._set("levels", tuple(self.levels))
+
+
+@dataclass(frozen=True)
+class _Evidence(Settings):
+    noise: _Noise = field(default_factory=_Noise)
+    q_max: float | None = 5.0
+
+
+@dataclass
+class _Component:
+    evidence: _Evidence = field(default_factory=_Evidence)
+    n: int = 1
+
+
+def test_dotted_keys_set_the_fields_of_settings_objects():
+    """``evidence.q_max=2`` sets that field on the default; nested keys reach nested settings and
+    the levels of a :class:`PerLevel`; a mapping under the plain name means the same; a
+    settings object given whole is the base the dotted keys apply to."""
+    got = check_options("c", _Component, {"evidence.q_max": 2, "n": 3})
+    assert got == {"evidence": _Evidence(q_max=2.0), "n": 3}
+    assert isinstance(got["evidence"].q_max, float)
+    got = check_options("c", _Component, {"evidence.noise.floor": 0, "evidence.noise.levels": [1, 2]})
+    assert got["evidence"].noise == _Noise(floor=PerLevel(0.0, 0.0, 0.0), levels=(1.0, 2.0))
+    assert got["evidence"].q_max == 5.0  # the default's other fields stay
+    got = check_options("c", _Component, {"evidence.noise.floor.wind": 0.3})
+    assert got["evidence"].noise.floor == PerLevel(0.5, 0.2, 0.3)
+    mapped = check_options("c", _Component, {"evidence": {"noise": {"floor": {"wind": 0.3}}}})
+    assert mapped == got
+    given = _Evidence(q_max=None)
+    on_given = check_options("c", _Component, {"evidence": given, "evidence.noise.robust": False})
+    assert on_given["evidence"] == _Evidence(noise=_Noise(robust=False), q_max=None)
+    assert accepts(_Component, "evidence.noise.floor.map") and accepts(_Component, "n")
+    assert not accepts(_Component, "evidence.noise.flor") and not accepts(_Component, "n.x")
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"evidence.qmax": 1}, r"option\(s\) evidence.qmax; known: evidence.noise, evidence.q_max$"),
+        ({"evidence.noise.flor": 1}, r"option\(s\) evidence.noise.flor; known: evidence.noise.floor, "),
+        ({"evidence.noise.floor.moon": 1}, r"evidence.noise.floor.moon; known: evidence.noise.floor.map, "),
+        ({"evidenc.q_max": 1}, r"option\(s\) evidenc.q_max; known: evidence.noise, evidence.q_max, n$"),
+        ({"n.x": 1}, r"option\(s\) n.x; known:"),
+        ({"evidence.q_max": "big"}, r"c: option evidence.q_max='big' must be a number or None"),
+        ({"evidence.noise.robust": "no"}, r"option evidence.noise.robust='no' must be true or false"),
+        ({"evidence.noise.floor": "x"}, r"noise.floor='x' must be a number \(one for every level"),
+        ({"evidence": 3}, r"option evidence=3 must be a _Evidence"),
+        ({"evidence.noise.floor.map": -1.0}, r"noise.floor must be >= 0"),
+    ],
+)
+def test_dotted_keys_are_checked(options, message):
+    """Unknown fields, at any depth, list the valid keys there; wrong types name the dotted key;
+    the settings object's own check runs."""
+    with pytest.raises(InputDataError, match=message):
+        check_options("c", _Component, options)
 
 
 def test_options_from_reads_the_target():

@@ -37,13 +37,14 @@ def test_presets_extend_per_level_and_user_options_win() -> None:
     at_openings = resolve("dgse-phys", "openings", search=True)
     assert at_map.planner_options == {**phys.planner_options, **phys.at_level["map"]["planner"]}
     assert at_openings.planner_options == dict(phys.planner_options)
-    assert at_map.estimator_options["effective_readings"] == 30.0
-    assert "effective_readings" not in at_openings.estimator_options
+    assert at_map.estimator_options["evidence.effective_readings"] == 30.0
+    assert at_map.estimator_options["evidence.effective_growth"] == 0.0
+    assert "evidence.effective_readings" not in at_openings.estimator_options
     # random-readings estimates do not take the search options
     assert resolve("dgse-phys", "map", search=False).estimator_options == {}
     assert resolve("dgse-s", "map", search=False).estimator_options == {}
-    user = resolve("dgse-phys", "openings", search=True, planner_options={"mass_level": 0.8})
-    assert user.planner_options["mass_level"] == 0.8
+    user = resolve("dgse-phys", "openings", search=True, planner_options={"stop.mass_level": 0.8})
+    assert user.planner_options["stop.mass_level"] == 0.8
     # another planner than the preset's keeps its own defaults
     assert resolve("dgse-phys", "openings", search=True, planner="infotaxis").planner_options == {}
     assert resolve(None, "wind", search=True).method == DEFAULT_METHOD["wind"] == "dgse-phys"

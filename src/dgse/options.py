@@ -13,6 +13,17 @@ whose type does not fit a simple hint (``int``, ``float``, ``bool``, ``str``,
 class states where they go with :func:`options_from`, so that the check reads
 the class's signature.
 
+Settings objects: a component with many options groups them into a few frozen
+dataclasses derived from :class:`Settings` (each validates itself in
+``__post_init__``), and takes one argument per group.  The one rule for users: a
+dotted key sets one field of such an argument, ``fusion.floor=0.0`` (``-p
+fusion.floor=0.0`` on the command line), on top of the argument's default (or of the
+object given under the plain name); keys nest (``fusion.floor.map=0.1``), and a mapping
+under the plain name means the same (``fusion={"floor": 0.0}``).  Unknown fields and
+wrong types are errors as above, and the message lists the valid keys.  A
+:class:`Settings` class with a ``from_value`` classmethod also takes a plain value
+(:class:`dgse.belief.knowledge.PerLevel`: one value for every knowledge level).
+
 Example::
 
     @options_from(AdjointEstimator, drop=("wind",))
@@ -20,10 +31,13 @@ Example::
 
     check_options("estimator 'adjoint'", make_adjoint, {"q_max": "abc"})
     # InputDataError: estimator 'adjoint': option q_max='abc' must be a number or None
+    check_options("estimator 'dgse-phys'", make_dgse_phys, {"fusion.floor": 0.0})
+    # {"fusion": NetworkFusion(..., floor=PerLevel(map=0.0, openings=0.0, wind=0.0))}
 """
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import math
 import os
@@ -34,11 +48,41 @@ from typing import Any
 
 from dgse.errors import InputDataError
 
-__all__ = ["accepts", "check_options", "options_from"]
+__all__ = ["Settings", "accepts", "check_options", "options_from"]
 
 #: attribute set by :func:`options_from`
 _ATTR = "__dgse_options__"
 _NOT_CHECKED = object()
+
+
+@dataclasses.dataclass(frozen=True)
+class Settings:
+    """Base of a settings object: a frozen dataclass of a component's options, each field with a
+    documented default, checked in the subclass's ``__post_init__`` (raise
+    :class:`~dgse.errors.InputDataError` naming the dotted key).  :func:`check_options` sets
+    its fields from dotted keys; :meth:`to_dict` is what results files record of it."""
+
+    def _set(self, name: str, value: Any) -> None:
+        """Store a normalized value in ``__post_init__`` (the object is frozen)."""
+        object.__setattr__(self, name, value)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The fields as plain values (nested settings as dicts, tuples as lists)."""
+        return {f.name: _plain(getattr(self, f.name)) for f in dataclasses.fields(self)}
+
+    @classmethod
+    def describe_option(cls, element: str) -> str:
+        """How an option message names what a field of this type takes (``element``: the
+        description of what ``from_value`` takes, where the class has one)."""
+        return f"a {cls.__name__}"
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, Settings):
+        return value.to_dict()
+    if isinstance(value, tuple | list):
+        return [_plain(v) for v in value]
+    return value
 
 
 def options_from(
@@ -68,8 +112,9 @@ def _hints(target: Callable[..., Any]) -> dict[str, Any]:
     return {}
 
 
-def _accepted(target: Callable[..., Any]) -> tuple[dict[str, Any], bool]:
-    """``({name: hint}, open)``: the keyword options ``target`` takes; ``open`` if it has ``**kwargs``."""
+def _accepted(target: Callable[..., Any]) -> tuple[dict[str, Any], dict[str, Any], bool]:
+    """``({name: hint}, {name: default}, open)``: the keyword options ``target`` takes, their
+    defaults where they have one, and ``open`` if it has ``**kwargs``."""
     drop: tuple[str, ...] = ()
     extra: dict[str, Any] = {}
     declared = getattr(target, _ATTR, None)
@@ -78,23 +123,85 @@ def _accepted(target: Callable[..., Any]) -> tuple[dict[str, Any], bool]:
     try:
         params = inspect.signature(target).parameters.values()
     except (TypeError, ValueError):  # no signature to read: accept anything
-        return dict(extra), True
+        return dict(extra), {}, True
     hints = _hints(target)
     names: dict[str, Any] = {}
+    defaults: dict[str, Any] = {}
     is_open = False
     for p in params:
         if p.kind is p.VAR_KEYWORD:
             is_open = True
         elif p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY) and p.name not in drop:
             names[p.name] = hints.get(p.name, _NOT_CHECKED)
+            if p.default is not p.empty:
+                defaults[p.name] = p.default
     names.update(extra)
-    return names, is_open
+    return names, defaults, is_open
+
+
+def _settings_hint(hint: Any) -> Any:
+    """The :class:`Settings` type in ``hint`` (itself, a parametrized one such as
+    ``PerLevel[float]``, or one member of a union), else None."""
+    origin = typing.get_origin(hint)
+    if origin in (typing.Union, types.UnionType):
+        for arg in typing.get_args(hint):
+            found = _settings_hint(arg)
+            if found is not None:
+                return found
+        return None
+    cls = origin if origin is not None else hint
+    return hint if isinstance(cls, type) and issubclass(cls, Settings) else None
+
+
+def _settings_class(hint: Any) -> type[Settings]:
+    origin = typing.get_origin(hint)
+    return origin if origin is not None else hint
+
+
+def _field_hints(hint: Any) -> dict[str, Any]:
+    """``{field: hint}`` of the settings type ``hint``'s init fields, type variables replaced
+    by ``hint``'s arguments (``PerLevel[float]``: every level's hint is ``float``)."""
+    cls = _settings_class(hint)
+    try:
+        raw = typing.get_type_hints(cls)
+    except Exception:  # unresolvable string annotations: check names only
+        raw = {}
+    subst = dict(zip(getattr(cls, "__parameters__", ()), typing.get_args(hint), strict=False))
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        if f.init and not f.name.startswith("_"):
+            h = raw.get(f.name, _NOT_CHECKED)
+            out[f.name] = subst.get(h, _NOT_CHECKED) if isinstance(h, typing.TypeVar) else h
+    return out
+
+
+def _keys(prefix: str, hint: Any) -> list[str]:
+    """The dotted keys of a settings type's fields (one level: a nested settings field is named
+    once, its own fields are ``KEY.FIELD``)."""
+    return [f"{prefix}.{name}" for name in _field_hints(hint)]
+
+
+def _resolve(accepted: Mapping[str, Any], name: str) -> Any:
+    """The hint of option ``name`` (dotted keys through the settings types), else ``KeyError``."""
+    head, *rest = name.split(".")
+    hint = accepted[head]
+    for part in rest:
+        st = _settings_hint(hint)
+        if st is None:
+            raise KeyError(name)
+        hint = _field_hints(st)[part]
+    return hint
 
 
 def accepts(target: Callable[..., Any], name: str) -> bool:
-    """True when ``target`` (a factory, class or function; see :func:`options_from`) takes option ``name``."""
-    accepted, _ = _accepted(target)
-    return name in accepted
+    """True when ``target`` (a factory, class or function; see :func:`options_from`) takes option
+    ``name`` (a dotted key: a field of one of its settings objects)."""
+    accepted, _, _ = _accepted(target)
+    try:
+        _resolve(accepted, name)
+    except KeyError:
+        return False
+    return True
 
 
 def _describe(hint: Any) -> str:
@@ -115,6 +222,10 @@ def _describe(hint: Any) -> str:
         return "a string"
     if origin in (list, tuple, Sequence) or hint in (list, tuple):
         return "a list"
+    st = _settings_hint(hint)
+    if st is not None:
+        args = typing.get_args(st)
+        return _settings_class(st).describe_option(_describe(args[0]) if args else "a value")
     return getattr(hint, "__name__", str(hint))
 
 
@@ -174,11 +285,86 @@ def _convert(value: Any, hint: Any) -> Any:
         if len(args) == 1 or (origin is tuple and len(args) >= 1 and Ellipsis in typing.get_args(hint)):
             return type(value)(_convert(v, args[0]) for v in value)
         return value
+    st = _settings_hint(hint)
+    if st is not None:
+        cls = _settings_class(st)
+        if isinstance(value, cls):
+            return value
+        make = getattr(cls, "from_value", None)
+        if make is None:
+            raise TypeError
+        args = typing.get_args(st)
+        return make(_convert(value, args[0]) if args else value)
     return value  # a hint we do not check (arrays, objects, paths)
 
 
+def _checked(what: str, key: str, value: Any, hint: Any) -> Any:
+    try:
+        return _convert(value, hint)
+    except TypeError:
+        raise InputDataError(f"{what}: option {key}={value!r} must be {_describe(hint)}") from None
+
+
+def _split(
+    what: str, options: Mapping[str, Any], hints: Mapping[str, Any], prefix: str, is_open: bool
+) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
+    """``(plain, nested)``: the options that set a name, and per settings-typed name the dotted
+    keys below it (a mapping given to a settings-typed name counts as such keys).  Unknown
+    names are errors (plain ones pass where ``is_open``)."""
+    plain: dict[str, Any] = {}
+    nested: dict[str, dict[str, Any]] = {}
+    unknown: list[str] = []
+    for key, value in options.items():
+        head, dot, rest = str(key).partition(".")
+        hint = hints.get(head)
+        st = None if head not in hints else _settings_hint(hint)
+        if head not in hints:
+            if dot or not is_open:
+                unknown.append(prefix + key)
+            else:
+                plain[head] = value
+        elif dot:
+            if st is None:
+                unknown.append(prefix + key)
+            else:
+                nested.setdefault(head, {})[rest] = value
+        elif st is not None and isinstance(value, Mapping):
+            nested.setdefault(head, {}).update({str(k): v for k, v in value.items()})
+        else:
+            plain[head] = value
+    if unknown:
+        known: list[str] = []
+        for name, hint in hints.items():  # at the top, a settings object's fields
+            st = _settings_hint(hint) if not prefix else None
+            known.extend(_keys(name, st) if st is not None else [prefix + name])
+        listed = ", ".join(sorted(known)) or "none"
+        raise InputDataError(f"unknown {what} option(s) {', '.join(sorted(unknown))}; known: {listed}")
+    return plain, nested
+
+
+def _with_fields(what: str, prefix: str, hint: Any, base: Any, changes: Mapping[str, Any]) -> Settings:
+    """The settings object ``base`` (of type ``hint``) with ``changes`` (keys relative to ``prefix``)."""
+    cls = _settings_class(hint)
+    if not isinstance(base, cls):
+        try:
+            base = cls()
+        except TypeError:
+            key = prefix.rstrip(".")
+            raise InputDataError(
+                f"{what}: option {key} has no default to set fields of; give {key} itself"
+            ) from None
+    hints = _field_hints(hint)
+    plain, nested = _split(what, changes, hints, prefix, is_open=False)
+    new = {k: _checked(what, prefix + k, v, hints[k]) for k, v in plain.items()}
+    for head, sub in nested.items():
+        current = new.get(head, getattr(base, head))
+        new[head] = _with_fields(what, f"{prefix}{head}.", _settings_hint(hints[head]), current, sub)
+    return dataclasses.replace(base, **new)
+
+
 def check_options(what: str, target: Callable[..., Any], options: Mapping[str, Any]) -> dict[str, Any]:
-    """``options`` checked against what ``target`` takes; numbers converted to the hinted type.
+    """``options`` checked against what ``target`` takes; numbers converted to the hinted type,
+    dotted keys made into the settings objects they set (see the module docstring).
 
     Args:
         what: how the message names the component, e.g. ``"estimator 'kdmv'"``.
@@ -187,18 +373,12 @@ def check_options(what: str, target: Callable[..., Any], options: Mapping[str, A
 
     Raises:
         InputDataError: an option ``target`` does not take (the message lists
-            the ones it takes), or a value of the wrong type.
+            the ones it takes), a value of the wrong type, or a settings object's own check.
     """
-    accepted, is_open = _accepted(target)
-    unknown = sorted(set(options) - set(accepted))
-    if unknown and not is_open:
-        known = ", ".join(sorted(accepted)) or "none"
-        raise InputDataError(f"unknown {what} option(s) {', '.join(unknown)}; known: {known}")
-    out: dict[str, Any] = {}
-    for name, value in options.items():
-        hint = accepted.get(name, _NOT_CHECKED)
-        try:
-            out[name] = _convert(value, hint)
-        except TypeError:
-            raise InputDataError(f"{what}: option {name}={value!r} must be {_describe(hint)}") from None
+    accepted, defaults, is_open = _accepted(target)
+    plain, nested = _split(what, options, accepted, "", is_open)
+    out = {k: _checked(what, k, v, accepted.get(k, _NOT_CHECKED)) for k, v in plain.items()}
+    for head, sub in nested.items():
+        base = out.get(head, defaults.get(head))
+        out[head] = _with_fields(what, f"{head}.", _settings_hint(accepted[head]), base, sub)
     return out

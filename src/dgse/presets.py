@@ -148,15 +148,15 @@ DGSE_S_ETA = 0.78
 
 #: The utility planner's settings in a dgse-phys search (every level).
 PHYS_SEARCH_PLANNER: dict[str, Any] = {
-    "min_observations": MIN_SENSORS,
-    "mass_radius_m": 1.0,
-    "mass_level": 0.9,
-    "source_radius_m": 1.0,
-    "deadline_margin_s": 60.0,
-    "revisit_radius_m": 0.5,
-    "confirm_radius_m": 1.0,
-    "confirm_readings": 1,
-    "confirm_sigmas": 2.0,
+    "stop.min_observations": MIN_SENSORS,
+    "stop.mass_radius_m": 1.0,
+    "stop.mass_level": 0.9,
+    "stop.confirm_radius_m": 1.0,
+    "stop.confirm_readings": 1,
+    "stop.confirm_sigmas": 2.0,
+    "weights.source_radius_m": 1.0,
+    "weights.revisit_radius_m": 0.5,
+    "deadline.margin_s": 60.0,
 }
 
 #: PMFS's filament simulations in a search, cheaper than the published ones (about 20 CPU-s
@@ -173,17 +173,20 @@ PRESETS: dict[str, Preset] = {
             "dgse-s",
             "dgse-s",
             search_estimator_options={"model": "default", "dtype": "auto", "channels_last": True},
-            planner_options={"eta": DGSE_S_ETA, "min_observations": MIN_SENSORS},
+            planner_options={"stop.eta": DGSE_S_ETA, "stop.min_observations": MIN_SENSORS},
         ),
         Preset(
             "dgse-phys",
             "dgse-phys",
-            search_estimator_options={"noise_weights": "mixture", "learned_floor": 0.0},
+            search_estimator_options={"fusion.floor": 0.0},
             planner_options=PHYS_SEARCH_PLANNER,
             at_level={
                 "map": {
-                    "search_estimator": {"effective_readings": 30.0},
-                    "planner": {"max_wind_misfit": 0.7, "deadline_estimate_radius_m": 1.0},
+                    "search_estimator": {
+                        "evidence.effective_readings": 30.0,
+                        "evidence.effective_growth": 0.0,
+                    },
+                    "planner": {"stop.max_wind_misfit": 0.7, "deadline.estimate_radius_m": 1.0},
                 }
             },
         ),

@@ -392,6 +392,12 @@ def test_register_and_params():
     assert parse_params(["e=inf", "f=-INF", "g=nan"]) == {"e": math.inf, "f": -math.inf, "g": "nan"}
     with pytest.raises(InputDataError):
         parse_params(["novalue"])
+    # a dotted key names a field of a settings object; each part must be a name
+    dotted = parse_params(["fusion.floor=0", "fusion.floor.map=0.1"])
+    assert dotted == {"fusion.floor": 0, "fusion.floor.map": 0.1}
+    for bad in ("fusion..floor=0", "fusion.=0", ".floor=0", "fusion.1x=0"):
+        with pytest.raises(InputDataError, match="dotted names"):
+            parse_params([bad])
 
 
 def test_plot_belief(cases):

@@ -17,6 +17,7 @@ from dgse.cli.main import main
 from dgse.errors import InputDataError
 from dgse.evaluation.evaluate import evaluate
 from dgse.journal import count_records
+from dgse.options import Settings
 from tests.search import PeakEstimator, UniformEstimator, corridor_case
 
 #: The module (``dgse.evaluation.evaluate`` is also the name of the function the package exports).
@@ -106,6 +107,32 @@ def test_a_journal_of_other_estimator_settings_is_refused(case_dir, tmp_path):
     assert again["n_cases"] == 2 and count_records(journal) == 2
     with pytest.raises(InputDataError, match=r"estimator\.settings\.sigma was 0\.2, now 0\.3"):
         evaluate(case_dir, SetPeak(sigma=0.3), [3], seed=4, journal=journal)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Width(Settings):
+    sigma: float = 0.2
+
+
+@dataclasses.dataclass(eq=False)
+class NestedPeak(PeakEstimator):
+    """PeakEstimator whose setting lives in a settings object."""
+
+    width: _Width = dataclasses.field(default_factory=_Width)
+
+    def __post_init__(self) -> None:
+        PeakEstimator.__init__(self, sigma=self.width.sigma)
+
+
+def test_a_settings_objects_fields_are_part_of_the_journals_identity(case_dir, tmp_path):
+    """A field of a settings object counts as any setting: recorded by its name, and a journal
+    of another value is refused, naming the nested field."""
+    journal = tmp_path / "n.journal.jsonl"
+    first = evaluate(case_dir, NestedPeak(), [3], seed=4, journal=journal)
+    assert first["estimator"]["settings"]["width"] == {"sigma": 0.2}
+    assert evaluate(case_dir, NestedPeak(), [3], seed=4, journal=journal)["n_cases"] == 2
+    with pytest.raises(InputDataError, match=r"estimator\.settings\.width"):
+        evaluate(case_dir, NestedPeak(width=_Width(sigma=0.3)), [3], seed=4, journal=journal)
 
 
 @pytest.fixture

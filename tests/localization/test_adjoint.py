@@ -12,13 +12,7 @@ from dgse.belief.knowledge import Knowledge
 from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators import get_estimator
 from dgse.localization.adjoint import AdjointEstimator
-from dgse.posterior.adjoint import (
-    adjoint_log_evidence,
-    censored_correction,
-    flow_model,
-    noise_scale_floor,
-    prior_noise_floor,
-)
+from dgse.posterior.adjoint import adjoint_log_evidence, censored_correction, flow_model
 from dgse.sensing.sensors import Observations
 from tests.localization import cell_distance, channel_case, dense_readings
 
@@ -92,8 +86,8 @@ def test_censored_evidence_matches_brute_force_integration(seed: int) -> None:
     assert np.abs(d_exact).max() > 0.2
 
 
-@pytest.mark.parametrize(("seed", "weights"), [(2, "candidate"), (5, "candidate"), (5, "larger")])
-def test_candidate_noise_weights_match_brute_force_integration(seed: int, weights: str) -> None:
+@pytest.mark.parametrize("seed", [2, 5])
+def test_candidate_noise_weights_match_brute_force_integration(seed: int) -> None:
     """With noise weights of each candidate's own the evidence (positive readings and zeros)
     is the brute-force integral of that candidate's model, weights included."""
     rng = np.random.default_rng(seed)
@@ -102,7 +96,7 @@ def test_candidate_noise_weights_match_brute_force_integration(seed: int, weight
     c = rng.uniform(0.5, 4) * A[:, 0]
     z = np.maximum(c + (0.3 + 0.5 * c) * rng.standard_normal(m), 0.0)
     z[rng.choice(m, 2, replace=False)] = 0.0
-    logl, det = adjoint_log_evidence(A, z, q_max=5.0, kappas=(2.0,), alpha0=1.0, noise_weights=weights)
+    logl, det = adjoint_log_evidence(A, z, q_max=5.0, kappas=(2.0,), alpha0=1.0, noise_weights="candidate")
     R = det["r"]
     assert R.shape == (m, n) and np.ptp(R, axis=1).max() > 0.1  # the candidates' weights differ
     pos = z > 0
@@ -118,13 +112,12 @@ def test_candidate_noise_weights_match_brute_force_integration(seed: int, weight
     # the plug-in weights are another model: they miss this one by more
     plug, det_p = adjoint_log_evidence(A, z, q_max=5.0, kappas=(2.0,), alpha0=1.0)
     assert det_p["r"].shape == (m,)
-    if weights == "larger":  # the larger of the plug-in and the candidate's own
-        own = adjoint_log_evidence(A, z, q_max=5.0, kappas=(2.0,), alpha0=1.0, noise_weights="candidate")[1]
-        assert np.allclose(R, np.maximum(own["r"], det_p["r"][:, None]), rtol=1e-12, atol=0.0)
     d_plug = (plug - brute) - (plug - brute)[np.argmax(brute)]
     assert np.abs(d_plug).max() > 0.2
     with pytest.raises(InputDataError, match="noise_weights"):
         adjoint_log_evidence(A, z, noise_weights="reading")  # type: ignore[arg-type]
+    with pytest.raises(InputDataError, match="noise_weights"):
+        adjoint_log_evidence(A, z, noise_weights="larger")  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("seed", [3, 8])
@@ -310,51 +303,6 @@ def test_oracle_on_the_case_and_registry() -> None:
     assert b.info["method"] == "adjoint-oracle" and b.info["seconds"] > 0
 
 
-def test_zero_readings_alone_do_not_rule_out_what_their_sensors_barely_see() -> None:
-    """Six zeros and no positive reading (the start of test 2014's search, seed 1).
-
-    Without a prior noise scale (``s0 = 0.25 mean(z)`` is 0) every zero ruled out each
-    candidate it saw however faintly, so the posterior piled onto the candidates no sensor
-    sees at all and the search stopped 2.8 m off after six readings.  With the floor a
-    candidate that could not lift any reading above a tenth of it, even at ``q_max``, keeps
-    its prior weight; one the sensors see strongly does not.
-    """
-    case = channel_case()
-    fm = flow_model(case.layout, case.inlet_velocity)
-    cells = np.array([[0, 8], [8, 8]])
-    np.testing.assert_allclose(
-        fm.mean_concentrations[fm.mesh.index[cells[:, 0], cells[:, 1]]],
-        fm.forward(cells, [1.0, 1.0]).mean(axis=1),
-        rtol=0.03,  # forward fields are clipped at 0 cell by cell, the mean after averaging
-    )
-    free = np.argwhere(case.occupancy == 0)
-    sensors = free[free[:, 1] == case.occupancy.shape[1] // 2][:6]
-    obs = Observations(sensors, np.zeros(len(sensors)), case.wind[:, sensors[:, 0], sensors[:, 1]].T)
-    floor = noise_scale_floor([fm], 5.0, 0.25)
-    assert floor > 0
-    reach = 5.0 * fm.responses(sensors).max(axis=0)  # the largest reading a candidate could cause
-    unseen, faint, strong = reach == 0, (reach > 0) & (reach < 0.1 * floor), reach > 10 * floor
-    assert unseen.sum() > 10 and faint.sum() > 10 and strong.sum() > 10
-    ratios = {}
-    for prior in ("never", "unscaled"):
-        know = Knowledge.from_case(case, "wind")
-        est = get_estimator("adjoint-oracle", knowledge=know, noise_floor_prior=prior)
-        p = fm.mesh.values(est.estimate(case.occupancy, case.resolution, obs).source_probs)
-        ratios[prior] = p[faint] / p[unseen].mean(), p[strong] / p[unseen].mean()
-    assert ratios["never"][0].min() < 1e-6  # the failure: faintly seen candidates ruled out
-    assert ratios["unscaled"][0].min() > 0.9
-    assert ratios["unscaled"][1].max() < 0.5
-    # two positive readings give the noise a scale: "unscaled" then leaves s0 to the readings
-    z = np.array([0.0, 5.0, 0.0, 7.0])
-    assert prior_noise_floor([fm], z, 5.0, 0.25, "unscaled") == 0.0
-    assert prior_noise_floor([fm], z, 5.0, 0.25, "always") == pytest.approx(floor)
-    assert prior_noise_floor([fm], z[:2], 5.0, 0.25, "unscaled") == pytest.approx(floor)
-    with pytest.raises(InputDataError, match="noise_floor_prior"):
-        prior_noise_floor([fm], z, 5.0, 0.25, "sometimes")
-    with pytest.raises(InputDataError, match="noise_floor_prior"):
-        get_estimator("dgse-phys", noise_floor_prior=True)
-
-
 def test_estimated_wind_fits_the_inlet_speed() -> None:
     case = channel_case()
     est = get_estimator(
@@ -457,35 +405,6 @@ def test_responses_are_never_negative_so_a_zero_favours_no_candidate() -> None:
     part, det = adjoint_log_evidence(A, z, censored="deferred")
     f = censored_correction(logl=part, **det["censor"], tail=0.0)
     assert np.all(f <= -2 * math.log(2.0) + 1e-9)
-
-
-def test_the_bound_ranking_never_drops_mass_the_plug_in_value_hides() -> None:
-    """After one positive reading the noise posterior is broad: the plug-in factor of a candidate
-    the zeros see well is 100+ nats below its integrated one.  Ranked by an upper bound, the
-    candidates left at the plug-in value are those bound to hold negligible mass; ranked by
-    the plug-in value (the default the searches were chosen with) the cut drops mass."""
-    rng = np.random.default_rng(0)
-    n_near, n_far = 300, 3000
-    A = np.empty((3, n_near + n_far))
-    A[0] = rng.uniform(200.0, 300.0, A.shape[1])  # the positive reading sees every candidate alike
-    A[1:, :n_near] = rng.uniform(0.0, 0.01, (2, n_near))  # the zero sensors hardly see these
-    A[1:, n_near:] = rng.uniform(200.0, 300.0, (2, n_far))  # and see these as the positive one does
-    z = np.array([900.0, 0.0, 0.0])
-    part, det = adjoint_log_evidence(A, z, censored="deferred", kappas=(0.0,))
-
-    def posterior(f: np.ndarray) -> np.ndarray:
-        p = np.exp(part + f - (part + f).max())
-        return p / p.sum()
-
-    cut = censored_correction(logl=part, **det["censor"], ranking="bound")
-    full = censored_correction(logl=part, **det["censor"], tail=0.0)
-    assert posterior(full)[n_near:].sum() > 0.03  # the far group holds mass
-    assert 0.5 * np.abs(posterior(cut) - posterior(full)).sum() < 1e-3
-    assert np.all(cut[n_near:] > full[n_near:] - 1.0)
-    plug_in = censored_correction(logl=part, **det["censor"], ranking="plug-in")
-    assert 0.5 * np.abs(posterior(plug_in) - posterior(full)).sum() > 0.01
-    with pytest.raises(ValueError, match="unknown ranking"):
-        censored_correction(logl=part, **det["censor"], ranking="best")
 
 
 def _zeros_evidence(seed: int, m: int, n: int, rate: float, noise: float) -> tuple[np.ndarray, dict]:

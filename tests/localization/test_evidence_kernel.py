@@ -57,15 +57,14 @@ def test_row_sums_equal_the_numpy_sums():
     assert (empty[0] == 1e-300).all() and (empty[1] == 0.0).all()
 
 
-@pytest.mark.parametrize("mode", ["candidate", "larger"])
-def test_evidence_with_own_weights_matches_the_weights_it_reports(mode):
+def test_evidence_with_own_weights_matches_the_weights_it_reports():
     """The compiled path gives the evidence of the noise weights it reports (kappa = best)."""
     rng = np.random.default_rng(4)
     m, n = 15, 40
     A = rng.random((m, n)) ** 2
     z = np.maximum(A[:, 7] * 2.0 + rng.normal(0.0, 0.05, m), 0.0)
     z[:3] = 0.0
-    logl, det = adjoint_log_evidence(A, z, kappas=(2.0,), noise_weights=mode, censored=False)
+    logl, det = adjoint_log_evidence(A, z, kappas=(2.0,), noise_weights="candidate", censored=False)
     # kappas = (2,) alone: the homoscedastic pass only gives the plug-in concentrations
     want = _numpy_evidence(A, z, det["r"], 5.0, 1.0, det["s0"] ** 2)
     np.testing.assert_allclose(logl, want, rtol=1e-10, atol=1e-9)
@@ -102,7 +101,7 @@ def test_plug_in_evidence_averages_each_kappas_evidence():
     np.testing.assert_allclose(logl, want, rtol=1e-10, atol=1e-9)
 
 
-@pytest.mark.parametrize("mode", ["plug-in", "candidate", "larger"])
+@pytest.mark.parametrize("mode", ["plug-in", "candidate"])
 def test_deferred_zeros_get_the_sums_of_the_weights_they_report(mode):
     """The zeros' factor reuses the evidence's sums: they are those of the weights it reports."""
     rng = np.random.default_rng(8)

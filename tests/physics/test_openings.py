@@ -63,39 +63,3 @@ def test_noiseless_readings_rank_the_true_openings_first(seed):
     (inlet,), (outlet,) = case.layout.inlets, case.layout.outlets
     assert any(_matches(p.inlets[0], inlet, 0.6) and _matches(p.outlets[0], outlet, 0.6) for p in props)
     assert _matches(props[0].inlets[0], inlet, 0.6) and _matches(props[0].outlets[0], outlet, 0.6)
-
-
-def test_wind_field_proposals_read_the_belief_with_the_readings_put_in():
-    """A belief blowing west to east proposes that pair; readings overrule the belief where taken."""
-    from dgse.physics.openings import wind_field_proposals
-
-    occ = np.zeros((20, 30), np.uint8)
-    wind = np.zeros((2, 20, 30))
-    wind[0, 5:10, :] = 1.0  # in through the west edge, rows 5-9; out through the east edge
-    props = wind_field_proposals(occ, 0.1, wind, np.zeros((0, 2), int), np.zeros((0, 2)), top=2)
-    assert props and props[0].inlets[0].side == "west" and props[0].outlets[0].side == "east"
-    assert _centre(props[0].inlets[0]) == pytest.approx(0.75, abs=0.15)
-    assert len(props) <= 2
-    # readings of no wind at every cell of the band: nothing crosses the edge, so nothing to propose
-    band = np.argwhere(wind[0] > 0)
-    assert wind_field_proposals(occ, 0.1, wind, band, np.zeros((len(band), 2))) == []
-    assert wind[0, 5, 0] == 1.0  # the caller's belief is not changed
-    with pytest.raises(InputDataError, match="do not match"):
-        wind_field_proposals(occ, 0.1, wind, band, np.zeros((3, 2)))
-    with pytest.raises(InputDataError, match="do not match"):
-        wind_field_proposals(occ, 0.1, wind[:, :10], band[:0], np.zeros((0, 2)))
-
-
-def test_merge_proposals_keeps_the_first_and_adds_only_new_pairs():
-    from dgse.physics.openings import OpeningProposal, merge_proposals
-    from dgse.world.layout import Opening
-
-    def pair(i0, o0, side_out="east"):
-        return OpeningProposal((Opening("west", i0, i0 + 1.0),), (Opening(side_out, o0, o0 + 1.0),), 1.0, 1.0)
-
-    first = [pair(1.0, 2.0), pair(3.0, 2.0)]
-    second = [pair(1.3, 2.2), pair(1.0, 2.0, "north"), pair(5.0, 0.0)]
-    merged = merge_proposals(first, second)
-    assert merged[:2] == first
-    assert merged[2:] == second[1:]  # 1.3/2.2 is the first pair again (centres within 0.5 m)
-    assert merge_proposals(first, second, tolerance_m=0.1) == [*first, *second]

@@ -8,7 +8,7 @@ import pytest
 
 from dgse.errors import InputDataError
 from dgse.journal import count_records, journal_path
-from dgse.planning.planners import UtilityPlanner
+from dgse.planning.planners import StopRule, UtilityPlanner
 from dgse.search.campaign import estimator_options, load_cases, run_trials, trial_seed
 from tests.search import PeakEstimator, corridor_case
 
@@ -27,7 +27,7 @@ def test_run_trials_structure_and_seeds(tmp_path):
     data = run_trials(
         d,
         PeakEstimator(adaptive=True),
-        UtilityPlanner(eta=0.4),
+        UtilityPlanner(stop=StopRule(eta=0.4)),
         trials=2,
         seed=5,
         time_limit=120.0,
@@ -64,9 +64,15 @@ def test_run_trials_structure_and_seeds(tmp_path):
 def test_named_methods_and_checks(tmp_path):
     d = _cases(tmp_path)
     data = run_trials(
-        d / "a.npz", "kdmv", "utility", trials=1, planner_options={"eta": 0.9}, time_limit=30.0, steps=True
+        d / "a.npz",
+        "kdmv",
+        "utility",
+        trials=1,
+        planner_options={"stop.eta": 0.9},
+        time_limit=30.0,
+        steps=True,
     )
-    assert data["settings"]["method"] == "kdmv" and data["settings"]["planner_options"] == {"eta": 0.9}
+    assert data["settings"]["method"] == "kdmv" and data["settings"]["planner_options"] == {"stop.eta": 0.9}
     assert "steps" in data["per_case"][0]["trials"][0]
     with pytest.raises(InputDataError, match="trials"):
         run_trials(d, "kdmv", "utility", trials=0)
@@ -107,7 +113,7 @@ def _untimed(metrics):
 
 def _campaign(d, **kw):
     args = {"trials": 2, "seed": 5, "time_limit": 90.0, "min_start_distance": 1.0, **kw}
-    return run_trials(d, PeakEstimator(adaptive=True), UtilityPlanner(eta=0.4), **args)
+    return run_trials(d, PeakEstimator(adaptive=True), UtilityPlanner(stop=StopRule(eta=0.4)), **args)
 
 
 def test_interrupted_campaign_keeps_finished_episodes_and_resumes(tmp_path):

@@ -11,7 +11,7 @@ import torch
 
 from dgse.estimators.dgse import DGSEEstimator
 from dgse.planning.paths import graph_for
-from dgse.planning.planners import UtilityPlanner
+from dgse.planning.planners import Deadline, StopRule, UtilityPlanner
 from dgse.search.episode import run_episode
 from dgse.sensing.noise import NoiseParams
 from tests.models.helpers import tiny_model
@@ -39,7 +39,7 @@ def test_search_climbs_to_the_source_and_succeeds():
     r = run_episode(
         case,
         est,
-        UtilityPlanner(eta=0.4),
+        UtilityPlanner(stop=StopRule(eta=0.4)),
         start=(5, 2),
         rng=1,
         noise_params=NoiseParams.zero(),
@@ -75,13 +75,15 @@ def test_no_gas_ends_at_the_time_limit():
 
 
 def test_deadline_stop_ends_before_the_limit():
-    """deadline_margin_s: the search that would time out declares its estimate instead."""
+    """deadline.margin_s: the search that would time out declares its estimate instead."""
     case = corridor_case(gas=False)
-    r = run_episode(case, UniformEstimator(), UtilityPlanner(deadline_margin_s=10.0), rng=2, time_limit=100.0)
+    r = run_episode(
+        case, UniformEstimator(), UtilityPlanner(deadline=Deadline(margin_s=10.0)), rng=2, time_limit=100.0
+    )
     assert r.reason == "deadline" and r.terminated
     assert 90.0 <= r.search_time_s < 100.0
-    # deadline_estimate_radius_m: the declared source, not the belief's mean (which the steps keep)
-    planner = UtilityPlanner(deadline_margin_s=10.0, deadline_estimate_radius_m=0.3)
+    # deadline.estimate_radius_m: the declared source, not the belief's mean (which the steps keep)
+    planner = UtilityPlanner(deadline=Deadline(margin_s=10.0, estimate_radius_m=0.3))
     d = run_episode(case, UniformEstimator(), planner, rng=2, time_limit=100.0)
     assert d.reason == "deadline" and d.steps[-1].estimate_xy == pytest.approx(r.estimate_xy)
     assert d.estimate_xy != pytest.approx(r.estimate_xy)
@@ -99,10 +101,10 @@ def test_a_stop_in_clean_air_is_held_and_recorded():
     case = corridor_case(gas=False)
     est = PeakEstimator(sigma=0.05, threshold=-1.0)  # peaked at the first zero
     kw = {"start": (5, 2), "rng": 2, "time_limit": 40.0}
-    plain = run_episode(case, est, UtilityPlanner(deadline_margin_s=4.0), **kw)
+    plain = run_episode(case, est, UtilityPlanner(deadline=Deadline(margin_s=4.0)), **kw)
     assert plain.reason == "converged" and plain.n_steps == 1 and not plain.steps[0].held
-    confirm = {"confirm_radius_m": 0.5, "confirm_readings": 1, "confirm_sigmas": 2.0}
-    r = run_episode(case, est, UtilityPlanner(deadline_margin_s=4.0, **confirm), **kw)
+    confirm = StopRule(confirm_radius_m=0.5, confirm_readings=1, confirm_sigmas=2.0)
+    r = run_episode(case, est, UtilityPlanner(stop=confirm, deadline=Deadline(margin_s=4.0)), **kw)
     assert r.reason == "deadline" and r.n_steps > 3
     assert all(s.held for s in r.steps[:-1]) and not r.steps[-1].held  # the deadline stop is no held one
     d = r.to_dict(steps=True)

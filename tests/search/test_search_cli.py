@@ -155,7 +155,16 @@ def test_param_reaches_the_estimator_and_planner_has_no_short_form(peak, tmp_pat
     code, _, err = _run(capsys, cases, *PEAK, "-p", "sigma=0.1", "--json", out, "--no-progress")
     assert code == 0, err
     assert built == [{"adaptive": True, "sigma": 0.1}]
-    assert json.loads(out.read_text())["settings"]["estimator_options"] == {"adaptive": True, "sigma": 0.1}
+    settings = json.loads(out.read_text())["settings"]
+    assert settings["estimator_options"] == {"adaptive": True, "sigma": 0.1}
+    # --eta is the utility planner's stop.eta; -P dotted keys set its settings' fields
+    assert settings["planner_options"] == {"stop.eta": 0.4}
+    dotted = tmp_path / "d.json"
+    args = ("-P", "stop.mass_radius_m=0.5", "-P", "weights.w_d=0.2", "--json", dotted, "--no-progress")
+    code, _, err = _run(capsys, cases, *PEAK, *args)
+    assert code == 0, err
+    planner_options = json.loads(dotted.read_text())["settings"]["planner_options"]
+    assert planner_options == {"stop.eta": 0.4, "stop.mass_radius_m": 0.5, "weights.w_d": 0.2}
     # -O/--option: the old spelling still works (hidden from --help)
     other = tmp_path / "o.json"
     code, _, err = _run(capsys, cases, *PEAK, "-O", "sigma=0.2", "--json", other, "--no-progress")

@@ -17,7 +17,8 @@ handed a :class:`Knowledge` before the estimates on a map
 :class:`~dgse.errors.UnsupportedError` that says which level it needs.  The
 evaluation, search and benchmark loops build the knowledge from the case with
 :meth:`Knowledge.from_case` and record its level in their results, so that
-every comparison says who knew what.
+every comparison says who knew what.  A setting whose value depends on the level
+(an estimator's default at ``map`` and at ``wind``) is a :class:`PerLevel`.
 
 Example::
 
@@ -29,12 +30,14 @@ Example::
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields, is_dataclass
-from typing import TYPE_CHECKING, Any, ClassVar, Literal
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, Literal, TypeVar
 
 import numpy as np
 
 from dgse.errors import InputDataError, UnsupportedError
+from dgse.options import Settings
 from dgse.world.case import WALL_WIND_TOLERANCE, wind_problem
 from dgse.world.layout import Layout, Opening
 
@@ -48,7 +51,9 @@ __all__ = [
     "Knowledge",
     "KnowledgeUser",
     "Level",
+    "PerLevel",
     "check_level",
+    "per_level",
     "require_level",
 ]
 
@@ -64,6 +69,51 @@ def check_level(level: str) -> Level:
     if level not in LEVELS:
         raise InputDataError(f"unknown knowledge level {level!r}; one of {', '.join(LEVELS)}")
     return level  # type: ignore[return-value]
+
+
+T = TypeVar("T")
+U = TypeVar("U")
+
+
+@dataclass(frozen=True)
+class PerLevel(Settings, Generic[T]):
+    """One value of a setting per knowledge level.
+
+    Where a user gives one value (``-p fusion.floor=0.0``) it holds at every level
+    (:meth:`from_value`); ``KEY.map=...`` sets one level's.
+
+    Attributes:
+        map, openings, wind: the value at each level.
+    """
+
+    map: T
+    openings: T
+    wind: T
+
+    @classmethod
+    def from_value(cls, value: T) -> PerLevel[T]:
+        """``value`` at every level."""
+        return cls(value, value, value)
+
+    @classmethod
+    def describe_option(cls, element: str) -> str:
+        return f"{element} (one for every level; per level: .map, .openings, .wind)"
+
+    def __getitem__(self, level: str) -> T:
+        return getattr(self, check_level(level))
+
+    def items(self) -> tuple[tuple[Level, T], ...]:
+        """``((level, value), ...)`` in the order of :data:`LEVELS`."""
+        return tuple((v, getattr(self, v)) for v in LEVELS)
+
+    def apply(self, fn: Callable[[T], U]) -> PerLevel[U]:
+        """``fn`` of every level's value."""
+        return PerLevel(fn(self.map), fn(self.openings), fn(self.wind))
+
+
+def per_level(value: PerLevel[T] | T) -> PerLevel[T]:
+    """``value`` if it is a :class:`PerLevel`, else ``value`` at every level."""
+    return value if isinstance(value, PerLevel) else PerLevel.from_value(value)
 
 
 def require_level(estimator: Estimator, name: str, level: str) -> None:
@@ -180,11 +230,6 @@ class Knowledge:
         if lv == "openings":
             return cls("openings", **base)
         return cls("wind", wind=case.wind, inlet_velocity=case.inlet_velocity, **base)
-
-    @classmethod
-    def from_map(cls, occupancy: np.ndarray, resolution: float, name: str = "") -> Knowledge:
-        """The paper's setting: the map alone."""
-        return cls("map", occupancy, resolution, name=name)
 
     # -- queries -----------------------------------------------------------------------------
     @property

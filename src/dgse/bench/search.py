@@ -15,7 +15,7 @@ Methods (estimator + planner, registry names):
   utility planner with ``eta = ETA_TUNED`` (0.78, tuned for the shipped model
   on the validation split, ``benchmarks/results/eta_validation.json``; the
   paper's 0.65 belongs to the paper's model), the entropy test only from the
-  5th reading on (``min_observations``: the networks never saw fewer);
+  5th reading on (``stop.min_observations``: the networks never saw fewer);
 * **DGSE-phys** (``dgse-phys`` + ``utility``): the physics-guided estimator at the run's
   knowledge level with the planner settings chosen for it on the validation split
   (its preset, :data:`dgse.presets.PRESETS`: a stop on 90 % of the posterior within 1 m
@@ -499,7 +499,7 @@ def run(ctx: BenchContext) -> None:
     ood_cases = load_cases(ctx.scenarios(plan.n_ood, "ood"))
     ood_runs = {
         eta: run_method(
-            dgse, f"ood_eta{eta:g}", ood_cases, planner_options={**dgse.planner_options, "eta": eta}
+            dgse, f"ood_eta{eta:g}", ood_cases, planner_options={**dgse.planner_options, "stop.eta": eta}
         )
         for eta in (ETA_OOD_PAPER, ETA_OOD)
     }
@@ -740,14 +740,14 @@ def _level_extras(level: str) -> str:
     """The report's words for what dgse-phys's preset adds at ``level`` ('' for nothing)."""
     extra = {k: v for part in PRESETS["dgse-phys"].at_level.get(level, {}).values() for k, v in part.items()}
     words = []
-    if "effective_readings" in extra:
-        words.append(f"the gas evidence counts at most {extra['effective_readings']:g} readings")
-    if "max_wind_misfit" in extra:
-        share = f"{extra['max_wind_misfit']:.0%}"
+    if "evidence.effective_readings" in extra:
+        words.append(f"the gas evidence counts at most {extra['evidence.effective_readings']:g} readings")
+    if "stop.max_wind_misfit" in extra:
+        share = f"{extra['stop.max_wind_misfit']:.0%}"
         words.append(f"no stop while the best flow leaves over {share} of the wind unexplained")
-    if "deadline_estimate_radius_m" in extra:
+    if "deadline.estimate_radius_m" in extra:
         words.append(
-            f"a deadline stop declares the {extra['deadline_estimate_radius_m']:g} m disk "
+            f"a deadline stop declares the {extra['deadline.estimate_radius_m']:g} m disk "
             "with the most posterior mass"
         )
     return "".join(f"; {w}" for w in words)

@@ -310,20 +310,24 @@ def path_text(path: Path | str) -> str:
 
 
 def parse_params(items: Sequence[str] | None, flag: str = "--param") -> dict[str, Any]:
-    """``["K=3", "name=x"]`` -> ``{"K": 3, "name": "x"}`` (values JSON-decoded when they parse;
-    ``inf`` and ``-inf`` are the floats, as options such as ``effective_readings=inf`` take them).
+    """``["K=3", "fusion.floor=0", "name=x"]`` -> ``{"K": 3, "fusion.floor": 0, "name": "x"}``
+    (values JSON-decoded when they parse; ``inf`` and ``-inf`` are the floats, as options such
+    as ``evidence.effective_readings=inf`` take them).  A dotted key sets one field of a
+    settings object (:func:`dgse.options.check_options`).
 
     The one reading of ``-p/--param`` (estimator) and ``-P/--planner-option`` options in every command.
 
     Raises:
-        InputDataError: an item without ``=`` or whose key is not a Python name.
+        InputDataError: an item without ``=`` or whose key is not a Python name (or dotted names).
     """
     out: dict[str, Any] = {}
     for item in items or ():
         key, sep, raw = item.partition("=")
         key = key.strip()
-        if not sep or not key.isidentifier():
-            raise InputDataError(f"{flag} needs KEY=VALUE with KEY a Python name, got {item!r}")
+        if not sep or not all(part.isidentifier() for part in key.split(".")):
+            raise InputDataError(
+                f"{flag} needs KEY=VALUE with KEY a Python name (or dotted names), got {item!r}"
+            )
         infinite = raw.strip().lower()
         if infinite in ("inf", "+inf", "-inf"):
             out[key] = -math.inf if infinite.startswith("-") else math.inf

@@ -104,7 +104,7 @@ def demo_cmd(
 
     from dgse.estimators.registry import ESTIMATORS, get_estimator
     from dgse.physics.scenario import random_cases
-    from dgse.planning.planners import get_planner
+    from dgse.planning.planners import PLANNERS, get_planner
     from dgse.presets import resolve
     from dgse.search.episode import run_episode
     from dgse.search.metrics import episode_metrics
@@ -114,7 +114,10 @@ def demo_cmd(
     torch.set_num_threads(max(1, threads))
     seed = secrets.randbelow(2**31) if seed is None else seed
     t0 = time.perf_counter()
-    run = resolve(method, level, search=True, planner_options={} if eta is None else {"eta": eta})
+    run = resolve(method, level, search=True)
+    if eta is not None:  # the utility planner's stop.eta, another planner's own eta
+        key = "stop.eta" if PLANNERS.accepts(run.planner, "stop.eta") else "eta"
+        run = resolve(method, level, search=True, planner_options={key: eta})
     method = run.method  # without --method: the level's default method
     kwargs = dict(run.estimator_options)
     if ESTIMATORS.accepts(run.estimator, "model"):
@@ -126,10 +129,10 @@ def demo_cmd(
     planner = get_planner(run.planner, **run.planner_options)
     opts = run.planner_options
     stop_at: float | str = (
-        f"{opts.get('mass_level', 0.9):.0%} of the source posterior lies within {opts['mass_radius_m']:g} m "
-        "of its mode"
-        if "mass_radius_m" in opts
-        else float(opts.get("eta", 0.65))
+        f"{opts.get('stop.mass_level', 0.9):.0%} of the source posterior lies within "
+        f"{opts['stop.mass_radius_m']:g} m of its mode"
+        if "stop.mass_radius_m" in opts
+        else float(opts.get("stop.eta", opts.get("eta", 0.65)))
     )
     written: list[Path] = []
 

@@ -181,7 +181,7 @@ def search_cmd(
     seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of the start cells and noise.")] = 0,
     eta: Annotated[
         float | None,
-        typer.Option("--eta", help="Entropy termination threshold of the utility planner (-P eta=...)."),
+        typer.Option("--eta", help="Entropy termination threshold of the utility planner (-P stop.eta=...)."),
     ] = None,
     time_limit: Annotated[
         float, typer.Option("--time-limit", help="Time limit per episode, s.")
@@ -258,6 +258,7 @@ def search_cmd(
     Every finished episode is kept at once (in the journal beside the JSON
     file); after Ctrl-C or a kill, the same command resumes where it stopped.
     """
+    from dgse.planning.planners import PLANNERS
     from dgse.presets import resolve
     from dgse.search.campaign import estimator_options, json_safe, run_trials
 
@@ -266,9 +267,10 @@ def search_cmd(
         raise InputDataError(f"--threads must be at least 1, got {threads}")
     user_est = parse_params([*(option or []), *(param or [])], "--param")
     user_plan = parse_params(planner_option, "--planner-option")
-    if eta is not None:
-        user_plan["eta"] = eta
     run = resolve(method, level, search=True, planner=planner, planner_options=user_plan)
+    if eta is not None:  # the utility planner's stop.eta, another planner's own eta
+        user_plan["stop.eta" if PLANNERS.accepts(run.planner, "stop.eta") else "eta"] = eta
+        run = resolve(method, level, search=True, planner=planner, planner_options=user_plan)
     method, planner = run.method, run.planner
     chosen_model = {} if model is None else {"model": model}
     est_kwargs = estimator_options(

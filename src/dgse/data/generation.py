@@ -716,8 +716,3 @@ def _stop_requests() -> Iterator[threading.Event]:
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)
-
-
-def splits_summary(report: GenerationReport) -> str:
-    """``train 3000, val 500, test 250`` of a report."""
-    return ", ".join(f"{s} {report.splits.get(s, 0)}" for s in SPLITS)

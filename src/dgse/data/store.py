@@ -688,12 +688,6 @@ class DatasetStore:
         with self._guard():
             return str(self._group(layout_id).attrs["split"])
 
-    def set_split(self, layout_id: str, split: str) -> None:
-        """Move a layout to another split (its cases stay where they are)."""
-        self._require_writable()
-        self._group(layout_id).attrs["split"] = _check_split(split)
-        self._f.flush()
-
     def reassign_splits(
         self, seed: int = 0, fractions: Mapping[str, float] | None = None
     ) -> dict[str, list[str]]:

@@ -106,6 +106,7 @@ from dgse.errors import DGSEError, InputDataError
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.metrics import METRIC_KEYS, EstimateMetrics, evaluate_belief
 from dgse.files import atomic_open, is_temporary, write_text
+from dgse.options import Settings
 from dgse.sensing.noise import NoiseModel, NoiseParams
 from dgse.sensing.sensors import Observations, random_observations
 from dgse.world.case import Case
@@ -386,6 +387,8 @@ def _jsonable(value: Any) -> Any:
         return {str(k): _jsonable(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
         return [_jsonable(v) for v in value]
+    if isinstance(value, Settings):  # a settings object: every field
+        return _jsonable(value.to_dict())
     text = repr(value)  # e.g. a network object: its type, not its whole architecture
     return text if len(text) <= 120 and "\n" not in text else f"<{type(value).__name__}>"
 

@@ -27,14 +27,11 @@ from dgse.physics.rans import FlowSettings
 from dgse.physics.transport import TransportSolver
 from dgse.posterior.adjoint import (
     DEFAULT_KAPPAS,
-    DEFAULT_SPEEDS,
     AdjointResponseModel,
     FlowModel,
     adjoint_log_evidence,
-    check_noise_floor_mode,
     check_noise_weights,
     flow_model,
-    prior_noise_floor,
     sigma_floor,
 )
 from dgse.sensing.sensors import Observations
@@ -62,13 +59,8 @@ class AdjointEstimator(KnowledgeUser):
         q_max: release-rate prior ``U[0, q_max]`` g/s (None: flat on ``q >= 0``).
         kappas: proportional-noise grid (``(0,)``: homoscedastic).
         alpha0, sigma0_fraction: the noise-precision prior.
-        noise_floor_prior: when the prior noise scale is kept at least
-            :func:`noise_scale_floor` (:func:`prior_noise_floor`: ``"always"``,
-            ``"unscaled"`` while fewer than two readings are positive, ``"never"``: from
-            the readings alone, ``sigma0_fraction * mean(z)``).
-        noise_weights: the proportional noise's concentrations, ``"plug-in"``, each
-            candidate's own (``"candidate"``) or the larger (``"larger"``;
-            :func:`adjoint_log_evidence`).
+        noise_weights: the proportional noise's concentrations, ``"plug-in"`` or each
+            candidate's own (``"candidate"``; :func:`adjoint_log_evidence`).
         censored: read zero readings as censored (:func:`censored_correction`); False: as exact zeros.
         candidate_speeds: inlet speeds solved for the wind fit (estimated variant), m/s.
         refine_speed: solve once more at the fitted speed (else use the best candidate).
@@ -86,10 +78,9 @@ class AdjointEstimator(KnowledgeUser):
     kappas: Sequence[float] = DEFAULT_KAPPAS
     alpha0: float = 1.0
     sigma0_fraction: float = 0.25
-    noise_floor_prior: Literal["always", "unscaled", "never"] = "never"
-    noise_weights: Literal["plug-in", "candidate", "larger"] = "plug-in"
+    noise_weights: Literal["plug-in", "candidate"] = "plug-in"
     censored: bool = True
-    candidate_speeds: Sequence[float] = DEFAULT_SPEEDS
+    candidate_speeds: Sequence[float] = (0.5, 1.0, 2.0, 3.5, 5.0)
     refine_speed: bool = True
     speed_step: float = 0.1
     conc_components: int = 32
@@ -100,7 +91,6 @@ class AdjointEstimator(KnowledgeUser):
     def __post_init__(self) -> None:
         if self.wind not in ("oracle", "estimated"):
             raise InputDataError(f"wind must be 'oracle' or 'estimated', got {self.wind!r}")
-        check_noise_floor_mode(self.noise_floor_prior)
         check_noise_weights(self.noise_weights)
         if self.q_max is not None:
             q = float(self.q_max)
@@ -229,7 +219,6 @@ class AdjointEstimator(KnowledgeUser):
         t_flow = time.perf_counter() - t0
         A = fm.responses(obs.cells, growing=True)
         z = obs.gas
-        s0_floor = prior_noise_floor([fm], z, self.q_max, self.sigma0_fraction, self.noise_floor_prior)
         logl, det = adjoint_log_evidence(
             A,
             z,
@@ -237,7 +226,6 @@ class AdjointEstimator(KnowledgeUser):
             kappas=self.kappas,
             alpha0=self.alpha0,
             sigma0_fraction=self.sigma0_fraction,
-            sigma0_floor=s0_floor,
             censored=self.censored,
             noise_weights=self.noise_weights,
         )

@@ -32,10 +32,8 @@ from dgse.world.layout import Opening
 __all__ = [
     "OpeningProposal",
     "edge_runs",
-    "merge_proposals",
     "potential_flow_proposals",
     "propose_openings",
-    "wind_field_proposals",
 ]
 
 SIDES = ("west", "east", "south", "north")
@@ -297,64 +295,3 @@ def potential_flow_proposals(
 
 def _overlap(a: Opening, b: Opening) -> bool:
     return a.side == b.side and a.start_m < b.end_m and b.start_m < a.end_m
-
-
-# -- proposals from a wind belief, and the union of two proposers ------------------------------------
-def wind_field_proposals(
-    occupancy: np.ndarray,
-    resolution: float,
-    wind: np.ndarray,
-    cells: np.ndarray,
-    readings: np.ndarray,
-    *,
-    top: int = 3,
-) -> list[OpeningProposal]:
-    """The best ``top`` pairs of :func:`propose_openings` on a wind belief with the readings put in.
-
-    ``wind`` is a belief's mean wind over the map (``(2, H, W)``, e.g. DGSE-S's);
-    the readings (``(m, 2)`` m/s at ``cells``) replace it where they were taken.
-    Up to 5 inflow and 5 outflow runs of at least a tenth of the strongest
-    crossing wind are paired, strongest pair first.  A wind that crosses the
-    edge nowhere gives no proposals (an empty list), not an error.
-    """
-    w = np.array(wind, dtype=np.float64, copy=True)
-    c = np.asarray(cells, dtype=np.int64).reshape(-1, 2)
-    r = np.asarray(readings, dtype=np.float64).reshape(-1, 2)
-    occ = np.asarray(occupancy)
-    if w.shape != (2, *occ.shape) or c.shape[0] != r.shape[0]:
-        raise InputDataError(
-            f"wind {w.shape} for a map {occ.shape}, {c.shape[0]} cells and {r.shape[0]} readings do not match"
-        )
-    w[:, c[:, 0], c[:, 1]] = r.T
-    try:
-        props = propose_openings(occ, resolution, w, min_fraction=0.1, max_inlets=5, max_outlets=5)
-    except InputDataError:  # no air crosses the edge, or no separate inflow and outflow
-        return []
-    return props[: max(0, int(top))]
-
-
-def _centre(o: Opening) -> float:
-    return 0.5 * (o.start_m + o.end_m)
-
-
-def _same_opening(a: Opening, b: Opening, tolerance_m: float) -> bool:
-    return a.side == b.side and abs(_centre(a) - _centre(b)) <= tolerance_m
-
-
-def merge_proposals(
-    first: list[OpeningProposal], second: list[OpeningProposal], *, tolerance_m: float = 0.5
-) -> list[OpeningProposal]:
-    """``first``, then the pairs of ``second`` that none of ``first`` already has.
-
-    Two pairs are the same when both their inlets and their outlets lie on the same
-    side with centres within ``tolerance_m`` of each other.
-    """
-    out = list(first)
-    for p in second:
-        if not any(
-            _same_opening(p.inlets[0], q.inlets[0], tolerance_m)
-            and _same_opening(p.outlets[0], q.outlets[0], tolerance_m)
-            for q in out
-        ):
-            out.append(p)
-    return out

@@ -105,27 +105,23 @@ class FlowSettings:
     alpha_turb_max: float = 0.99
     #: the SER bound on maps of at most ``ser_cells`` free cells (``alpha_turb`` or less: no
     #: SER there).  Paper-size maps converge in fewer iterations with it, but ``alpha_turb_max``
-    #: makes some of them stall; the value was chosen on generated layouts
-    #: (``benchmarks/results/solver_ser_small.md``)
+    #: makes some of them stall (``docs/decisions.md``)
     alpha_turb_max_small: float = 0.9
     #: Gauss-Seidel sweeps at most per k and epsilon solve under SER: with the pseudo-time
     #: step near that of ``alpha_turb_max`` those equations lose their diagonal dominance
     #: and a solve to ``rel_tol`` takes ~50 sweeps (most of an iteration's time on large
     #: maps) for a change the next iteration undoes.  Capped solves can hold the k residual
     #: just above the tolerance: a stall under the cap lifts it (the iteration goes on from
-    #: where it is, its stall test on half the window) before the relaxation retry.  The
-    #: caps tried are in ``benchmarks/results/solver_speed.md``
+    #: where it is, its stall test on half the window) before the relaxation retry
     ser_max_sweeps: int = 10
     #: Gauss-Seidel's short-chain arithmetic (``short_chain`` of
     #: :func:`~dgse.physics.fv.gauss_seidel`): faster sweeps, the same solution up to
-    #: rounding.  False: the plain division in the sweeps' natural order (the flows of
-    #: results recorded before 2026-11-26 also differ in the k-epsilon kernels' last bits)
+    #: rounding.  False: the plain division in the sweeps' natural order
     short_chain: bool = True
     #: a run from rest that still stalls or diverges after the relaxation retry is tried
     #: once more from the solution on a grid twice as coarse (as large maps start): the
     #: cold iteration can fall into a limit cycle next to a steady state that another path
-    #: reaches (validation layout 928: stalled from rest with both relaxations, converged
-    #: in 230 iterations from the coarse start; OpenFOAM converges it too)
+    #: reaches
     coarse_retry: bool = True
 
     def __post_init__(self) -> None:

@@ -65,7 +65,7 @@ says only that the noisy concentration was at most 0: its likelihood is
 ``Phi(-q a_i(s) / (sigma r_i))``, not a Gaussian density at 0 (``censored``,
 the default).  Read as exact zeros, clipped noise in clean air (0, 8, 33, 74
 ppm where the truth is 0) has a positive mean and looks like a weak source
-nearby, and searches stopped on such spots.  The positive readings keep the
+nearby, and searches stop confidently on it.  The positive readings keep the
 closed form above; the zeros multiply it by ``E[prod Phi(...)]`` under the
 posterior of ``(q, tau)`` given the positive readings
 (:func:`censored_correction`: an adaptive Gauss-Hermite rule over ``log tau``
@@ -76,8 +76,8 @@ integration in the tests).  Where the zeros pull the rate far from the positive
 readings' estimate (a noise floor far above the plume reads half zeros and half
 noise, and the positive readings alone then put the rate many of its spreads too
 high), the rate's nodes follow a normal fitted to the product and carry importance
-weights (``censored_kernel._rate_nodes``): without that, test 2008 of the searches
-missed the true source's factor by 21 nats.  Candidates whose positive-readings evidence
+weights (``censored_kernel._rate_nodes``): nodes at the positive readings' rate alone
+can miss the true source's factor by tens of nats.  Candidates whose positive-readings evidence
 leaves less than ``CENSORED_TAIL`` of the mass are left at the factor's
 plug-in value, and so are those the zero sensors cannot see (``q sqrt(tau)
 sum_i a_i / (sigma r_i)`` below ``CENSORED_FAINT`` even at the rate prior's
@@ -177,12 +177,9 @@ FLOW_CACHE_SIZE = 16
 MAX_CACHED_ROWS = 1024
 #: Forward fields per unit release kept per flow model (one float per free cell each).
 MAX_CACHED_FIELDS = 256
-#: The quantile over a map's sources of their mean concentration that sets the least prior
-#: noise scale (:func:`noise_scale_floor`).
-NOISE_FLOOR_QUANTILE = 0.01
-DEFAULT_SPEEDS = (0.5, 1.0, 2.0, 3.5, 5.0)
 #: Candidates this many nats below the best one skip the evidence's truncation term.
 TRUNC_NATS = 60.0
+#: The grid of the proportional noise's weight ``kappa`` (equal prior weights; module docstring).
 DEFAULT_KAPPAS = (0.0, 0.5, 2.0, 8.0, 32.0)
 
 
@@ -208,24 +205,7 @@ class FlowModel:
     solved: FlowField | None = field(default=None, repr=False)
     _rows: dict[tuple[int, int], np.ndarray] = field(default_factory=dict, repr=False)
     _fields: dict[tuple[int, int], np.ndarray] = field(default_factory=dict, repr=False)
-    _mean_concentrations: np.ndarray | None = field(default=None, repr=False)
     _grown: tuple[list[tuple[int, int]], np.ndarray] | None = field(default=None, repr=False)
-
-    @property
-    def mean_concentrations(self) -> np.ndarray:
-        """``float64 (n_free,)`` ppm per g/s: the concentration averaged over the free cells,
-        for a source in each free cell (one transposed solve, cached).
-
-        Times the release rate it is the ``c_bar`` that Table I scales the noise floor
-        ``sigma_env`` by.  It spans orders of magnitude over the sources of one map (a
-        source in a quiet room fills it, one by the outlet leaves at once).
-        """
-        if self._mean_concentrations is None:
-            m, ts = self.mesh, self.transport
-            e = np.full((m.n, 1), 1.0 / m.n)
-            x = ts.factor(ts.adjoint_scheme).solve(e, trans="T")[:, 0] / ts.physics.slab_depth
-            self._mean_concentrations = np.maximum(x, 0.0) * self.physics.ppm_per_gm3
-        return self._mean_concentrations
 
     @property
     def mesh(self):
@@ -245,13 +225,13 @@ class FlowModel:
         :data:`MAX_CACHED_ROWS` cells used), clipped at 0: a release cannot lower a
         reading, but the second-order upwind scheme undershoots next to a
         point source: a row dips below zero for sources a cell or two
-        downstream of the sensor (to minus 0.18 of its peak on test 2005).  Left
+        downstream of the sensor (to a fifth of its peak below zero).  Left
         in, such lobes made a zero reading *favour* the candidates just
         downstream of it (``Phi(-q a / sigma) > 1/2`` for ``a < 0``).
 
         ``growing``: the cells of a search's readings, which only grow.  The rows go into
         one buffer, and a call whose cells extend the last growing call's copies only the
-        new rows (stacking every row afresh was a few per cent of a search step); a call
+        new rows (stacking every row afresh costs a few per cent of a search step); a call
         that does not extend it starts the buffer again.  The answer is then a read-only
         view of that buffer, valid until the next growing call.
         """
@@ -364,36 +344,8 @@ def flow_model(
     return fm
 
 
-def noise_scale_floor(flows: Sequence[FlowModel], q_max: float | None, fraction: float) -> float:
-    """The least prior noise scale ``s0``, ppm: ``fraction`` of a low prior ``c_bar``.
-
-    Table I draws the noise floor as ``sigma_env = U[0, 0.5] c_bar`` (mean ``0.25 c_bar``),
-    ``c_bar`` the mean concentration over the free cells, which depends on the unknown source:
-    :attr:`FlowModel.mean_concentrations` spans orders of magnitude over a map's sources.
-    The floor takes its :data:`NOISE_FLOOR_QUANTILE` quantile over the sources (averaged
-    over ``flows``, equal weights, so that one floor serves every flow hypothesis and their
-    evidences stay comparable) times the mean release rate (``q_max / 2``; 2.5 g/s without
-    ``q_max``): a scale the noise is unlikely to lie below.  Without a floor, readings that
-    are all zero (or nearly so) set the prior scale to nothing, and each zero then rules out
-    every candidate it sees however faintly (:func:`adjoint_log_evidence`).
-    """
-    if not flows:
-        return 0.0
-    q_mean = 2.5 if q_max is None else 0.5 * float(q_max)
-    low = [float(np.quantile(f.mean_concentrations, NOISE_FLOOR_QUANTILE)) for f in flows]
-    return float(fraction) * q_mean * float(np.mean(low))
-
-
-#: When the noise-scale floor applies (:func:`prior_noise_floor`).
-NOISE_FLOOR_MODES = ("always", "unscaled", "never")
 #: Where the proportional noise weights of :func:`adjoint_log_evidence` take their concentrations.
-NOISE_WEIGHTS = ("plug-in", "candidate", "larger")
-
-
-def check_noise_floor_mode(mode: object) -> None:
-    """Raise a clear :class:`InputDataError` unless ``mode`` is one of :data:`NOISE_FLOOR_MODES`."""
-    if mode not in NOISE_FLOOR_MODES:
-        raise InputDataError(f"noise_floor_prior must be one of {NOISE_FLOOR_MODES}, got {mode!r}")
+NOISE_WEIGHTS = ("plug-in", "candidate")
 
 
 def check_noise_weights(mode: object, modes: tuple[str, ...] = NOISE_WEIGHTS) -> None:
@@ -401,21 +353,6 @@ def check_noise_weights(mode: object, modes: tuple[str, ...] = NOISE_WEIGHTS) ->
     :data:`NOISE_WEIGHTS`; an estimator may offer more, e.g. ``dgse-phys``'s mixture)."""
     if mode not in modes:
         raise InputDataError(f"noise_weights must be one of {modes}, got {mode!r}")
-
-
-def prior_noise_floor(
-    flows: Sequence[FlowModel], z: np.ndarray, q_max: float | None, fraction: float, mode: str
-) -> float:
-    """The ``sigma0_floor`` of :func:`adjoint_log_evidence` for readings ``z`` under ``mode``.
-
-    ``"always"``: :func:`noise_scale_floor`; ``"unscaled"``: that floor only while fewer than
-    two readings are positive (the readings then say nothing of the noise scale, and
-    ``0.25 mean(z)`` is 0 or one reading's share); ``"never"``: 0.
-    """
-    check_noise_floor_mode(mode)
-    if mode == "never" or (mode == "unscaled" and int((np.asarray(z) > 0).sum()) >= 2):
-        return 0.0
-    return noise_scale_floor(flows, q_max, fraction)
 
 
 def clear_flow_cache() -> None:
@@ -485,11 +422,9 @@ CENSORED_TAU_NODES = 4
 CENSORED_NEWTON_STEPS = 5
 #: Gauss-Legendre nodes per piece over the release rate (pieces refine towards the low end).
 CENSORED_Q_NODES = 4
-#: Breakpoints of those pieces in the rate's conditional CDF: the censored readings' factor
-#: ``prod Phi(-q a / sigma)`` can fall steeply from ``q = 0``, so the pieces shrink towards it.
+#: Breakpoints of those pieces in the rate's CDF, closer near ``q = 0`` where the factor falls steeply.
 CENSORED_Q_PIECES = (0.0, 1.0 / 512, 1.0 / 64, 1.0 / 8, 1.0)
-#: Candidates outside the top of the posterior that hold all but this share of the mass keep
-#: the zeros' plug-in factor instead of the integrated one.
+#: The share of the posterior mass the candidates left at the zeros' plug-in factor may hold.
 CENSORED_TAIL = 1e-4
 
 
@@ -569,9 +504,7 @@ def _censored_log_factor(
 
 #: The zeros' factor (nats) of a candidate whose integrand underflows everywhere.
 CENSORED_FLOOR = -1e4
-#: Where a probe of the zeros' integrand at the positive readings' noise precision says the
-#: Gauss-Hermite value misses this much (nats), the candidate's integral is scanned instead
-#: (see :func:`dgse.posterior.censored_kernel.censored_log_factor`).
+#: The miss (nats) of the Gauss-Hermite value, by a probe, above which a candidate is scanned instead.
 CENSORED_SCAN_MARGIN = 0.5
 #: Chebyshev points for the zeros' factor as a function of ``lambda = q sqrt(tau)``.
 CENSORED_CHEBYSHEV_POINTS = 10
@@ -647,7 +580,6 @@ def censored_correction(
     alpha0: float,
     beta0: float,
     tail: float = CENSORED_TAIL,
-    ranking: str | None = None,
     tilt: bool = True,
     memo: dict[str, Any] | None = None,
     sums: tuple[np.ndarray, np.ndarray, np.ndarray | float] | None = None,
@@ -665,24 +597,19 @@ def censored_correction(
     those whose bound (``1/2`` a zero) lies :data:`CENSORED_NEGLIGIBLE_NATS` below the best
     plug-in value keep that bound, no plug-in value computed.
 
-    ``ranking`` (default :data:`CENSORED_RANKING`): ``"plug-in"`` ranks by that plug-in
-    value.  It is an approximation: after few positive readings the noise posterior is
-    broad and the plug-in factor of a candidate the zeros see well can sit hundreds of nats
-    below the integrated one, so the cut leaves out mass (``benchmarks/censored_cut.py`` at
-    commit 86ae264:
-    up to 74 % of the posterior after 3 readings of a search).  ``"bound"`` ranks by an
-    upper bound (the positive readings' evidence times ``1/2`` per zero the response
-    reaches) and so leaves out at most ``tail`` of the mass (why it is not the default:
-    :data:`CENSORED_RANKING`).
+    The ranking is by that plug-in value, an approximation: after few positive readings the
+    noise posterior is broad and the plug-in factor of a candidate the zeros see well can sit
+    far below the integrated one, so the cut can leave out mass.  It acts as a tighter noise
+    prior, which the searches were measured with (``docs/decisions.md``).
 
     ``tilt`` (default True): where the zeros move the rate far from the positive readings'
     estimate, the rate's nodes and the plug-in value follow them (see the module doc's
-    "Zero readings"); False gives the factor as it was computed before 2026-11-28 e.
+    "Zero readings"); False: they stay at the positive readings' estimate.
 
     ``memo``: a dict shared by calls with the same ``A``, ``z``, ``r``, ``q_max``, ``alpha0``,
-    ``beta0`` and ``tilt`` (the caller's promise; ``logl``, ``tail`` and ``ranking`` may
-    differ): every candidate's plug-in and integrated factors are computed once and reused
-    (the same numbers as computed afresh).  The two noise-weight modes of
+    ``beta0`` and ``tilt`` (the caller's promise; ``logl`` and ``tail`` may differ): every
+    candidate's plug-in and integrated factors are computed once and reused (the same numbers
+    as computed afresh).  The two noise-weight modes of
     :class:`~dgse.estimators.phys.PhysicsGuidedEstimator` share them where their most probable
     ``kappa`` gives the same weights.
 
@@ -731,14 +658,8 @@ def censored_correction(
         best = max(best, float(np.max(logl[blk] + plug[blk])))
     out = np.where(np.isnan(plug), ceiling, plug)
     key = logl + out
-    # the ranking and the stop: the plug-in value, or an upper bound of the factor (see above)
-    ranking = CENSORED_RANKING if ranking is None else ranking
-    if ranking == "bound":
-        rank_key = logl - math.log(2.0) * (Bt >= 0.0).sum(axis=1)
-    elif ranking == "plug-in":
-        rank_key = key
-    else:
-        raise ValueError(f"unknown ranking {ranking!r}: use one of {CENSORED_RANKINGS}")
+    # the ranking and the stop: the plug-in value (see above)
+    rank_key = key
     order = np.argsort(rank_key)[::-1]
     # candidates the zero sensors hardly see: where even the largest plausible
     # lambda = q sqrt(tau) (q at its prior's end, tau at its 1 - 1e-12 quantile) gives
@@ -785,29 +706,13 @@ def censored_correction(
     return np.minimum(out, ceiling)
 
 
-#: Nats within which the plug-in zeros' factor stands for the integrated one of a candidate the
-#: zero sensors hardly see (:func:`censored_correction`).
+#: The error (nats) of the plug-in factor that stands for a candidate the zero sensors hardly see.
 CENSORED_FAINT = 1e-3
-#: How :func:`censored_correction` ranks the candidates for its cut.  ``"plug-in"`` is an
-#: approximation (it can leave out most of the mass after few readings) but every recorded
-#: search was made with it.  With ``"bound"`` (exact to ``tail``) the validation searches
-#: (openings, the search preset, seed 0) found 22 of 24 sources against 23 of 24, with
-#: a new stop 5.6 m off on scenario 917 (and 903 stopping 1.75 m off where it had run to
-#: the deadline 1.07 m off); both re-run with only the ranking changed gave the same.
-#: After few readings the exact zeros say little under the broad noise posterior; the
-#: plug-in acts as a tighter noise prior, which the searches benefit from.  A tighter
-#: prior with the bound ranking (dgse-phys ``alpha0=5``) did worse still: 5 of 8 on
-#: 900-907, three stops 2.1-4.8 m off.
-CENSORED_RANKING = "plug-in"
-#: The rankings :func:`censored_correction` knows.
-CENSORED_RANKINGS = ("plug-in", "bound")
 #: Candidates per chunk of the censored correction (chunks run on :func:`dgse.threads.map_threads`).
 CENSORED_CHUNK = 256
-#: Candidates whose bound (positive readings' evidence, ``(1/2)`` a zero) lies this many nats below
-#: the best plug-in value get no plug-in value (:func:`censored_correction`): their bound stands,
-#: a mass below ``exp(-50)`` of the best candidate's either way.  The plug-in pass goes down
-#: the bounds in blocks of ``CENSORED_PLUG_BLOCK``.
+#: Candidates whose bound lies this many nats below the best plug-in value keep their bound.
 CENSORED_NEGLIGIBLE_NATS = 50.0
+#: Candidates per block of the plug-in pass down the bounds.
 CENSORED_PLUG_BLOCK = 512
 
 
@@ -848,9 +753,8 @@ def adjoint_log_evidence(
     kappas: Sequence[float] = DEFAULT_KAPPAS,
     alpha0: float = 1.0,
     sigma0_fraction: float = 0.25,
-    sigma0_floor: float = 0.0,
     censored: bool | Literal["deferred"] = True,
-    noise_weights: Literal["plug-in", "candidate", "larger"] = "plug-in",
+    noise_weights: Literal["plug-in", "candidate"] = "plug-in",
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """``log p(z | s)`` for every candidate source (columns of ``A``), release rate and noise integrated out.
 
@@ -862,9 +766,6 @@ def adjoint_log_evidence(
             ``(0,)`` gives a homoscedastic model.
         alpha0: shape of the Gamma prior on the noise precision.
         sigma0_fraction: prior noise scale ``s0 = sigma0_fraction * mean(z)`` (``beta0 = alpha0 s0^2``).
-        sigma0_floor: the least ``s0``, ppm (:func:`noise_scale_floor`: from the prior, not the
-            readings; 0: none).  With no or few positive readings ``mean(z)`` says nothing
-            of the noise, and ``s0`` near 0 makes every zero rule out each candidate it sees.
         censored: treat readings of 0 as censored (the sensor clips negatives: such a reading
             says only that the noisy concentration was at most 0, :func:`censored_correction`);
             False reads them as exact zeros; ``"deferred"`` returns the positive readings'
@@ -876,10 +777,7 @@ def adjoint_log_evidence(
             mean of a first, homoscedastic pass (the same weights for every candidate);
             ``"candidate"``, each candidate's own prediction ``clip(qhat, 0, q_max) a_i(s)``
             of that pass (Table I's noise given that source: a candidate that predicts high
-            concentrations where the readings are low pays ``log r_i`` for each);
-            ``"larger"``, the larger of the two (such a candidate pays, and a high reading
-            that the plug-in expects does not rule out a candidate whose flow, maybe wrong,
-            predicts less there).
+            concentrations where the readings are low pays ``log r_i`` for each).
 
     Returns:
         ``(log_evidence (N,), details)`` with ``details`` (a :class:`Details`): ``qhat`` ``(N,)``
@@ -901,9 +799,7 @@ def adjoint_log_evidence(
     if not ks or any(not (k >= 0 and math.isfinite(k)) for k in ks):
         raise InputDataError(f"kappas must be finite and >= 0, got {kappas}")
     check_noise_weights(noise_weights)
-    if not (sigma0_floor >= 0 and math.isfinite(sigma0_floor)):
-        raise InputDataError(f"sigma0_floor must be a finite number of ppm >= 0, got {sigma0_floor}")
-    s0 = max(sigma0_fraction * float(z.mean()), float(sigma0_floor), 1e-9 * max(float(z.max()), 1.0), 1e-12)
+    s0 = max(sigma0_fraction * float(z.mean()), 1e-9 * max(float(z.max()), 1.0), 1e-12)
     beta0 = alpha0 * s0**2
     ones = np.ones_like(z)
     # readings clipped at zero are censored: the Gaussian part takes the others, and the
@@ -944,13 +840,9 @@ def adjoint_log_evidence(
         ks = [0.0]
     logls, qhats, totals = [], [], []
 
-    # each candidate's own concentrations at the sensors are max(a q, floor): its prediction
-    # ("candidate"), or at least the plug-in ("larger"); None: the plug-in for every candidate
-    floor = None
-    if noise_weights == "candidate":
-        floor = np.zeros_like(z)
-    elif noise_weights == "larger":
-        floor = chat
+    # each candidate's own concentrations at the sensors (the kernels' max(a q, floor) with a
+    # zero floor): its prediction ("candidate"); None: the plug-in for every candidate
+    floor = np.zeros_like(z) if noise_weights == "candidate" else None
 
     def weights(k: float, which: np.ndarray | None = None) -> np.ndarray:
         """The noise weights of ``kappa = k``, of every reading or of the readings ``which``."""

@@ -19,21 +19,17 @@ candidates does the same arithmetic in registers.  The normal distribution's
 Both are tested against SciPy (``tests/localization/test_censored_kernel.py``).  The sums of
 the zeros' ``log Phi`` (:func:`_log_phi_sum`, and the Mills ratio of the Newton steps over
 ``log tau``) read ``log Phi`` on ``[-38, 0)`` from a table instead (:func:`log_ndtr_table`:
-cubic Hermite between nodes 1/64 apart, values and slopes from SciPy, within 1e-10 nats):
-3.5 ns a value against 24 ns for ``erfc`` and ``log``, which took 4-8 % off the kernel's
-time on the recorded calls of two search episodes (2026-11-28, timed by throwaway scripts
-that are not kept; ``python benchmarks/search.py step-time`` is the kept measure of a
-search step).  The quantiles of the rate nodes (:func:`_rate_nodes`) are the larger share and keep
-the exact functions.
+cubic Hermite between nodes 1/64 apart, values and slopes from SciPy, within 1e-10 nats),
+several times cheaper than ``erfc`` and ``log`` (``python benchmarks/search.py step-time`` times a
+search step).  The quantiles of the rate nodes (:func:`_rate_nodes`) keep the exact
+functions.
 
 Most zeros hardly reach most candidates (a sensor upwind or behind a wall): those whose
 ``lambda b_i`` stays within ``_SERIES_X`` up to the candidate's largest plausible ``lambda``
 enter every sum through a Taylor series in their power sums (:func:`_split_zeros`), so each
-pass visits only the zeros the candidate reaches.  With that, and Newton's step on a rate
-node's quantile only where Acklam's error could exceed 1e-5 of the nodes' spread
-(:data:`_QUANTILE_SHIFT`), the kernel took 13.9 instead of 27.1 microseconds a candidate on
-calls recorded in test 2005's search (2026-11-29), its factors within 5e-8 nats of the
-kernel before (``benchmarks/censored_kernel_time.py``, in git history at commit 86ae264).
+pass visits only the zeros the candidate reaches; Newton's step on a rate node's quantile
+is taken only where Acklam's error could exceed :data:`_QUANTILE_SHIFT` of the nodes'
+spread (``benchmarks/censored_kernel_time.py`` at commit 86ae264 timed the kernel on recorded calls).
 
 The integral over ``log tau`` is Gauss-Hermite around a Newton mode found with the rate at
 its estimate from the positive readings.  Where those leave a rate near 0 plausible (few
@@ -72,20 +68,15 @@ _LOG_HALF = math.log(0.5)
 _PHI0 = 1.0 / math.sqrt(2.0 * math.pi)
 #: Below this, :func:`log_ndtr` and :func:`_mills` use their series.
 _SMALL = 1e-3
-#: Below this width (in standard deviations) a normal interval's mass is taken by the midpoint
-#: rule (:func:`_truncation_mass`).
+#: Below this width (standard deviations) a normal interval's mass is the midpoint rule's.
 _NARROW = 1e-5
-#: Where the censored factor probes its integrand over ``log tau``, from t0 (the positive
-#: readings' estimate of it): at t0 and below, where a small ``alpha_n`` leaves a long tail.
+#: Where the factor probes its integrand over ``log tau``, from the positive readings' t0.
 _PROBES = np.array([0.0, -2.0])
-#: The fallback scan of the integral over ``log tau`` (:func:`_scan_log_integral`): how far
-#: beyond the Newton mode and t0 it may look for the peak, the step of its central
-#: differences, how far the integrand must fall before the walk stops, the most Newton
-#: steps, the uniform steps each side of the peak, and the most growing steps beyond.
-#: A rate estimate outside ``[0, q_max]`` is scanned only up to ``_SCAN_OUTSIDE_ALPHA``
-#: (about 9 positive readings): later, such candidates are many and the zeros too (a
-#: scan costs ``O(zeros)`` per evaluation), and the probe alone catches most misses
-#: (``benchmarks/censored_accuracy.py`` at commit 86ae264).
+# The fallback scan over ``log tau`` (:func:`_scan_log_integral`): its reach beyond the mode
+# and t0, the central differences' step, the fall that ends the walk, the most Newton steps,
+# the uniform steps each side of the peak, the most growing steps beyond, and the largest
+# ``alpha_n`` at which a rate estimate outside ``[0, q_max]`` is scanned (the probe covers
+# the rest; ``benchmarks/censored_accuracy.py`` at commit 86ae264).
 _SCAN_REACH = 8.0
 _FD = 1e-2
 _SCAN_DROP = 20.0
@@ -93,18 +84,13 @@ _SCAN_NEWTON = 12
 _SCAN_UNIFORM = 6
 _SCAN_MAX_STEPS = 60
 _SCAN_OUTSIDE_ALPHA = 5.0
-#: The rate's nodes follow the zeros (:func:`_rate_nodes`) where a Newton step from the
-#: positive readings' rate moves it by more than ``TILT_MIN`` of its spreads, or where the
-#: zeros narrow its spread below ``_TILT_NARROW`` of the positive readings' one.
+#: The rate's nodes follow the zeros where a Newton step moves the rate by more spreads than this.
 TILT_MIN = 2.0
+#: ... or where the zeros narrow the rate's spread below this share of the positive readings'.
 _TILT_NARROW = 0.5
-#: How far (in the nodes' spread) Acklam's quantile may leave a rate node before a Newton step
-#: puts it right (:func:`_rate_nodes`).  At 1e-7 (2026-11-28) the steps took about a quarter
-#: of the kernel's time (a throwaway replay, not kept); at 1e-5, with the faint zeros' series,
-#: the factors moved by at most 5e-8 nats on test 2005's recorded calls
-#: (``benchmarks/censored_kernel_time.py`` at commit 86ae264).
+#: How far (in the nodes' spread) Acklam's quantile may leave a rate node before a Newton step.
 _QUANTILE_SHIFT = 1e-5
-#: The most Newton steps to that rate's mode, and how close (in its spreads) they get.
+#: The most Newton steps to the tilted rate's mode, and their tolerance in its spreads.
 _TILT_NEWTON = 30
 _TILT_TOL = 1e-2
 
@@ -386,15 +372,10 @@ def _log_ndtr_series(order: int) -> np.ndarray:
     return coef
 
 
-#: Zeros that a candidate hardly reaches, ``0 <= lambda b_i <= _SERIES_X`` for every ``lambda``
-#: up to the candidate's cap (:func:`_lambda_cap`), enter ``G`` and its slopes through the
-#: Taylor series of ``log Phi(-x)`` at 0 to ``x^_SERIES_ORDER`` (within 2e-12 nats a zero on
-#: ``[0, 0.2]``, checked by a test): their power sums ``sum b^k`` stand for them, so a pass
-#: over the zeros visits only those the candidate reaches.  Late in a search most zeros
-#: are far upwind or across walls of most candidates (88 % of the (candidate, zero) pairs of
-#: test 2005's recorded calls, ``benchmarks/censored_kernel_time.py`` at commit 86ae264).  Above the cap the
-#: sums take every zero.
+#: The Taylor series of ``log Phi(-x)`` at 0 that stands for the zeros a candidate hardly
+#: reaches (``lambda b_i <= _SERIES_X`` up to its cap; within 2e-12 nats a zero): its order.
 _SERIES_ORDER = 8
+#: ... and the largest ``lambda b_i`` it covers.
 _SERIES_X = 0.2
 _SERIES = _log_ndtr_series(_SERIES_ORDER)
 #: The cap's noise precision: the Wilson-Hilferty approximation of the noise posterior's
@@ -862,7 +843,7 @@ def censored_log_factor(
             is small; ``inf``: never);
         scanned: ``(n,)`` set to 1 where it was (written, not read).
         tilt_min: where the rate's nodes follow the zeros (:func:`_rate_nodes`; ``inf``:
-            never, as before 2026-11-28 e).
+            never).
     """
     n, c = Bt.shape
     nt, nq, npts = xh.size, u.size, cheb_matrix.shape[0]

@@ -83,9 +83,8 @@ def candidate_sums_many(
     Args:
         A: ``(m, N)`` responses; rows: indices of the readings to sum; q: ``(N,)`` each
             candidate's rate (``>= 0``); floor: ``(m,)`` the least concentration a reading's weight
-            scales with (zeros: a candidate's own prediction, ``noise_weights="candidate"``; the
-            plug-in concentrations: the larger of the two, ``"larger"``); z: ``(m,)`` readings;
-            cs: ``(K,)`` the ``kappa / cbar`` (``>= 0``).
+            scales with (zeros: a candidate's own prediction, ``noise_weights="candidate"``);
+            z: ``(m,)`` readings; cs: ``(K,)`` the ``kappa / cbar`` (``>= 0``).
 
     Every ``c`` gets the same arithmetic (and bits) as it would alone.  Each reading's row is
     read once; the loop over the candidates is innermost, so that it runs in vector registers.

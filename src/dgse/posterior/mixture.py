@@ -24,14 +24,11 @@ __all__ = [
     "censor_zeros",
     "field_error_variance",
     "fitted_wind_scale",
-    "flattened",
     "gas_misfit",
     "log_speed_priors",
     "logsumexp",
     "mix_posteriors",
-    "neighbour_correlation",
     "predictive_sources",
-    "profile_wind_log_likelihood",
     "relative_wind_misfit",
     "same_noise_weights",
     "speed_label",
@@ -94,7 +91,6 @@ def logsumexp(x: np.ndarray) -> float:
 def mix_posteriors(
     log_evidence: Sequence[np.ndarray],
     log_prior: Sequence[float] | np.ndarray,
-    hypothesis_temperature: float = 1.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(p(s | data), p(h | data))`` of a mixture over hypotheses ``h``.
 
@@ -103,8 +99,6 @@ def mix_posteriors(
             shared by all hypotheses.
         log_prior: ``(H,)`` log prior weights of the hypotheses (any data about ``h``
             besides the gas, e.g. the wind readings' log likelihood, added in).
-        hypothesis_temperature: the hypotheses' log weights ``log p(data, h)`` are divided
-            by it (``> 1``: approximate hypotheses are compared less sharply).
 
     With one hypothesis holding all the prior weight the result is that
     hypothesis's own posterior.
@@ -116,7 +110,7 @@ def mix_posteriors(
     lp = np.asarray(log_prior, dtype=np.float64)
     if lp.shape != (len(L),):
         raise InputDataError(f"{len(L)} hypotheses but {lp.size} prior weights")
-    log_z = (np.array([logsumexp(x) - math.log(n) for x in L]) + lp) / hypothesis_temperature
+    log_z = np.array([logsumexp(x) - math.log(n) for x in L]) + lp
     hw = np.exp(log_z - logsumexp(log_z))
     post = np.zeros(n)
     for w, x in zip(hw, L, strict=True):
@@ -126,27 +120,13 @@ def mix_posteriors(
     return post / post.sum(), hw
 
 
-#: A flow whose wind likelihood falls this many nats below the best flow's is not given the gas
-#: evidence (its weight would need the gas readings to favour it by as much; between inlet
-#: speeds of one layout they differ by a few nats, since concentrations scale as ``q / v_in``).
+#: A flow whose wind log likelihood is this many nats below the best flow's gets no gas evidence.
 WIND_HOPELESS_NATS = 30.0
-#: The given field's prior weight at knowledge ``wind`` (``given_wind_prior``); the built-in
-#: RANS flows of its openings share the rest.  Chosen on validation 900-923 (2026-11-29;
-#: ``python benchmarks/phys.py robustness --seeds 900-923 --counts 50 150 --trials 2 --variants
-#: steady wind_smoothed wind_x2 wind_rotated filament --methods dgse-phys@wind -E
-#: given_wind_prior=P``, 48 estimates a cell, chance calibration error 0.043), 0.5 against 1 (the
-#: given field alone): mean SL error equal or lower in all 10 cells (smoothed field at 150
-#: readings 0.63 against 0.85 m, twice too fast 0.62 against 0.78 m), mean CE lower in 8 (0.02
-#: nats higher with filament readings, the true wind), calibration error with the smoothed field
-#: 0.028 against 0.085 at 50 readings; at 150 readings the perturbed fields' posteriors became
-#: too flat as the true wind's is (the truth's mean credible level 0.39-0.42, calibration error
-#: 0.07-0.10 against 0.055-0.065; the true wind 0.081 against 0.089).
-GIVEN_WIND_PRIOR = 0.5
-#: the noise-weight modes ``noise_weights="mixture"`` averages (the first one's evidence also
-#: gives the predictive fields)
+#: The two noise models whose posteriors dgse-phys averages (the first's evidence also gives
+#: the predictive fields): the proportional noise from the plug-in concentrations, and from
+#: each candidate's own (:func:`~dgse.posterior.adjoint.adjoint_log_evidence`).
 MIXED_NOISE_WEIGHTS = ("plug-in", "candidate")
-#: A hypothesis whose evidence bound falls this many nats below the best one's evidence is
-#: not corrected for the zero readings (its weight is below ``exp(-HOPELESS)`` either way).
+#: A hypothesis whose evidence bound is this many nats below the best one's is left at its bound.
 HOPELESS_NATS = 10.0
 #: The most of its own mass the zeros' correction of a weak hypothesis may leave out (:func:`censor_zeros`).
 CENSORED_TAIL_MAX = 0.5
@@ -157,9 +137,7 @@ def censor_zeros(
     log_prior: Sequence[float],
     details: Sequence[dict[str, Any]],
     temp: float,
-    ranking: str | None = None,
     tilt: bool = True,
-    hypothesis_temperature: float = 1.0,
     memos: dict[int, dict[str, Any]] | None = None,
 ) -> list[np.ndarray]:
     """Add the zero readings' factor to each hypothesis's evidence, skipping hopeless ones.
@@ -168,9 +146,9 @@ def censor_zeros(
     from above; hypotheses are corrected best bound first, and one whose bound lies
     ``HOPELESS_NATS`` below the best corrected hypothesis is left at its bound.  The others
     are corrected to the mixture's precision: a hypothesis whose weight is at most ``w`` of
-    the best one's (its bound against the best corrected total, over the hypotheses'
-    temperature) leaves out at most ``CENSORED_TAIL / w`` of its own mass (at most
-    :data:`CENSORED_TAIL_MAX`), which is ``CENSORED_TAIL`` of the mixture's.
+    the best one's (its bound against the best corrected total) leaves out at most
+    ``CENSORED_TAIL / w`` of its own mass (at most :data:`CENSORED_TAIL_MAX`), which is
+    ``CENSORED_TAIL`` of the mixture's.
 
     ``memos``: per hypothesis, the correction's memo of an earlier call with the same noise
     weights (another noise-weight mode's, :func:`~dgse.posterior.adjoint.censored_correction`;
@@ -192,11 +170,11 @@ def censor_zeros(
         if bounds[i] < best - HOPELESS_NATS:
             out[i] = log_ev[i] + ceiling
             continue
-        share = math.exp(min((bounds[i] - best) / hypothesis_temperature, 0.0))
+        share = math.exp(min(bounds[i] - best, 0.0))
         tail = min(CENSORED_TAIL / share, CENSORED_TAIL_MAX)
         memo = None if memos is None else memos.setdefault(i, {})
         out[i] = log_ev[i] + censored_correction(
-            logl=log_ev[i], ranking=ranking, tilt=tilt, tail=tail, memo=memo, **details[i]["censor"]
+            logl=log_ev[i], tilt=tilt, tail=tail, memo=memo, **details[i]["censor"]
         )
         best = max(best, total(i, out[i]))
     return out
@@ -236,27 +214,6 @@ def wind_log_likelihood(
         var = (r * r) * s2u + floor * floor
         vals.append(float((-np.log(2.0 * math.pi * var) - 0.5 * d2 / var).sum()))
     return logsumexp(np.array(vals)) - math.log(len(vals))
-
-
-def profile_wind_log_likelihood(
-    predicted: np.ndarray, readings: np.ndarray, readings_counted: float
-) -> float:
-    """``log p(readings | flow)`` with the residuals' variance unknown and maximized out, each
-    reading counting ``min(1, readings_counted / m)``: ``-(m' / 2) log(RSS / m)``, ``m' =
-    min(m, readings_counted)``, up to a constant shared by all flows.
-
-    Where no flow reproduces the readings to within the sensor noise (a flow of proposed
-    openings errs by far more), the sensor-noise likelihood (:func:`wind_log_likelihood`)
-    separates two flows that leave 41 % and 42 % of the wind unexplained by tens of nats on
-    hundreds of readings; this one by ``m' log(0.42 / 0.41)``: it tells a good flow from a
-    poor one, not one good flow from another.  ``predicted``, ``readings``: ``(m, 2)`` m/s.
-    """
-    u = np.asarray(predicted, dtype=np.float64)
-    w = np.asarray(readings, dtype=np.float64)
-    m = u.shape[0]
-    rss = float(((w - u) ** 2).sum()) / max(m, 1)
-    counted = min(float(m), float(readings_counted))
-    return -0.5 * counted * math.log(max(rss, 1e-12))
 
 
 def fitted_wind_scale(predicted: np.ndarray, readings: np.ndarray) -> float:
@@ -319,39 +276,6 @@ def gas_misfit(mean: np.ndarray, readings: np.ndarray, model: AdjointResponseMod
     ``mean`` under ``model``'s noise (:func:`standardized_residuals`): about 1 where the
     physics and the noise model explain the readings, more where they do not."""
     return float(np.mean(standardized_residuals(mean, readings, model) ** 2))
-
-
-def neighbour_correlation(xy: np.ndarray, residuals: np.ndarray, radius: float) -> float:
-    """How alike the residuals of readings at most ``radius`` apart are: ``mean(r_i r_j)`` over
-    such pairs ``i < j`` (at different places) over ``mean(r^2)``.
-
-    About 0 where the residuals are independent noise, toward 1 where a model error shared
-    by neighbouring places makes them (a plume the physics puts in the wrong place), below
-    0 where neighbours disagree.  ``xy``: ``(m, 2)`` positions, ``radius`` in their unit.
-    0 when no such pair exists or every residual is 0.
-    """
-    p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-    r = np.asarray(residuals, dtype=np.float64).reshape(-1)
-    if p.shape[0] != r.size:
-        raise InputDataError(f"{p.shape[0]} positions for {r.size} residuals")
-    scale = float(np.mean(r * r))
-    if r.size < 2 or not scale > 0:
-        return 0.0
-    d2 = ((p[:, None, :] - p[None, :, :]) ** 2).sum(axis=-1)
-    i, j = np.nonzero(np.triu((d2 <= radius * radius) & (d2 > 0), k=1))
-    if i.size == 0:
-        return 0.0
-    return float(np.mean(r[i] * r[j]) / scale)
-
-
-def flattened(probs: np.ndarray, tau: float) -> np.ndarray:
-    """``probs ** (1 / tau)``, normalized (zeros stay zero): the same mode, less sure."""
-    p = np.asarray(probs, dtype=np.float64)
-    lp = np.full(p.shape, -np.inf)
-    pos = p > 0
-    lp[pos] = np.log(p[pos]) / float(tau)
-    q = np.exp(lp - lp.max())
-    return q / q.sum()
 
 
 def predictive_sources(probs: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:

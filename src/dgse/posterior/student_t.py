@@ -2,7 +2,7 @@
 
 The adjoint evidence (:mod:`dgse.posterior.adjoint`) needs it for every candidate
 source, for five noise weights, every search step: SciPy's ``stdtr`` (an incomplete
-beta function per value) was most of the evidence's time.  All candidates of a step
+beta function per value) would be most of the evidence's time.  All candidates of a step
 share ``nu``, so :func:`log_interval` interpolates ``log T_nu`` from a table made once
 per ``nu`` (cubic Hermite with the exact slope, on a uniform grid in ``u = log(1 -
 x)`` over ``x <= 0``, where it is smooth and, in the polynomial tail, almost linear;

@@ -78,7 +78,7 @@ __all__ = [
     "run_episode",
 ]
 
-#: Why an episode ended: the planner's termination test, its deadline (``deadline_margin_s``),
+#: Why an episode ended: the planner's termination test, its deadline (``deadline.margin_s``),
 #: ``next_goal`` returned None, the time limit.
 REASONS = ("converged", "deadline", "planner_stop", "time_limit")
 
@@ -100,7 +100,8 @@ class StepRecord:
         preprocessing_s, inference_s, planning_s: computation time of this step, s.
         goal: the chosen next cell, or None (the search ended at this step).
         held: the planner's stop test passed here but the stop waited for readings that
-            confirm the posterior's mode (``UtilityPlanner.confirm_radius_m``).
+            confirm the posterior's mode (``StopRule.confirm_radius_m``) or a flow that explains
+            the wind (``StopRule.max_wind_misfit``).
         source_probs: recorded source posterior ``float32 (h, w)`` (or None).
         wind_mean: recorded wind mean ``float32 (2, h, w)`` (or None).
         log_conc_mean: recorded ``log(1 + c)`` mean ``float32 (h, w)`` (or None).

@@ -62,10 +62,6 @@ class Grid:
         return round(self.height * self.resolution, 9)
 
     @property
-    def cell_area(self) -> float:
-        return self.resolution**2
-
-    @property
     def x(self) -> np.ndarray:
         """Cell-centre x coordinates, shape ``(W,)``."""
         return (np.arange(self.width) + 0.5) * self.resolution
