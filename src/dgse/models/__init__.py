@@ -12,8 +12,7 @@ entry points:
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from dgse.registry import lazy_attributes
 
 #: Where each name of the package lives; imported on first use, so that importing one
 #: module of the package (its torch-free settings) does not import the others.
@@ -48,46 +47,6 @@ _WHERE: dict[str, str] = {
     "UNetEncoder": "dgse.models.unet",
 }
 
-__all__ = [
-    "DGSE_O",
-    "DGSE_P",
-    "DGSE_S",
-    "PRESETS",
-    "VARIANTS",
-    "CheckpointError",
-    "DGSEModel",
-    "DGSEOutput",
-    "LossWeights",
-    "ModelConfig",
-    "Prediction",
-    "TargetBatch",
-    "UNet",
-    "UNetDecoder",
-    "UNetEncoder",
-    "build_model",
-    "count_parameters",
-    "create_model",
-    "dgse_loss",
-    "gaussian_nll",
-    "load_model",
-    "mc_marginal_nll",
-    "moment_match",
-    "predict",
-    "preset_config",
-    "read_checkpoint_info",
-    "save_model",
-    "source_cross_entropy",
-]
+__all__ = sorted(_WHERE)
 
-
-def __getattr__(name: str) -> Any:
-    module = _WHERE.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_attributes(globals(), _WHERE)

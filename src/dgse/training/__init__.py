@@ -15,10 +15,11 @@ checked before they are imported).  Main entry points:
 
 from __future__ import annotations
 
-import importlib
 import sys
 import types
 from typing import Any
+
+from dgse.registry import lazy_attributes
 
 #: Where each name of the package lives; imported on first use, so that importing one
 #: module of the package (its torch-free settings) does not import the others.
@@ -44,40 +45,9 @@ _WHERE: dict[str, str] = {
     "train": "dgse.training.train",
 }
 
-__all__ = [
-    "BEST_NAME",
-    "HISTORY_NAME",
-    "LAST_NAME",
-    "PRECISIONS",
-    "DGSEDataModule",
-    "DGSELightningModule",
-    "EpochSetup",
-    "EpochShuffleSampler",
-    "StopControl",
-    "TrainConfig",
-    "TrainResult",
-    "TrainState",
-    "TrainStateCheckpoint",
-    "export_model",
-    "load_config",
-    "localization_error",
-    "parse_duration",
-    "read_train_state",
-    "train",
-]
+__all__ = sorted(_WHERE)
 
-
-def __getattr__(name: str) -> Any:
-    module = _WHERE.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_attributes(globals(), _WHERE)
 
 
 class _Package(types.ModuleType):
