@@ -79,7 +79,7 @@ from dgse.cli.common import (
     user_errors,
 )
 from dgse.errors import InputDataError
-from dgse.files import write_json
+from dgse.files import json_safe, write_json
 from dgse.journal import count_records, journal_path
 from dgse.presets import PROTOCOL
 
@@ -126,8 +126,6 @@ def _table(rows: list[tuple[str, dict[str, Any]]], title: str) -> Table:
 
 
 def _write_json(path: Path, data: dict[str, Any]) -> Path:
-    from dgse.search.campaign import json_safe
-
     path.parent.mkdir(parents=True, exist_ok=True)
     return write_json(path, json_safe(data), indent=1, allow_nan=False)
 
@@ -259,7 +257,7 @@ def search_cmd(
     file); after Ctrl-C or a kill, the same command resumes where it stopped.
     """
     from dgse.presets import resolve
-    from dgse.search.campaign import estimator_options, json_safe, run_trials
+    from dgse.search.campaign import estimator_options, run_trials
 
     level = check_level(knowledge)
     if threads is not None and threads < 1:

@@ -98,6 +98,7 @@ import numba
 import numpy as np
 
 from dgse.errors import InputDataError
+from dgse.files import json_safe
 from dgse.physics.constants import DEFAULT_PHYSICS, RECOMMENDED_MAX_FILAMENTS, Physics
 from dgse.world.case import Case
 from dgse.world.generate import RngLike, as_generator
@@ -1218,17 +1219,5 @@ def make_filament_case(
         "release_per_s": settings.filaments_per_second,
     }
     info["wall_clock_s"] = {**info["wall_clock_s"], "nut_flow": t_flow}
-    meta = {**case.meta, "frame_dt": float(settings.frame_dt), "filament": _jsonable(info)}
+    meta = {**case.meta, "frame_dt": float(settings.frame_dt), "filament": json_safe(info)}
     return replace(case, frames=run.frames, meta=meta)
-
-
-def _jsonable(x: object) -> object:
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.generic):
-        return x.item()
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    return x

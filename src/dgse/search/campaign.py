@@ -52,7 +52,7 @@ import numpy as np
 from dgse.belief.estimator import Estimator
 from dgse.belief.knowledge import DEFAULT_LEVEL, check_level, require_level
 from dgse.errors import InputDataError
-from dgse.files import is_temporary
+from dgse.files import is_temporary, json_safe
 from dgse.planning.planners import Planner
 from dgse.presets import PROTOCOL
 from dgse.search.episode import EpisodeResult, StepRecord
@@ -108,21 +108,6 @@ def load_cases(path: str | os.PathLike[str]) -> list[tuple[Path, Case]]:
 def trial_seed(seed: int, stem: str, trial: int) -> np.random.SeedSequence:
     """The seed of trial ``trial`` on the case file named ``stem`` (see the module docstring)."""
     return np.random.SeedSequence([int(seed) & 0xFFFFFFFF, zlib.crc32(stem.encode()), int(trial)])
-
-
-def json_safe(obj: Any) -> Any:
-    """NaN and infinities as None; numpy scalars as Python numbers; tuples as lists."""
-    if isinstance(obj, Mapping):
-        return {str(k): json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [json_safe(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return json_safe(obj.tolist())
-    if isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
 
 
 def estimator_options(
