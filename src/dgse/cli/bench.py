@@ -17,6 +17,7 @@ from rich.markup import escape
 
 from dgse.cli.common import (
     KnowledgeOption,
+    ThreadsOption,
     check_output_dir,
     check_output_file,
     console,
@@ -55,7 +56,7 @@ def bench_cmd(
         ),
     ] = None,
     seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of scenarios and trials.")] = 0,
-    threads: Annotated[int | None, typer.Option("--threads", help="PyTorch CPU threads.")] = None,
+    threads: ThreadsOption = None,
     report: Annotated[bool, typer.Option("--report/--no-report", help="Also write DIR/report.html.")] = True,
     progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Progress bars.")] = True,
     knowledge: KnowledgeOption = "map",
