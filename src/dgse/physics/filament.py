@@ -93,6 +93,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass, field, fields, replace
+from typing import Any
 
 import numba
 import numpy as np
@@ -1129,17 +1130,9 @@ def _prefill(
     return x, y, np.full(n, age), weight
 
 
-def simulate_filaments(
-    occupancy: np.ndarray,
-    wind: np.ndarray,
-    source_xy,
-    settings: FilamentSettings,
-    rng: RngLike = None,
-    outlet_mask: np.ndarray | None = None,
-    **kwargs,
-) -> np.ndarray:
+def simulate_filaments(*args: Any, **kwargs: Any) -> np.ndarray:
     """The frames ``float32 (T, H, W)`` in ppm of :func:`run_filaments` (same arguments)."""
-    return run_filaments(occupancy, wind, source_xy, settings, rng, outlet_mask, **kwargs).frames
+    return run_filaments(*args, **kwargs).frames
 
 
 def make_filament_case(
