@@ -194,21 +194,22 @@ class Registry(Generic[T]):
 
 
 def lazy_attributes(
-    namespace: dict[str, Any], where: dict[str, str]
+    namespace: dict[str, Any], modules: dict[str, tuple[str, ...]]
 ) -> tuple[Callable[[str], Any], Callable[[], list[str]]]:
     """A package's module-level ``__getattr__`` and ``__dir__`` for names imported on first use.
 
     Args:
         namespace: the package's ``globals()``; a name, once imported, is kept in it, so
             the next use finds it without coming back here.
-        where: each lazy name -> the module that defines it.
+        modules: each module -> the names of it the package offers.
 
     Returns:
-        ``(__getattr__, __dir__)``: the first imports ``where[name]`` and returns its
-        ``name`` (:class:`AttributeError` for a name not in ``where``); the second lists
-        the namespace and the package's ``__all__``.
+        ``(__getattr__, __dir__)``: the first imports the module of ``name`` and returns
+        its ``name`` (:class:`AttributeError` for a name no module offers); the second
+        lists the namespace and the package's ``__all__``.
     """
     package = namespace["__name__"]
+    where = {name: module for module, names in modules.items() for name in names}
 
     def __getattr__(name: str) -> Any:
         module = where.get(name)

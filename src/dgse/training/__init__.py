@@ -21,33 +21,29 @@ from typing import Any
 
 from dgse.registry import lazy_attributes
 
-#: Where each name of the package lives; imported on first use, so that importing one
-#: module of the package (its torch-free settings) does not import the others.
-_WHERE: dict[str, str] = {
-    "PRECISIONS": "dgse.training.config",
-    "TrainConfig": "dgse.training.config",
-    "load_config": "dgse.training.config",
-    "parse_duration": "dgse.training.config",
-    "DGSEDataModule": "dgse.training.datamodule",
-    "EpochSetup": "dgse.training.datamodule",
-    "EpochShuffleSampler": "dgse.training.datamodule",
-    "DGSELightningModule": "dgse.training.module",
-    "localization_error": "dgse.training.module",
-    "BEST_NAME": "dgse.training.train",
-    "HISTORY_NAME": "dgse.training.train",
-    "LAST_NAME": "dgse.training.train",
-    "StopControl": "dgse.training.train",
-    "TrainResult": "dgse.training.train",
-    "TrainState": "dgse.training.train",
-    "TrainStateCheckpoint": "dgse.training.train",
-    "export_model": "dgse.training.train",
-    "read_train_state": "dgse.training.train",
-    "train": "dgse.training.train",
+#: The modules of the package and the names each defines, imported on first use, so that
+#: importing one module of the package (its torch-free settings) does not import the others.
+_MODULES: dict[str, tuple[str, ...]] = {
+    "dgse.training.config": ("PRECISIONS", "TrainConfig", "load_config", "parse_duration"),
+    "dgse.training.datamodule": ("DGSEDataModule", "EpochSetup", "EpochShuffleSampler"),
+    "dgse.training.module": ("DGSELightningModule", "localization_error"),
+    "dgse.training.train": (
+        "BEST_NAME",
+        "HISTORY_NAME",
+        "LAST_NAME",
+        "StopControl",
+        "TrainResult",
+        "TrainState",
+        "TrainStateCheckpoint",
+        "export_model",
+        "read_train_state",
+        "train",
+    ),
 }
 
-__all__ = sorted(_WHERE)
+__all__ = sorted(name for names in _MODULES.values() for name in names)
 
-__getattr__, __dir__ = lazy_attributes(globals(), _WHERE)
+__getattr__, __dir__ = lazy_attributes(globals(), _MODULES)
 
 
 class _Package(types.ModuleType):
