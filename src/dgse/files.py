@@ -22,16 +22,20 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import re
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import IO, Any
+
+import numpy as np
 
 __all__ = [
     "atomic_open",
     "atomic_path",
     "is_temporary",
+    "json_safe",
     "lock_path",
     "temporary_name",
     "update_json",
@@ -129,6 +133,23 @@ def write_text(path: str | os.PathLike[str], text: str, encoding: str = "utf-8")
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding=encoding)
     return Path(path)
+
+
+def json_safe(obj: Any) -> Any:
+    """``obj`` as plain JSON data: NaN and infinities as None; numpy scalars as Python numbers;
+    arrays and tuples as lists; mapping keys as strings (so ``json.dumps(..., allow_nan=False)``
+    takes it)."""
+    if isinstance(obj, Mapping):
+        return {str(k): json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return json_safe(obj.tolist())
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
 
 
 def write_json(path: str | os.PathLike[str], obj: Any, *, end: str = "", **json_kwargs: Any) -> Path:

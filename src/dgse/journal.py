@@ -46,6 +46,7 @@ __all__ = [
     "JOURNAL_VERSION",
     "Journal",
     "case_fingerprint",
+    "check_kept_case",
     "count_records",
     "journal_path",
 ]
@@ -78,6 +79,14 @@ def case_fingerprint(case: Case) -> str:
         h.update(c.data)
     h.update(repr((float(case.resolution), case.meta.get("frame_dt"))).encode())
     return h.hexdigest()[:16]
+
+
+def check_kept_case(entry: Mapping[str, Any], fingerprint: str | None, differs: str) -> None:
+    """Refuse a kept piece of work whose case changed since (its ``case_fingerprint`` is not
+    ``fingerprint``): :class:`InputDataError` with ``differs``, which says which case and
+    journal and how to start afresh (``{restart}`` is named as the caller's option)."""
+    if entry.get("case_fingerprint") != fingerprint:
+        raise InputDataError(differs, names={"restart": "restart=True"})
 
 
 def _canonical(obj: Any) -> Any:

@@ -25,7 +25,7 @@ from typing import Any, Generic, TypeVar
 
 from dgse.errors import InputDataError, UnsupportedError
 
-__all__ = ["Entry", "Registry"]
+__all__ = ["Entry", "Registry", "lazy_attributes"]
 
 T = TypeVar("T")
 
@@ -191,3 +191,35 @@ class Registry(Generic[T]):
         except (ImportError, AttributeError) as err:
             raise UnsupportedError(f"{self.kind} {e.name!r} cannot be loaded here: {err}") from err
         return obj
+
+
+def lazy_attributes(
+    namespace: dict[str, Any], modules: dict[str, tuple[str, ...]]
+) -> tuple[Callable[[str], Any], Callable[[], list[str]]]:
+    """A package's module-level ``__getattr__`` and ``__dir__`` for names imported on first use.
+
+    Args:
+        namespace: the package's ``globals()``; a name, once imported, is kept in it, so
+            the next use finds it without coming back here.
+        modules: each module -> the names of it the package offers.
+
+    Returns:
+        ``(__getattr__, __dir__)``: the first imports the module of ``name`` and returns
+        its ``name`` (:class:`AttributeError` for a name no module offers); the second
+        lists the namespace and the package's ``__all__``.
+    """
+    package = namespace["__name__"]
+    where = {name: module for module, names in modules.items() for name in names}
+
+    def __getattr__(name: str) -> Any:
+        module = where.get(name)
+        if module is None:
+            raise AttributeError(f"module {package!r} has no attribute {name!r}")
+        value = getattr(importlib.import_module(module), name)
+        namespace[name] = value
+        return value
+
+    def __dir__() -> list[str]:
+        return sorted(set(namespace) | set(namespace.get("__all__", ())))
+
+    return __getattr__, __dir__

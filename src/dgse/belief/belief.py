@@ -342,8 +342,9 @@ def log_moments_from_ppm(
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Lognormal moment match of ``1 + c``: ppm mean/variance -> mean/variance of ``log(1 + c)``.
 
-    ``s2 = log(1 + v / (1 + m)^2)``, ``mu = log(1 + m) - s2 / 2`` (the mean is
-    clipped at 0 first), so ``Belief.conc_mean_ppm`` gives back ``m``.
+    Returns ``(mu, s2)``: ``s2 = log(1 + v / (1 + m)^2)``, ``mu = log(1 + m) - s2 / 2``
+    (the mean is clipped at 0 first; ``s2`` is None when ``var_ppm`` is), the exact
+    inverse of :attr:`Belief.conc_mean_ppm` / :attr:`Belief.conc_var_ppm`.
     """
     m = np.maximum(np.asarray(mean_ppm, dtype=np.float64), 0.0)
     if var_ppm is None:

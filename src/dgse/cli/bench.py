@@ -18,6 +18,7 @@ from rich.markup import escape
 
 from dgse.cli.common import (
     KnowledgeOption,
+    ThreadsOption,
     check_output_dir,
     check_output_file,
     console,
@@ -56,7 +57,7 @@ def bench_cmd(
         ),
     ] = None,
     seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of scenarios and trials.")] = 0,
-    threads: Annotated[int | None, typer.Option("--threads", help="PyTorch CPU threads.")] = None,
+    threads: ThreadsOption = None,
     report: Annotated[
         bool, typer.Option("--report/--no-report", help="Also write DIR/summary.md and DIR/report.html.")
     ] = True,

@@ -346,6 +346,38 @@ KNOWLEDGE_HELP = (
     "the user's own CFD). Recorded in the results."
 )
 KnowledgeOption = Annotated[str, typer.Option("--knowledge", metavar="LEVEL", help=KNOWLEDGE_HELP)]
+#: ``-p/--param KEY=VALUE`` (repeatable): estimator options, read by :func:`parse_params`.
+ParamOption = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--param",
+        "-p",
+        metavar="KEY=VALUE",
+        help="Estimator argument KEY=VALUE (VALUE as JSON, else a string); repeatable.",
+    ),
+]
+#: ``--threads N``: PyTorch's CPU threads (None: PyTorch's default).
+THREADS_HELP = "PyTorch CPU threads (1 is often fastest on busy, shared cores)."
+ThreadsOption = Annotated[int | None, typer.Option("--threads", help=THREADS_HELP)]
+#: ``--progress/--no-progress``: a progress bar while the command works.
+ProgressOption = Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")]
+
+
+def journal_output(what: str, default: str, kept: str) -> Any:
+    """The ``-o/--out/--json`` option of a command that keeps its finished ``kept`` (say,
+    ``"episodes"``) in a journal beside its JSON file of ``what`` (default path ``default``)."""
+    return typer.Option(
+        "--out",
+        "-o",
+        "--json",
+        help=f"{what} as JSON (default: {default}).  Finished {kept} are kept as they finish in "
+        "<name>.journal.jsonl beside it; the same command again resumes an interrupted run.",
+    )
+
+
+def restart_option(kept: str) -> Any:
+    """The ``--restart`` option of a command that keeps its finished ``kept`` in a journal."""
+    return typer.Option("--restart", help=f"Discard the {kept} kept from an earlier run into the same file.")
 
 
 #: Folder of the results of a command run without an output path.

@@ -19,6 +19,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from dgse.cli.common import (
+    ProgressOption,
     check_output_dir,
     check_output_file,
     console,
@@ -80,7 +81,7 @@ def generate_cmd(
         float,
         typer.Option("--checkpoint", help="Least seconds between commits into the store file."),
     ] = 60.0,
-    progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")] = True,
+    progress: ProgressOption = True,
     split: Annotated[
         list[str] | None,
         typer.Option(

@@ -41,10 +41,15 @@ from rich.table import Table
 from dgse.belief.knowledge import DEFAULT_LEVEL, Knowledge, check_level
 from dgse.cli.common import (
     KnowledgeOption,
+    ParamOption,
+    ProgressOption,
+    ThreadsOption,
     check_output_file,
     console,
+    journal_output,
     parse_params,
     path_text,
+    restart_option,
     user_errors,
 )
 from dgse.errors import InputDataError
@@ -69,9 +74,19 @@ class Dtype(StrEnum):
 
 _DTYPE_HELP = "DGSE precision: float32, bf16, or auto (bf16 where the CPU computes it natively)."
 DtypeOption = Annotated[Dtype | None, typer.Option("--dtype", help=_DTYPE_HELP, show_default=False)]
+# the options estimate and evaluate share
+MethodOption = Annotated[
+    str | None,
+    typer.Option(
+        "--method", "-m", help="Method or registered estimator (default: dgse-phys, the named method)."
+    ),
+]
+SeedOption = Annotated[int, typer.Option("--seed", "-s", help="Seed of the observations (>= 0).")]
 _MODEL_HELP = "DGSE weights: 'default' (shipped with dgse) or a .safetensors checkpoint."
-_PARAM_HELP = "Estimator argument KEY=VALUE (VALUE as JSON, else a string); repeatable."
-_THREADS_HELP = "PyTorch CPU threads (1 is often fastest on busy, shared cores)."
+ModelOption = Annotated[str | None, typer.Option("--model", help=_MODEL_HELP)]
+KOption = Annotated[int | None, typer.Option("-K", help="DGSE-S wind samples (default 5).")]
+TOption = Annotated[int | None, typer.Option("-T", help="DGSE-S concentration samples (default 5).")]
+DeviceOption = Annotated[str | None, typer.Option("--device", help="DGSE device (cpu, cuda, ...).")]
 
 
 def _set_threads(threads: int | None) -> None:
@@ -160,20 +175,15 @@ def estimate_cmd(
         int, typer.Option("--observations", "-n", help="Number of sensors at random free cells.")
     ],
     out: Annotated[Path, typer.Option("--out", "-o", help="Estimate file (.npz) to write.")],
-    seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of the observations (>= 0).")] = 0,
-    method: Annotated[
-        str | None,
-        typer.Option(
-            "--method", "-m", help="Method or registered estimator (default: dgse-phys, the named method)."
-        ),
-    ] = None,
-    model: Annotated[str | None, typer.Option("--model", help=_MODEL_HELP)] = None,
-    k: Annotated[int | None, typer.Option("-K", help="DGSE-S wind samples (default 5).")] = None,
-    t: Annotated[int | None, typer.Option("-T", help="DGSE-S concentration samples (default 5).")] = None,
-    device: Annotated[str | None, typer.Option("--device", help="DGSE device (cpu, cuda, ...).")] = None,
+    seed: SeedOption = 0,
+    method: MethodOption = None,
+    model: ModelOption = None,
+    k: KOption = None,
+    t: TOption = None,
+    device: DeviceOption = None,
     dtype: DtypeOption = None,
-    params: Annotated[list[str] | None, typer.Option("--param", "-p", help=_PARAM_HELP)] = None,
-    threads: Annotated[int | None, typer.Option("--threads", help=_THREADS_HELP)] = None,
+    params: ParamOption = None,
+    threads: ThreadsOption = None,
     plot: Annotated[Path | None, typer.Option("--plot", help="Also save a figure of the belief.")] = None,
     knowledge: KnowledgeOption = DEFAULT_LEVEL,
 ) -> None:
@@ -359,41 +369,25 @@ def evaluate_cmd(
             show_default=False,
         ),
     ],
-    method: Annotated[
-        str | None,
-        typer.Option(
-            "--method", "-m", help="Method or registered estimator (default: dgse-phys, the named method)."
-        ),
-    ] = None,
+    method: MethodOption = None,
     trials: Annotated[
         int, typer.Option("--trials", "-r", help="Random sensor configurations per case and count.")
     ] = 20,
-    seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of the observations (>= 0).")] = 0,
+    seed: SeedOption = 0,
     out: Annotated[
-        Path | None,
-        typer.Option(
-            "--out",
-            "-o",
-            "--json",
-            help="The full result as JSON (default: dgse-out/evaluate-<method>.json).  Finished "
-            "estimates are kept as they finish in <name>.journal.jsonl beside it; the same command "
-            "again resumes an interrupted run.",
-        ),
+        Path | None, journal_output("The full result", "dgse-out/evaluate-<method>.json", "estimates")
     ] = None,
-    restart: Annotated[
-        bool,
-        typer.Option("--restart", help="Discard the estimates kept from an earlier run into the same file."),
-    ] = False,
+    restart: Annotated[bool, restart_option("estimates")] = False,
     split: Annotated[str, typer.Option("--split", help="Split of a dataset store.")] = "test",
-    model: Annotated[str | None, typer.Option("--model", help=_MODEL_HELP)] = None,
-    k: Annotated[int | None, typer.Option("-K", help="DGSE-S wind samples (default 5).")] = None,
-    t: Annotated[int | None, typer.Option("-T", help="DGSE-S concentration samples (default 5).")] = None,
-    device: Annotated[str | None, typer.Option("--device", help="DGSE device (cpu, cuda, ...).")] = None,
+    model: ModelOption = None,
+    k: KOption = None,
+    t: TOption = None,
+    device: DeviceOption = None,
     dtype: DtypeOption = None,
-    params: Annotated[list[str] | None, typer.Option("--param", "-p", help=_PARAM_HELP)] = None,
-    threads: Annotated[int | None, typer.Option("--threads", help=_THREADS_HELP)] = None,
+    params: ParamOption = None,
+    threads: ThreadsOption = None,
     limit: Annotated[int | None, typer.Option("--limit", help="Only the first N cases.")] = None,
-    progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")] = True,
+    progress: ProgressOption = True,
     knowledge: KnowledgeOption = DEFAULT_LEVEL,
 ) -> None:
     """Evaluate an estimator on cases from random noisy observations (paper Sec. V).

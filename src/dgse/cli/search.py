@@ -66,20 +66,24 @@ from rich.table import Table
 from dgse.belief.knowledge import DEFAULT_LEVEL, check_level
 from dgse.cli.common import (
     KnowledgeOption,
+    ParamOption,
+    ThreadsOption,
     check_output_dir,
     check_output_file,
     console,
     default_output,
     interruptible,
+    journal_output,
     kept_note,
     parse_params,
     path_text,
+    restart_option,
     resume_command,
     resume_note,
     user_errors,
 )
 from dgse.errors import InputDataError
-from dgse.files import write_json
+from dgse.files import json_safe, write_json
 from dgse.journal import count_records, journal_path
 from dgse.presets import PROTOCOL
 
@@ -126,14 +130,11 @@ def _table(rows: list[tuple[str, dict[str, Any]]], title: str) -> Table:
 
 
 def _write_json(path: Path, data: dict[str, Any]) -> Path:
-    from dgse.search.campaign import json_safe
-
     path.parent.mkdir(parents=True, exist_ok=True)
     return write_json(path, json_safe(data), indent=1, allow_nan=False)
 
 
 # -- command -----------------------------------------------------------------------------
-_PARAM_HELP = "Estimator argument KEY=VALUE (VALUE as JSON, else a string); repeatable."
 #: What the columns of the summary table stand for, printed under it.
 LEGEND = (
     "SR success rate (error <= 2 m when the method stops), ST search time, TD travelled distance, "
@@ -207,20 +208,9 @@ def search_cmd(
         ),
     ] = False,
     out: Annotated[
-        Path | None,
-        typer.Option(
-            "--out",
-            "-o",
-            "--json",
-            help="The metrics as JSON (default: dgse-out/search-<method>-<planner>.json).  Finished "
-            "episodes are kept as they finish in <name>.journal.jsonl beside it; the same command "
-            "again resumes an interrupted run.",
-        ),
+        Path | None, journal_output("The metrics", "dgse-out/search-<method>-<planner>.json", "episodes")
     ] = None,
-    restart: Annotated[
-        bool,
-        typer.Option("--restart", help="Discard the episodes kept from an earlier run into the same file."),
-    ] = False,
+    restart: Annotated[bool, restart_option("episodes")] = False,
     animate: Annotated[
         Path | None,
         typer.Option("--animate", help="Write a GIF of trial 0 of every case into this directory."),
@@ -228,10 +218,7 @@ def search_cmd(
     steps: Annotated[
         bool, typer.Option("--steps/--no-steps", help="Include every step of every trial in the JSON.")
     ] = False,
-    param: Annotated[
-        list[str] | None,
-        typer.Option("--param", "-p", metavar="KEY=VALUE", help=_PARAM_HELP),
-    ] = None,
+    param: ParamOption = None,
     option: Annotated[
         list[str] | None,
         typer.Option("--option", "-O", metavar="KEY=VALUE", hidden=True, help="Old name of --param."),
@@ -240,9 +227,7 @@ def search_cmd(
         list[str] | None,
         typer.Option("--planner-option", "-P", metavar="KEY=VALUE", help="Planner option (repeatable)."),
     ] = None,
-    threads: Annotated[
-        int | None, typer.Option("--threads", help="PyTorch CPU threads (1 is fastest on busy cores).")
-    ] = None,
+    threads: ThreadsOption = None,
     progress: Annotated[
         bool,
         typer.Option(
@@ -260,7 +245,7 @@ def search_cmd(
     """
     from dgse.planning.planners import PLANNERS
     from dgse.presets import resolve
-    from dgse.search.campaign import estimator_options, json_safe, run_trials
+    from dgse.search.campaign import estimator_options, run_trials
 
     level = check_level(knowledge)
     if threads is not None and threads < 1:

@@ -24,6 +24,7 @@ from rich.markup import escape
 from dgse.cli.common import (
     EXIT_INTERRUPTED,
     NOTHING_KEPT,
+    ThreadsOption,
     check_output_dir,
     check_output_file,
     console,
@@ -160,7 +161,7 @@ def train_cmd(
     workers: Annotated[
         int | None, typer.Option("--workers", "-w", help="DataLoader worker processes per device.")
     ] = None,
-    threads: Annotated[int | None, typer.Option("--threads", help="PyTorch CPU threads.")] = None,
+    threads: ThreadsOption = None,
     seed: Annotated[int | None, typer.Option("--seed", "-s", help="Seed of the run.")] = None,
     export: Annotated[
         Path | None, typer.Option("--export", help="Also write the selected model to this .safetensors file.")

@@ -633,7 +633,7 @@ def _evaluate_case(
     level: str,
 ) -> list[dict[str, Any]]:
     """The records of one case in loop order: kept ones from the journal, the others estimated."""
-    from dgse.journal import case_fingerprint
+    from dgse.journal import case_fingerprint, check_kept_case
 
     case = ref.load()
     fingerprint = None if book is None else case_fingerprint(case)
@@ -645,12 +645,12 @@ def _evaluate_case(
         for trial in range(trials):
             old = kept.get((ref.id, n, trial))
             if old is not None and book is not None:
-                if old.get("case_fingerprint") != fingerprint:
-                    raise InputDataError(
-                        f"case {ref.id!r} differs from the one whose estimates {book.path} keeps "
-                        "(re-solved?): start afresh with {restart}, or give another path",
-                        names={"restart": "restart=True"},
-                    )
+                check_kept_case(
+                    old,
+                    fingerprint,
+                    f"case {ref.id!r} differs from the one whose estimates {book.path} keeps "
+                    "(re-solved?): start afresh with {restart}, or give another path",
+                )
                 out.append(dict(old["record"]))
                 continue
             if before is not None:

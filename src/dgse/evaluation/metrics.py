@@ -107,6 +107,21 @@ def rmse(estimate: np.ndarray, truth: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(e - t))))
 
 
+def _gaussian_nll_terms(
+    what: str, t: np.ndarray, mean: np.ndarray, var: np.ndarray, var_floor: float
+) -> np.ndarray | None:
+    """Each element's ``0.5 [log(2 pi v) + (t - mu)^2 / v]`` (nats), ``v`` raised to ``var_floor``;
+    None for no elements.  ``what`` names the metric when the shapes differ."""
+    m = np.asarray(mean, dtype=np.float64)
+    v = np.asarray(var, dtype=np.float64)
+    if not (t.shape == m.shape == v.shape):
+        raise InputDataError(f"{what}: shapes {t.shape}, {m.shape}, {v.shape} differ")
+    if t.size == 0:
+        return None
+    v = np.maximum(v, var_floor)
+    return 0.5 * (LOG_2PI + np.log(v) + np.square(t - m) / v)
+
+
 def gaussian_nll(truth: np.ndarray, mean: np.ndarray, var: np.ndarray, var_floor: float = VAR_FLOOR) -> float:
     """Mean Gaussian negative log-likelihood ``0.5 [log(2 pi v) + (t - mu)^2 / v]`` in nats.
 
@@ -115,14 +130,8 @@ def gaussian_nll(truth: np.ndarray, mean: np.ndarray, var: np.ndarray, var_floor
         var_floor: variances below it are raised to it.
     """
     t = np.asarray(truth, dtype=np.float64)
-    m = np.asarray(mean, dtype=np.float64)
-    v = np.asarray(var, dtype=np.float64)
-    if not (t.shape == m.shape == v.shape):
-        raise InputDataError(f"gaussian_nll: shapes {t.shape}, {m.shape}, {v.shape} differ")
-    if t.size == 0:
-        return NAN
-    v = np.maximum(v, var_floor)
-    return float(np.mean(0.5 * (LOG_2PI + np.log(v) + np.square(t - m) / v)))
+    terms = _gaussian_nll_terms("gaussian_nll", t, mean, var, var_floor)
+    return NAN if terms is None else float(np.mean(terms))
 
 
 def lognormal_nll_ppm(
@@ -135,14 +144,8 @@ def lognormal_nll_ppm(
     (``c >= 0``; negative truths are clipped at 0).
     """
     t = np.log1p(np.maximum(np.asarray(truth_ppm, dtype=np.float64), 0.0))
-    m = np.asarray(log_mean, dtype=np.float64)
-    v = np.asarray(log_var, dtype=np.float64)
-    if not (t.shape == m.shape == v.shape):
-        raise InputDataError(f"lognormal_nll_ppm: shapes {t.shape}, {m.shape}, {v.shape} differ")
-    if t.size == 0:
-        return NAN
-    v = np.maximum(v, var_floor)
-    return float(np.mean(0.5 * (LOG_2PI + np.log(v) + np.square(t - m) / v) + t))
+    terms = _gaussian_nll_terms("lognormal_nll_ppm", t, log_mean, log_var, var_floor)
+    return NAN if terms is None else float(np.mean(terms + t))
 
 
 def _check_same_grid(belief: Belief, case: Case) -> None:

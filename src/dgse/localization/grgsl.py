@@ -58,6 +58,7 @@ from dgse.belief.belief import Belief, probs_from_log, uniform_probs
 from dgse.belief.inputs import check_inputs
 from dgse.belief.knowledge import KnowledgeUser
 from dgse.errors import InputDataError
+from dgse.localization.grid_dijkstra import expansions
 from dgse.sensing.sensors import Observations
 
 __all__ = ["GrGSLEstimator", "grgsl_weights", "make_grgsl"]
@@ -82,28 +83,13 @@ def _flood(free, ri, rj, w_robot, seed_i, seed_j, seed_d, seed_w):  # pragma: no
         dist[i, j] = seed_d[k]
         wgt[i, j] = seed_w[k]
         heapq.heappush(heap, (seed_d[k], np.int64(i * W + j)))
-    while len(heap) > 0:
-        d, idx = heapq.heappop(heap)
-        i = idx // W
-        j = idx % W
-        if done[i, j]:
-            continue
-        done[i, j] = True
-        for di in range(-1, 2):
-            for dj in range(-1, 2):
-                if di == 0 and dj == 0:
-                    continue
-                ni = i + di
-                nj = j + dj
-                if ni < 0 or ni >= H or nj < 0 or nj >= W or not free[ni, nj] or done[ni, nj]:
-                    continue
-                nd = d + (1.4142135623730951 if di != 0 and dj != 0 else 1.0)
-                if nd < dist[ni, nj] - 1e-9:
-                    dist[ni, nj] = nd
-                    wgt[ni, nj] = wgt[i, j]
-                    heapq.heappush(heap, (nd, np.int64(ni * W + nj)))
-                elif abs(nd - dist[ni, nj]) <= 1e-9 and wgt[i, j] > wgt[ni, nj]:
-                    wgt[ni, nj] = wgt[i, j]
+    for i, j, ni, nj, nd in expansions(heap, done, free, 1.0):
+        if nd < dist[ni, nj] - 1e-9:
+            dist[ni, nj] = nd
+            wgt[ni, nj] = wgt[i, j]
+            heapq.heappush(heap, (nd, np.int64(ni * W + nj)))
+        elif abs(nd - dist[ni, nj]) <= 1e-9 and wgt[i, j] > wgt[ni, nj]:
+            wgt[ni, nj] = wgt[i, j]
     return wgt, dist
 
 

@@ -99,6 +99,7 @@ from dgse.belief.belief import Belief, probs_from_log
 from dgse.belief.inputs import check_inputs
 from dgse.belief.knowledge import Knowledge, KnowledgeUser
 from dgse.errors import InputDataError
+from dgse.localization.grid_dijkstra import expansions
 from dgse.options import options_from
 from dgse.planning.paths import Cell
 from dgse.planning.planners import PlannerBase, SearchHistory
@@ -219,33 +220,18 @@ def _hit_update(free, ri, rj, res, window, ux, uy, s_major, s_minor, prior, valu
             diry[i, j] = oy / d
             aux[i, j] = _falloff(ox, oy, ux, uy, s_major, s_minor, prior, value)
             heapq.heappush(heap, (d, np.int64(i * W + j)))
-    while len(heap) > 0:
-        d, idx = heapq.heappop(heap)
-        i = idx // W
-        j = idx % W
-        if done[i, j]:
-            continue
-        done[i, j] = True
-        for di in range(-1, 2):
-            for dj in range(-1, 2):
-                if di == 0 and dj == 0:
-                    continue
-                ni = i + di
-                nj = j + dj
-                if ni < 0 or ni >= H or nj < 0 or nj >= W or not free[ni, nj] or done[ni, nj]:
-                    continue
-                nd = d + res * (1.4142135623730951 if di != 0 and dj != 0 else 1.0)
-                nw = _falloff(dirx[i, j] * nd, diry[i, j] * nd, ux, uy, s_major, s_minor, prior, value)
-                if nd < dist[ni, nj] - 1e-9:
-                    dist[ni, nj] = nd
-                    aux[ni, nj] = nw
-                    dirx[ni, nj] = dirx[i, j]
-                    diry[ni, nj] = diry[i, j]
-                    heapq.heappush(heap, (nd, np.int64(ni * W + nj)))
-                elif abs(nd - dist[ni, nj]) <= 1e-9 and nw > aux[ni, nj]:
-                    aux[ni, nj] = nw
-                    dirx[ni, nj] = dirx[i, j]
-                    diry[ni, nj] = diry[i, j]
+    for i, j, ni, nj, nd in expansions(heap, done, free, res):
+        nw = _falloff(dirx[i, j] * nd, diry[i, j] * nd, ux, uy, s_major, s_minor, prior, value)
+        if nd < dist[ni, nj] - 1e-9:
+            dist[ni, nj] = nd
+            aux[ni, nj] = nw
+            dirx[ni, nj] = dirx[i, j]
+            diry[ni, nj] = diry[i, j]
+            heapq.heappush(heap, (nd, np.int64(ni * W + nj)))
+        elif abs(nd - dist[ni, nj]) <= 1e-9 and nw > aux[ni, nj]:
+            aux[ni, nj] = nw
+            dirx[ni, nj] = dirx[i, j]
+            diry[ni, nj] = diry[i, j]
     return aux, dist
 
 
@@ -410,6 +396,31 @@ def _release(rel, res, state):  # pragma: no cover - numba
 
 
 @nb.njit(cache=True)
+def _release_many(fx, fy, act, last, n_per, rel, res, state):  # pragma: no cover - numba
+    """Release ``n_per`` filaments into the slots from ``last`` on; returns the slots in use."""
+    for _ in range(n_per):
+        fx[last], fy[last] = _release(rel, res, state)
+        act[last] = True
+        last += 1
+    return last
+
+
+@nb.njit(cache=True)
+def _advect(
+    f, fx, fy, wx, wy, step, noise, free, open_mask, edges_open, res, state
+):  # pragma: no cover - numba
+    """Move filament ``f`` for ``step`` s by its cell's wind plus noise; False once it left the map."""
+    j = math.floor(fx[f] / res)
+    i = math.floor(fy[f] / res)
+    vx = wx[i, j] + noise * _randn(state)
+    vy = wy[i, j] + noise * _randn(state)
+    fx[f], fy[f] = _move(fx[f], fy[f], fx[f] + step * vx, fy[f] + step * vy, free, open_mask, edges_open, res)
+    j = math.floor(fx[f] / res)
+    i = math.floor(fy[f] / res)
+    return 0 <= i < free.shape[0] and 0 <= j < free.shape[1]
+
+
+@nb.njit(cache=True)
 def _simulate_one(
     free, open_mask, edges_open, wx, wy, rel, res, dt, noise, n_per, min_warm, max_warm, n_rec, seed
 ):  # pragma: no cover - numba
@@ -427,23 +438,11 @@ def _simulate_one(
     stable = False
     it = 0
     while it < min_warm or ((not stable) and it < max_warm):
-        for _ in range(n_per):
-            fx[last], fy[last] = _release(rel, res, state)
-            act[last] = True
-            last += 1
+        last = _release_many(fx, fy, act, last, n_per, rel, res, state)
         for f in range(last):
-            if not act[f]:
-                continue
-            j = math.floor(fx[f] / res)
-            i = math.floor(fy[f] / res)
-            vx = wx[i, j] + noise * _randn(state)
-            vy = wy[i, j] + noise * _randn(state)
-            ex = fx[f] + 2.0 * dt * vx
-            ey = fy[f] + 2.0 * dt * vy
-            fx[f], fy[f] = _move(fx[f], fy[f], ex, ey, free, open_mask, edges_open, res)
-            j = math.floor(fx[f] / res)
-            i = math.floor(fy[f] / res)
-            if i < 0 or i >= H or j < 0 or j >= W:
+            if act[f] and not _advect(
+                f, fx, fy, wx, wy, 2.0 * dt, noise, free, open_mask, edges_open, res, state
+            ):
                 act[f] = False
                 stable = True
                 break
@@ -451,10 +450,7 @@ def _simulate_one(
     hits = np.zeros((H, W))
     updated = np.zeros((H, W), dtype=np.int64)
     for t in range(1, n_rec + 1):
-        for _ in range(n_per):
-            fx[last], fy[last] = _release(rel, res, state)
-            act[last] = True
-            last += 1
+        last = _release_many(fx, fy, act, last, n_per, rel, res, state)
         for f in range(last):
             if not act[f]:
                 continue
@@ -463,14 +459,7 @@ def _simulate_one(
             if updated[i, j] < t:
                 hits[i, j] += 1.0
                 updated[i, j] = t
-            vx = wx[i, j] + noise * _randn(state)
-            vy = wy[i, j] + noise * _randn(state)
-            fx[f], fy[f] = _move(
-                fx[f], fy[f], fx[f] + dt * vx, fy[f] + dt * vy, free, open_mask, edges_open, res
-            )
-            j = math.floor(fx[f] / res)
-            i = math.floor(fy[f] / res)
-            if i < 0 or i >= H or j < 0 or j >= W:
+            if not _advect(f, fx, fy, wx, wy, dt, noise, free, open_mask, edges_open, res, state):
                 act[f] = False
     return hits / n_rec
 

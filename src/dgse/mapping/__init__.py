@@ -91,7 +91,7 @@ from typing import Any
 
 import numpy as np
 
-from dgse.belief.belief import Belief, normalize_source_probs
+from dgse.belief.belief import Belief, log_moments_from_ppm, normalize_source_probs
 from dgse.belief.knowledge import KnowledgeUser
 from dgse.errors import InputDataError
 from dgse.options import check_options
@@ -210,22 +210,9 @@ def check_inputs(occupancy: np.ndarray, resolution: float, observations: Observa
 
 
 # -- results -------------------------------------------------------------------------------
-def ppm_to_log_moments(
-    mean_ppm: np.ndarray, var_ppm: np.ndarray | None
-) -> tuple[np.ndarray, np.ndarray | None]:
-    """Mean and variance of ``L = log(1 + c)`` for a lognormal ``1 + c`` with the given ppm moments.
-
-    ``mean_ppm`` is clipped at 0 first.  Returns ``(mu, s2)`` with
-    ``s2 = log(1 + v / (1 + m)^2)`` and ``mu = log(1 + m) - s2 / 2``, the exact
-    inverse of :attr:`Belief.conc_mean_ppm` / :attr:`Belief.conc_var_ppm`
-    (``s2`` is None when ``var_ppm`` is).
-    """
-    m = np.maximum(np.asarray(mean_ppm, dtype=np.float64), 0.0)
-    if var_ppm is None:
-        return np.log1p(m), None
-    v = np.maximum(np.asarray(var_ppm, dtype=np.float64), 0.0)
-    s2 = np.log1p(v / (1.0 + m) ** 2)
-    return np.log1p(m) - 0.5 * s2, s2
+#: Mean and variance of ``L = log(1 + c)`` of a lognormal ``1 + c`` with given ppm moments
+#: (:func:`~dgse.belief.belief.log_moments_from_ppm`, the belief's own conversion).
+ppm_to_log_moments = log_moments_from_ppm
 
 
 @dataclass(frozen=True, eq=False)

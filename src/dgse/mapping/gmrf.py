@@ -72,10 +72,12 @@ __all__ = [
     "FreeGraph",
     "GGMRFParams",
     "SparseSPDFactor",
+    "check_variance_method",
     "diag_of_inverse",
     "free_graph",
     "gas_precision",
     "ggmrf",
+    "gmrf_inputs",
     "selected_inverse_diag",
 ]
 
@@ -147,6 +149,19 @@ def gas_precision(
 
 # -- selected inverse ---------------------------------------------------------------------------
 @numba.njit(cache=True, nogil=True)
+def _add_rows_below(rows, lo, hi, j, mark, buf, m):  # pragma: no cover
+    """Append to ``buf[m:]`` the rows ``rows[lo:hi]`` below ``j`` not yet marked for column ``j``
+    (marking them); returns the new count of ``buf``."""
+    for q in range(lo, hi):
+        i = rows[q]
+        if i > j and mark[i] != j:
+            mark[i] = j
+            buf[m] = i
+            m += 1
+    return m
+
+
+@numba.njit(cache=True, nogil=True)
 def _symbolic_cholesky(n: int, bp: np.ndarray, bi: np.ndarray):  # pragma: no cover
     """Row pattern of the strictly lower Cholesky factor of a matrix whose strictly lower part is (bp, bi).
 
@@ -162,21 +177,10 @@ def _symbolic_cholesky(n: int, bp: np.ndarray, bi: np.ndarray):  # pragma: no co
     mark = np.full(n, -1, dtype=np.int64)
     buf = np.empty(n, dtype=np.int64)
     for j in range(n):
-        m = 0
-        for q in range(bp[j], bp[j + 1]):
-            i = bi[q]
-            if i > j and mark[i] != j:
-                mark[i] = j
-                buf[m] = i
-                m += 1
+        m = _add_rows_below(bi, bp[j], bp[j + 1], j, mark, buf, 0)
         c = head[j]
         while c >= 0:
-            for q in range(lp[c], lp[c + 1]):
-                i = li[q]
-                if i > j and mark[i] != j:
-                    mark[i] = j
-                    buf[m] = i
-                    m += 1
+            m = _add_rows_below(li, lp[c], lp[c + 1], j, mark, buf, m)
             c = nxt[c]
         rows = np.sort(buf[:m])
         if lp[j] + m > cap:
@@ -320,8 +324,7 @@ class SparseSPDFactor:
         self, method: str = "takahashi", n_samples: int = 200, seed: int | None = 0
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """``diag(A^-1)`` by ``method`` (one of :data:`VARIANCE_METHODS`) and how it was computed."""
-        if method not in VARIANCE_METHODS:
-            raise InputDataError(f"unknown variance method {method!r}; one of {VARIANCE_METHODS}")
+        check_variance_method(method)
         t0 = time.perf_counter()
         info: dict[str, Any] = {"variance_method": method}
         ldl = self._lower()
@@ -405,8 +408,30 @@ class GGMRFParams:
             positive("gas_scale", self.gas_scale)
 
 
-def _obs_nodes(graph: FreeGraph, inp: MappingInputs) -> np.ndarray:
-    return graph.index[inp.cells[:, 0], inp.cells[:, 1]]
+def check_variance_method(method: str) -> None:
+    """Refuse a variance method that is not one of :data:`VARIANCE_METHODS` (:class:`InputDataError`)."""
+    if method not in VARIANCE_METHODS:
+        raise InputDataError(f"unknown variance method {method!r}; one of {VARIANCE_METHODS}")
+
+
+def gmrf_inputs(
+    occupancy: np.ndarray,
+    resolution: float,
+    observations: Observations,
+    variance: str,
+    gas_scale: float | None,
+) -> tuple[MappingInputs, float, FreeGraph, np.ndarray]:
+    """What every GMRF map starts from, its arguments checked (the variance method first).
+
+    Returns the checked inputs, the ppm per normalized gas unit
+    (:meth:`MappingInputs.gas_scale` of ``gas_scale``), the free-cell graph and the
+    graph node of each reading ``int (n,)``.
+    """
+    check_variance_method(variance)
+    inp = check_inputs(occupancy, resolution, observations)
+    scale = inp.gas_scale(gas_scale)
+    graph = free_graph(inp.free)
+    return inp, scale, graph, graph.index[inp.cells[:, 0], inp.cells[:, 1]]
 
 
 def ggmrf(
@@ -432,14 +457,8 @@ def ggmrf(
     """
     t0 = time.perf_counter()
     p = params or GGMRFParams()
-    if variance not in VARIANCE_METHODS:
-        raise InputDataError(f"unknown variance method {variance!r}; one of {VARIANCE_METHODS}")
-    inp = check_inputs(occupancy, resolution, observations)
-    scale = inp.gas_scale(p.gas_scale)
-    graph = free_graph(inp.free)
-    H, b = gas_precision(
-        graph, _obs_nodes(graph, inp), inp.gas / scale, p.sigma_r**-2, p.sigma_z**-2, p.sigma_b**-2
-    )
+    inp, scale, graph, obs_nodes = gmrf_inputs(occupancy, resolution, observations, variance, p.gas_scale)
+    H, b = gas_precision(graph, obs_nodes, inp.gas / scale, p.sigma_r**-2, p.sigma_z**-2, p.sigma_b**-2)
     fac = SparseSPDFactor(H)
     mean = fac.solve(b)
     t_solve = time.perf_counter() - t0
@@ -479,8 +498,7 @@ class GMRFEstimator(MappingEstimator):
         n_samples: int = 200,
         **params: Any,
     ) -> None:
-        if variance not in VARIANCE_METHODS:
-            raise InputDataError(f"unknown variance method {variance!r}; one of {VARIANCE_METHODS}")
+        check_variance_method(variance)
         self.params = resolve_params(self.params_class, self.name, tuning, params)
         self.variance = variance
         self.n_samples = int(n_samples)

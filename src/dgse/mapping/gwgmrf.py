@@ -69,8 +69,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from dgse.errors import InputDataError
-from dgse.mapping import GasMap, check_inputs, positive
-from dgse.mapping.gmrf import VARIANCE_METHODS, FreeGraph, GMRFEstimator, SparseSPDFactor, free_graph
+from dgse.mapping import GasMap, positive
+from dgse.mapping.gmrf import FreeGraph, GMRFEstimator, SparseSPDFactor, gmrf_inputs
 from dgse.sensing.sensors import Observations
 
 __all__ = ["GWGMRF", "GWGMRFParams", "gwgmrf"]
@@ -302,13 +302,8 @@ def gwgmrf(
     """
     t0 = time.perf_counter()
     p = params or GWGMRFParams()
-    if variance not in VARIANCE_METHODS:
-        raise InputDataError(f"unknown variance method {variance!r}; one of {VARIANCE_METHODS}")
-    inp = check_inputs(occupancy, resolution, observations)
-    scale = inp.gas_scale(p.gas_scale)
-    graph = free_graph(inp.free)
+    inp, scale, graph, obs_nodes = gmrf_inputs(occupancy, resolution, observations, variance, p.gas_scale)
     n = graph.n
-    obs_nodes = graph.index[inp.cells[:, 0], inp.cells[:, 1]]
     H_lin, b_lin = _linear_system(graph, obs_nodes, inp.gas / scale, inp.wind, p)
     nb = _neighbours(graph, p.closed_boundary)
     l_gw = p.sigma_gw**-2

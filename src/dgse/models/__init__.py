@@ -12,82 +12,34 @@ entry points:
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from dgse.registry import lazy_attributes
 
-#: Where each name of the package lives; imported on first use, so that importing one
-#: module of the package (its torch-free settings) does not import the others.
-_WHERE: dict[str, str] = {
-    "CheckpointError": "dgse.models.checkpoint",
-    "load_model": "dgse.models.checkpoint",
-    "read_checkpoint_info": "dgse.models.checkpoint",
-    "save_model": "dgse.models.checkpoint",
-    "LossWeights": "dgse.models.config",
-    "ModelConfig": "dgse.models.config",
-    "PRESETS": "dgse.models.config",
-    "VARIANTS": "dgse.models.config",
-    "preset_config": "dgse.models.config",
-    "Prediction": "dgse.models.inference",
-    "moment_match": "dgse.models.inference",
-    "predict": "dgse.models.inference",
-    "DGSEModel": "dgse.models.networks",
-    "DGSEOutput": "dgse.models.networks",
-    "DGSE_O": "dgse.models.networks",
-    "DGSE_P": "dgse.models.networks",
-    "DGSE_S": "dgse.models.networks",
-    "build_model": "dgse.models.networks",
-    "count_parameters": "dgse.models.networks",
-    "create_model": "dgse.models.networks",
-    "TargetBatch": "dgse.models.objectives",
-    "dgse_loss": "dgse.models.objectives",
-    "gaussian_nll": "dgse.models.objectives",
-    "mc_marginal_nll": "dgse.models.objectives",
-    "source_cross_entropy": "dgse.models.objectives",
-    "UNet": "dgse.models.unet",
-    "UNetDecoder": "dgse.models.unet",
-    "UNetEncoder": "dgse.models.unet",
+#: The modules of the package and the names each defines, imported on first use, so that
+#: importing one module of the package (its torch-free settings) does not import the others.
+_MODULES: dict[str, tuple[str, ...]] = {
+    "dgse.models.checkpoint": ("CheckpointError", "load_model", "read_checkpoint_info", "save_model"),
+    "dgse.models.config": ("LossWeights", "ModelConfig", "PRESETS", "VARIANTS", "preset_config"),
+    "dgse.models.inference": ("Prediction", "moment_match", "predict"),
+    "dgse.models.networks": (
+        "DGSEModel",
+        "DGSEOutput",
+        "DGSE_O",
+        "DGSE_P",
+        "DGSE_S",
+        "build_model",
+        "count_parameters",
+        "create_model",
+    ),
+    "dgse.models.objectives": (
+        "TargetBatch",
+        "dgse_loss",
+        "gaussian_nll",
+        "mc_marginal_nll",
+        "source_cross_entropy",
+    ),
+    "dgse.models.unet": ("UNet", "UNetDecoder", "UNetEncoder"),
 }
 
-__all__ = [
-    "DGSE_O",
-    "DGSE_P",
-    "DGSE_S",
-    "PRESETS",
-    "VARIANTS",
-    "CheckpointError",
-    "DGSEModel",
-    "DGSEOutput",
-    "LossWeights",
-    "ModelConfig",
-    "Prediction",
-    "TargetBatch",
-    "UNet",
-    "UNetDecoder",
-    "UNetEncoder",
-    "build_model",
-    "count_parameters",
-    "create_model",
-    "dgse_loss",
-    "gaussian_nll",
-    "load_model",
-    "mc_marginal_nll",
-    "moment_match",
-    "predict",
-    "preset_config",
-    "read_checkpoint_info",
-    "save_model",
-    "source_cross_entropy",
-]
+__all__ = sorted(name for names in _MODULES.values() for name in names)
 
-
-def __getattr__(name: str) -> Any:
-    module = _WHERE.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_attributes(globals(), _MODULES)

@@ -28,7 +28,7 @@ their own by DGSE-P (one shared encoder, three task decoders).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import torch
 import torch.nn.functional as F
@@ -93,25 +93,16 @@ class DoubleConv(nn.Sequential):
         )
 
 
-def _check_arch(base_width: int, depth: int) -> None:
-    if base_width < 1:
-        raise InputDataError(f"U-Net base width must be >= 1, got {base_width}")
-    if depth < 1:
-        raise InputDataError(f"U-Net depth must be >= 1, got {depth}")
+class _UNetHalf(nn.Module):
+    """What both halves of a U-Net share: the checked architecture and the channels per level.
 
-
-class UNetEncoder(nn.Module):
-    """The contracting half: ``(B, in_ch, H, W) -> (bottleneck, skips)``.
-
-    ``H`` and ``W`` must be multiples of ``2**depth`` (see :func:`pad_to_multiple`).
-    ``skips[l]`` has ``base_width * 2**l`` channels at resolution ``H / 2**l``
-    (``l = 0..depth-1``); the bottleneck has ``base_width * 2**depth`` channels
-    at ``H / 2**depth``.
+    ``channels`` are the encoder's input or the decoder's output channels; level ``l``
+    has ``base_width * 2**l`` channels (``l = 0..depth``); ``_build`` adds the layers.
     """
 
     def __init__(
         self,
-        in_ch: int,
+        channels: int,
         base_width: int = 16,
         depth: int = 4,
         norm: Norm = "group",
@@ -119,14 +110,33 @@ class UNetEncoder(nn.Module):
         norm_groups: int = 8,
     ) -> None:
         super().__init__()
-        _check_arch(base_width, depth)
-        self.in_ch = in_ch
+        if base_width < 1:
+            raise InputDataError(f"U-Net base width must be >= 1, got {base_width}")
+        if depth < 1:
+            raise InputDataError(f"U-Net depth must be >= 1, got {depth}")
         self.base_width = base_width
         self.depth = depth
         widths = [base_width * 2**level for level in range(depth + 1)]
-        self.blocks = nn.ModuleList([DoubleConv(in_ch, widths[0], norm, activation, norm_groups)])
-        for level in range(1, depth + 1):
-            self.blocks.append(DoubleConv(widths[level - 1], widths[level], norm, activation, norm_groups))
+        self._build(channels, widths, lambda a, b: DoubleConv(a, b, norm, activation, norm_groups))
+
+    def _build(self, channels: int, widths: list[int], conv: Callable[[int, int], DoubleConv]) -> None:
+        raise NotImplementedError
+
+
+class UNetEncoder(_UNetHalf):
+    """The contracting half: ``(B, in_ch, H, W) -> (bottleneck, skips)``.
+
+    ``H`` and ``W`` must be multiples of ``2**depth`` (see :func:`pad_to_multiple`).
+    ``skips[l]`` has ``base_width * 2**l`` channels at resolution ``H / 2**l``
+    (``l = 0..depth-1``); the bottleneck has ``base_width * 2**depth`` channels
+    at ``H / 2**depth``.  Arguments: ``channels`` (``in_ch``), then as :class:`UNet`.
+    """
+
+    def _build(self, channels: int, widths: list[int], conv: Callable[[int, int], DoubleConv]) -> None:
+        self.in_ch = channels
+        self.blocks = nn.ModuleList([conv(channels, widths[0])])
+        for level in range(1, self.depth + 1):
+            self.blocks.append(conv(widths[level - 1], widths[level]))
         self.out_channels = widths[-1]
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, list[torch.Tensor]]:
@@ -141,32 +151,21 @@ class UNetEncoder(nn.Module):
         return h, skips
 
 
-class UNetDecoder(nn.Module):
+class UNetDecoder(_UNetHalf):
     """The expanding half: ``(bottleneck, skips) -> (B, out_ch, H, W)``.
 
-    Matches a :class:`UNetEncoder` of the same ``base_width`` and ``depth``.
+    Matches a :class:`UNetEncoder` of the same ``base_width`` and ``depth``.  Arguments:
+    ``channels`` (``out_ch``), then as :class:`UNet`.
     """
 
-    def __init__(
-        self,
-        out_ch: int,
-        base_width: int = 16,
-        depth: int = 4,
-        norm: Norm = "group",
-        activation: Activation = "relu",
-        norm_groups: int = 8,
-    ) -> None:
-        super().__init__()
-        _check_arch(base_width, depth)
-        self.depth = depth
-        widths = [base_width * 2**level for level in range(depth + 1)]
+    def _build(self, channels: int, widths: list[int], conv: Callable[[int, int], DoubleConv]) -> None:
         self.ups = nn.ModuleList()
         self.blocks = nn.ModuleList()
-        for level in reversed(range(depth)):
+        for level in reversed(range(self.depth)):
             self.ups.append(nn.ConvTranspose2d(widths[level + 1], widths[level], 2, stride=2))
-            self.blocks.append(DoubleConv(2 * widths[level], widths[level], norm, activation, norm_groups))
-        self.head = nn.Conv2d(widths[0], out_ch, 1)
-        self.out_ch = out_ch
+            self.blocks.append(conv(2 * widths[level], widths[level]))
+        self.head = nn.Conv2d(widths[0], channels, 1)
+        self.out_ch = channels
 
     def forward(self, bottleneck: torch.Tensor, skips: Sequence[torch.Tensor]) -> torch.Tensor:
         h = bottleneck

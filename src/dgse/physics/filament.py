@@ -93,11 +93,13 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass, field, fields, replace
+from typing import Any
 
 import numba
 import numpy as np
 
 from dgse.errors import InputDataError
+from dgse.files import json_safe
 from dgse.physics.constants import DEFAULT_PHYSICS, RECOMMENDED_MAX_FILAMENTS, Physics
 from dgse.world.case import Case
 from dgse.world.generate import RngLike, as_generator
@@ -380,6 +382,28 @@ def _drift(x, y, comp, inv_res, ufx, ufy, dp):
 
 
 @_jit_inline
+def _first_crossing(p, d, cell, res):
+    """Along one axis, a trace from ``p`` (m, in cell ``cell``) by ``d`` (m): the cell step
+    (-1, 0 or 1), the fraction of ``d`` at its first cell edge and the fraction per cell."""
+    if d > 0.0:
+        return 1, ((cell + 1) * res - p) / d, res / d
+    if d < 0.0:
+        return -1, (cell * res - p) / d, -res / d
+    return 0, math.inf, math.inf
+
+
+@_jit_inline
+def _leaving(i, j, H, W, open_w, open_e, open_s, open_n):
+    """How a trace ends that reaches cell ``(i, j)`` outside the ``(H, W)`` domain:
+    ``_EXITED`` across an open boundary cell beside a side, else ``_BLOCKED`` (corners too)."""
+    if 0 <= i < H:
+        return _EXITED if (open_w[i] if j < 0 else open_e[i]) else _BLOCKED
+    if 0 <= j < W:
+        return _EXITED if (open_s[j] if i < 0 else open_n[j]) else _BLOCKED
+    return _BLOCKED
+
+
+@_jit_inline
 def _move(x, y, dx, dy, res, inv_res, occ, open_w, open_e, open_s, open_n):
     """Trace the segment ``(x, y) -> (x + dx, y + dy)`` through the grid.
 
@@ -394,48 +418,23 @@ def _move(x, y, dx, dy, res, inv_res, occ, open_w, open_e, open_s, open_n):
     je = math.floor((x + dx) * inv_res)
     if ie == i and je == j:
         return _OK
-    inf = math.inf
-    if dx > 0.0:
-        sx, tmx, tdx = 1, ((j + 1) * res - x) / dx, res / dx
-    elif dx < 0.0:
-        sx, tmx, tdx = -1, (j * res - x) / dx, -res / dx
-    else:
-        sx, tmx, tdx = 0, inf, inf
-    if dy > 0.0:
-        sy, tmy, tdy = 1, ((i + 1) * res - y) / dy, res / dy
-    elif dy < 0.0:
-        sy, tmy, tdy = -1, (i * res - y) / dy, -res / dy
-    else:
-        sy, tmy, tdy = 0, inf, inf
+    sx, tmx, tdx = _first_crossing(x, dx, j, res)
+    sy, tmy, tdy = _first_crossing(y, dy, i, res)
     n_cross = abs(ie - i) + abs(je - j)
     for _ in range(n_cross):
         if tmx < tmy:
             j += sx
             tmx += tdx
-            if j < 0:
-                return _EXITED if open_w[i] else _BLOCKED
-            if j >= W:
-                return _EXITED if open_e[i] else _BLOCKED
         else:
             i += sy
             tmy += tdy
-            if i < 0:
-                return _EXITED if open_s[j] else _BLOCKED
-            if i >= H:
-                return _EXITED if open_n[j] else _BLOCKED
+        if i < 0 or i >= H or j < 0 or j >= W:
+            return _leaving(i, j, H, W, open_w, open_e, open_s, open_n)
         if occ[i, j]:
             return _BLOCKED
     # rounding may leave the trace a cell short or long of the end: check the end cell itself
     if ie < 0 or ie >= H or je < 0 or je >= W:
-        if 0 <= ie < H:
-            if je < 0:
-                return _EXITED if open_w[ie] else _BLOCKED
-            return _EXITED if open_e[ie] else _BLOCKED
-        if 0 <= je < W:
-            if ie < 0:
-                return _EXITED if open_s[je] else _BLOCKED
-            return _EXITED if open_n[je] else _BLOCKED
-        return _BLOCKED
+        return _leaving(ie, je, H, W, open_w, open_e, open_s, open_n)
     if occ[ie, je]:
         return _BLOCKED
     return _OK
@@ -1131,17 +1130,9 @@ def _prefill(
     return x, y, np.full(n, age), weight
 
 
-def simulate_filaments(
-    occupancy: np.ndarray,
-    wind: np.ndarray,
-    source_xy,
-    settings: FilamentSettings,
-    rng: RngLike = None,
-    outlet_mask: np.ndarray | None = None,
-    **kwargs,
-) -> np.ndarray:
+def simulate_filaments(*args: Any, **kwargs: Any) -> np.ndarray:
     """The frames ``float32 (T, H, W)`` in ppm of :func:`run_filaments` (same arguments)."""
-    return run_filaments(occupancy, wind, source_xy, settings, rng, outlet_mask, **kwargs).frames
+    return run_filaments(*args, **kwargs).frames
 
 
 def make_filament_case(
@@ -1221,17 +1212,5 @@ def make_filament_case(
         "release_per_s": settings.filaments_per_second,
     }
     info["wall_clock_s"] = {**info["wall_clock_s"], "nut_flow": t_flow}
-    meta = {**case.meta, "frame_dt": float(settings.frame_dt), "filament": _jsonable(info)}
+    meta = {**case.meta, "frame_dt": float(settings.frame_dt), "filament": json_safe(info)}
     return replace(case, frames=run.frames, meta=meta)
-
-
-def _jsonable(x: object) -> object:
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.generic):
-        return x.item()
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    return x

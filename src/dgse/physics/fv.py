@@ -303,6 +303,17 @@ def residual_norm(aP, a, b, nb, x):
 
 
 @_jit
+def _gathered(s, a, nb, x, c, k, order):
+    """``s`` plus cell ``c``'s neighbour terms ``a[c, d] x[nb[c, d], k]``, added in the face
+    order ``order`` (E, W, N, S = 0, 1, 2, 3; missing neighbours skipped)."""
+    for d in order:
+        j = nb[c, d]
+        if j >= 0:
+            s += a[c, d] * x[j, k]
+    return s
+
+
+@_jit
 def gauss_seidel(aP, a, b, nb, x, rel_tol, max_sweeps, short_chain=False):
     """Symmetric Gauss-Seidel on ``aP x - sum a x_nb = b`` for ``m`` right-hand sides.
 
@@ -345,23 +356,14 @@ def gauss_seidel(aP, a, b, nb, x, rel_tol, max_sweeps, short_chain=False):
         est[:] = 0.0
         for c in range(n):
             for k in range(m):
-                s = b[c, k]
-                for d in range(4):
-                    j = nb[c, d]
-                    if j >= 0:
-                        s += a[c, d] * x[j, k]
+                s = _gathered(b[c, k], a, nb, x, c, k, (0, 1, 2, 3))
                 est[k] += abs(s - aP[c] * x[c, k])
                 x[c, k] = s / aP[c]
         if sweeps > 0 and _settled(est, r0, rel_tol):
             break
         for c in range(n - 1, -1, -1):
             for k in range(m):
-                s = b[c, k]
-                for d in range(4):
-                    j = nb[c, d]
-                    if j >= 0:
-                        s += a[c, d] * x[j, k]
-                x[c, k] = s / aP[c]
+                x[c, k] = _gathered(b[c, k], a, nb, x, c, k, (0, 1, 2, 3)) / aP[c]
         sweeps += 1
     return sweeps, initial
 
@@ -386,29 +388,14 @@ def _sweeps_short_chain(aP, a, b, nb, x, rel_tol, max_sweeps, r0):
         est[:] = 0.0
         for c in range(n):
             for k in range(m):
-                s = b[c, k]
-                for d in (0, 2, 3):  # E, N, S, then W: updated just before
-                    j = nb[c, d]
-                    if j >= 0:
-                        s += a[c, d] * x[j, k]
-                j = nb[c, 1]
-                if j >= 0:
-                    s += a[c, 1] * x[j, k]
+                s = _gathered(b[c, k], a, nb, x, c, k, (0, 2, 3, 1))  # W, updated just before, last
                 est[k] += abs(s - aP[c] * x[c, k])
                 x[c, k] = s * inv[c]
         if sweeps > 0 and _settled(est, r0, rel_tol):
             break
         for c in range(n - 1, -1, -1):
             for k in range(m):
-                s = b[c, k]
-                for d in (1, 2, 3):  # W, N, S, then E: updated just before
-                    j = nb[c, d]
-                    if j >= 0:
-                        s += a[c, d] * x[j, k]
-                j = nb[c, 0]
-                if j >= 0:
-                    s += a[c, 0] * x[j, k]
-                x[c, k] = s * inv[c]
+                x[c, k] = _gathered(b[c, k], a, nb, x, c, k, (1, 2, 3, 0)) * inv[c]  # E last
         sweeps += 1
     return sweeps
 

@@ -398,14 +398,19 @@ def _flow_fields(
         p.name: _entry(type="fixedValue", value=f"uniform {_vec(s.velocity)}")
         for p, s in zip(inlets, states, strict=True)
     }
-    k_in = {
-        p.name: _entry(type="fixedValue", value=f"uniform {_num(s.k)}")
-        for p, s in zip(inlets, states, strict=True)
-    }
-    e_in = {
-        p.name: _entry(type="fixedValue", value=f"uniform {_num(s.epsilon)}")
-        for p, s in zip(inlets, states, strict=True)
-    }
+
+    def turbulence(dims: str, wall_function: str, value: float, at_inlets: list[float]) -> tuple[str, str]:
+        """A k or epsilon field: ``value`` inside, at the wall function and at the outlets
+        (``inletOutlet``), ``at_inlets`` fixed at the inlets."""
+        uniform = f"uniform {_num(value)}"
+        inlet = {
+            p.name: _entry(type="fixedValue", value=f"uniform {_num(x)}")
+            for p, x in zip(inlets, at_inlets, strict=True)
+        }
+        walls = _entry(type=wall_function, value=uniform)
+        outlet = _entry(type="inletOutlet", inletValue=uniform, value=uniform)
+        return "volScalarField", _field(dims, uniform, bc(walls, inlet, outlet))
+
     zg = _entry(type="zeroGradient")
     calc0 = _entry(type="calculated", value="uniform 0")
     return {
@@ -421,30 +426,8 @@ def _flow_fields(
                 bc(zg, {p.name: zg for p in inlets}, _entry(type="fixedValue", value="uniform 0")),
             ),
         ),
-        "k": (
-            "volScalarField",
-            _field(
-                "[0 2 -2 0 0 0 0]",
-                f"uniform {_num(k0)}",
-                bc(
-                    _entry(type="kqRWallFunction", value=f"uniform {_num(k0)}"),
-                    k_in,
-                    _entry(type="inletOutlet", inletValue=f"uniform {_num(k0)}", value=f"uniform {_num(k0)}"),
-                ),
-            ),
-        ),
-        "epsilon": (
-            "volScalarField",
-            _field(
-                "[0 2 -3 0 0 0 0]",
-                f"uniform {_num(e0)}",
-                bc(
-                    _entry(type="epsilonWallFunction", value=f"uniform {_num(e0)}"),
-                    e_in,
-                    _entry(type="inletOutlet", inletValue=f"uniform {_num(e0)}", value=f"uniform {_num(e0)}"),
-                ),
-            ),
-        ),
+        "k": turbulence("[0 2 -2 0 0 0 0]", "kqRWallFunction", k0, [s.k for s in states]),
+        "epsilon": turbulence("[0 2 -3 0 0 0 0]", "epsilonWallFunction", e0, [s.epsilon for s in states]),
         "nut": (
             "volScalarField",
             _field(

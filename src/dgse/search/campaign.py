@@ -52,7 +52,7 @@ import numpy as np
 from dgse.belief.estimator import Estimator
 from dgse.belief.knowledge import DEFAULT_LEVEL, check_level, require_level
 from dgse.errors import InputDataError
-from dgse.files import is_temporary
+from dgse.files import is_temporary, json_safe
 from dgse.planning.planners import Planner
 from dgse.presets import PROTOCOL
 from dgse.search.episode import EpisodeResult, StepRecord
@@ -110,19 +110,14 @@ def trial_seed(seed: int, stem: str, trial: int) -> np.random.SeedSequence:
     return np.random.SeedSequence([int(seed) & 0xFFFFFFFF, zlib.crc32(stem.encode()), int(trial)])
 
 
-def json_safe(obj: Any) -> Any:
-    """NaN and infinities as None; numpy scalars as Python numbers; tuples as lists."""
-    if isinstance(obj, Mapping):
-        return {str(k): json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [json_safe(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return json_safe(obj.tolist())
-    if isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
+def _made(
+    given: Any, factory: Callable[..., Any], options: dict[str, Any], name: str | None
+) -> tuple[Any, str]:
+    """An estimator or planner given by registry name (made by ``factory`` with ``options``) or
+    as an object, and the name a run records for it (``name``, else the given one's)."""
+    if isinstance(given, str):
+        return factory(given, **options), name or given
+    return given, name or given.name
 
 
 def estimator_options(
@@ -231,7 +226,7 @@ def run_trials(
         UnsupportedError: a knowledge level the estimator does not work at.
     """
     from dgse.estimators.registry import get_estimator
-    from dgse.journal import Journal, case_fingerprint
+    from dgse.journal import Journal, case_fingerprint, check_kept_case
     from dgse.planning.planners import get_planner
     from dgse.search.episode import run_episode
     from dgse.search.metrics import aggregate, episode_metrics
@@ -243,18 +238,8 @@ def run_trials(
         raise InputDataError("no cases to search")
     est_kw = dict(estimator_options or {})
     plan_kw = dict(planner_options or {})
-    if isinstance(estimator, str):
-        est = get_estimator(estimator, **est_kw)
-        method = method or estimator
-    else:
-        est = estimator
-        method = method or estimator.name
-    if isinstance(planner, str):
-        plan = get_planner(planner, **plan_kw)
-        planner_name = planner_name or planner
-    else:
-        plan = planner
-        planner_name = planner_name or planner.name
+    est, method = _made(estimator, get_estimator, est_kw, method)
+    plan, planner_name = _made(planner, get_planner, plan_kw, planner_name)
     require_level(est, method, level)
     model = est_kw.get("model")
     settings = json_safe(
@@ -291,12 +276,12 @@ def run_trials(
             for r in range(trials):
                 old = kept.get((path.stem, r))
                 if old is not None and book is not None:
-                    if old.get("case_fingerprint") != fingerprint:
-                        raise InputDataError(
-                            f"{path} differs from the case whose episodes {book.path} keeps (re-solved?): "
-                            "start afresh with {restart}, or give another output path",
-                            names={"restart": "restart=True"},
-                        )
+                    check_kept_case(
+                        old,
+                        fingerprint,
+                        f"{path} differs from the case whose episodes {book.path} keeps (re-solved?): "
+                        "start afresh with {restart}, or give another output path",
+                    )
                     row = old["row"]
                 else:
                     if progress is not None:

@@ -15,69 +15,35 @@ checked before they are imported).  Main entry points:
 
 from __future__ import annotations
 
-import importlib
 import sys
 import types
 from typing import Any
 
-#: Where each name of the package lives; imported on first use, so that importing one
-#: module of the package (its torch-free settings) does not import the others.
-_WHERE: dict[str, str] = {
-    "PRECISIONS": "dgse.training.config",
-    "TrainConfig": "dgse.training.config",
-    "load_config": "dgse.training.config",
-    "parse_duration": "dgse.training.config",
-    "DGSEDataModule": "dgse.training.datamodule",
-    "EpochSetup": "dgse.training.datamodule",
-    "EpochShuffleSampler": "dgse.training.datamodule",
-    "DGSELightningModule": "dgse.training.module",
-    "localization_error": "dgse.training.module",
-    "BEST_NAME": "dgse.training.train",
-    "HISTORY_NAME": "dgse.training.train",
-    "LAST_NAME": "dgse.training.train",
-    "StopControl": "dgse.training.train",
-    "TrainResult": "dgse.training.train",
-    "TrainState": "dgse.training.train",
-    "TrainStateCheckpoint": "dgse.training.train",
-    "export_model": "dgse.training.train",
-    "read_train_state": "dgse.training.train",
-    "train": "dgse.training.train",
+from dgse.registry import lazy_attributes
+
+#: The modules of the package and the names each defines, imported on first use, so that
+#: importing one module of the package (its torch-free settings) does not import the others.
+_MODULES: dict[str, tuple[str, ...]] = {
+    "dgse.training.config": ("PRECISIONS", "TrainConfig", "load_config", "parse_duration"),
+    "dgse.training.datamodule": ("DGSEDataModule", "EpochSetup", "EpochShuffleSampler"),
+    "dgse.training.module": ("DGSELightningModule", "localization_error"),
+    "dgse.training.train": (
+        "BEST_NAME",
+        "HISTORY_NAME",
+        "LAST_NAME",
+        "StopControl",
+        "TrainResult",
+        "TrainState",
+        "TrainStateCheckpoint",
+        "export_model",
+        "read_train_state",
+        "train",
+    ),
 }
 
-__all__ = [
-    "BEST_NAME",
-    "HISTORY_NAME",
-    "LAST_NAME",
-    "PRECISIONS",
-    "DGSEDataModule",
-    "DGSELightningModule",
-    "EpochSetup",
-    "EpochShuffleSampler",
-    "StopControl",
-    "TrainConfig",
-    "TrainResult",
-    "TrainState",
-    "TrainStateCheckpoint",
-    "export_model",
-    "load_config",
-    "localization_error",
-    "parse_duration",
-    "read_train_state",
-    "train",
-]
+__all__ = sorted(name for names in _MODULES.values() for name in names)
 
-
-def __getattr__(name: str) -> Any:
-    module = _WHERE.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_attributes(globals(), _MODULES)
 
 
 class _Package(types.ModuleType):

@@ -22,7 +22,7 @@ from dgse.belief.belief import Belief
 from dgse.errors import InputDataError
 from dgse.sensing.sensors import Observations
 from dgse.viz.case import SOURCE_STYLE as _CASE_SOURCE_STYLE
-from dgse.viz.case import _field_cmap, _style_map_axes, log_ppm_ticks
+from dgse.viz.case import _style_map_axes, field_image, log_ppm_ticks, wind_arrows
 from dgse.world.case import Case
 
 __all__ = ["plot_belief"]
@@ -51,53 +51,13 @@ def _imshow(
     finite = field[~solid]
     top = float(finite.max()) if finite.size else 1.0
     vmax = max(top if vmax is None else vmax, vmin + 1e-9)
-    im = ax.imshow(
-        np.ma.masked_where(solid, field),
-        cmap=_field_cmap(cmap),
-        origin="lower",
-        extent=extent,
-        interpolation="nearest",
-        vmin=vmin,
-        vmax=vmax,
-    )
+    im = field_image(ax, field, solid, extent, cmap, vmin, vmax)
     cb = fig.colorbar(im, ax=ax, shrink=0.85, pad=0.02)
     if log_ppm:
         ticks, labels = log_ppm_ticks(vmax)
         cb.set_ticks(ticks, labels=labels)
     cb.set_label(label, fontsize=8)
     cb.ax.tick_params(labelsize=7)
-
-
-def _arrows(ax: Axes, wind: np.ndarray, solid: np.ndarray, res: float) -> None:
-    """Unit-length direction arrows of ``wind`` ``(2, H, W)`` on a sub-grid of free cells."""
-    H, W = solid.shape
-    speed = np.hypot(wind[0], wind[1])
-    step = max(1, math.ceil(max(H, W) / _ARROWS_ALONG))
-    ii, jj = np.meshgrid(np.arange(step // 2, H, step), np.arange(step // 2, W, step), indexing="ij")
-    s = speed[ii, jj]
-    keep = ~solid[ii, jj] & (s > 1e-3 * max(float(speed.max()), 1e-12))
-    if not keep.any():
-        return
-    ii, jj, s = ii[keep], jj[keep], s[keep]
-    length = 0.7 * step * res
-    ax.quiver(
-        (jj + 0.5) * res,
-        (ii + 0.5) * res,
-        wind[0][ii, jj] / s,
-        wind[1][ii, jj] / s,
-        angles="xy",
-        scale_units="xy",
-        scale=1.0 / length,
-        pivot="mid",
-        color="white",
-        edgecolor="black",
-        linewidth=0.3,
-        width=0.004,
-        headwidth=4,
-        headlength=4.5,
-        headaxislength=4,
-        zorder=5,
-    )
 
 
 def _sensor_sizes(gas: np.ndarray) -> np.ndarray:
@@ -218,7 +178,7 @@ def plot_belief(belief: Belief, case: Case | None = None, observations: Observat
 
         def wind_mean(fig: Figure, ax: Axes) -> None:
             _imshow(fig, ax, speed, solid, extent, "viridis", "speed [m/s]", vmax=top)
-            _arrows(ax, wm, solid, res)
+            wind_arrows(ax, wm, solid, res, _ARROWS_ALONG, width=0.004)
             if obs is not None:
                 _sensors(ax, obs, res, wind=True)
             _style_map_axes(ax, "Wind mean", W_m, H_m)
@@ -246,7 +206,7 @@ def plot_belief(belief: Belief, case: Case | None = None, observations: Observat
                     "speed [m/s]",
                     vmax=top,
                 )
-                _arrows(ax, true_wind, solid, res)
+                wind_arrows(ax, true_wind, solid, res, _ARROWS_ALONG, width=0.004)
                 _style_map_axes(ax, "Wind (truth)", W_m, H_m)
 
             panels.append(wind_truth)

@@ -19,6 +19,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colorbar import Colorbar
 from matplotlib.colors import Colormap, ListedColormap
 from matplotlib.figure import Figure
+from matplotlib.image import AxesImage
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
@@ -32,12 +33,14 @@ __all__ = [
     "OUTLET_COLOR",
     "SOURCE_STYLE",
     "draw_openings",
+    "field_image",
     "label_ppm_colorbar",
     "log_ppm_ticks",
     "opening_handles",
     "openings_of",
     "plot_case",
     "plot_layout",
+    "wind_arrows",
 ]
 
 INLET_COLOR = "#1a9641"
@@ -243,33 +246,17 @@ def plot_case(case: Case, *, ax: Sequence[Axes] | None = None, arrows: bool = Tr
 
     # 2. wind speed + direction
     speed = np.hypot(case.wind[0], case.wind[1])
-    im = a_wind.imshow(
-        np.ma.masked_where(solid, speed),
-        cmap=_field_cmap("viridis"),
-        origin="lower",
-        extent=extent,
-        interpolation="nearest",
-        vmin=0.0,
-        vmax=max(float(speed.max()), 1e-6),
-    )
+    im = field_image(a_wind, speed, solid, extent, "viridis", 0.0, max(float(speed.max()), 1e-6))
     fig.colorbar(im, ax=a_wind, shrink=0.9, pad=0.02, label="wind speed [m/s]")
     if arrows:
-        _quiver(a_wind, case, speed)
+        wind_arrows(a_wind, case.wind, solid, case.resolution)
     draw_openings(a_wind, inlets, outlets, W_m, H_m, thick=False)
     _style_map_axes(a_wind, "Wind", W_m, H_m)
 
     # 3. concentration
     logc = np.log1p(np.maximum(case.concentration, 0.0))
     vmax = max(float(logc.max()), 1.0)
-    im = a_gas.imshow(
-        np.ma.masked_where(solid, logc),
-        cmap=_field_cmap("inferno"),
-        origin="lower",
-        extent=extent,
-        interpolation="nearest",
-        vmin=0.0,
-        vmax=vmax,
-    )
+    im = field_image(a_gas, logc, solid, extent, "inferno", 0.0, vmax)
     label_ppm_colorbar(fig.colorbar(im, ax=a_gas, shrink=0.9, pad=0.02), vmax)
     draw_openings(a_gas, inlets, outlets, W_m, H_m, thick=False)
     a_gas.plot(sx, sy, ls="none", zorder=8, **SOURCE_STYLE)
@@ -334,25 +321,56 @@ def _field_cmap(name: str) -> Colormap:
     return colormaps[name].with_extremes(bad=SOLID_IN_FIELD)
 
 
-def _quiver(ax: Axes, case: Case, speed: np.ndarray) -> None:
-    """Unit-length direction arrows on a sub-grid of free cells with non-negligible speed."""
-    H, W = speed.shape
-    step = max(1, math.ceil(max(H, W) / _ARROWS_ALONG))
-    rows = np.arange(step // 2, H, step)
-    cols = np.arange(step // 2, W, step)
-    ii, jj = np.meshgrid(rows, cols, indexing="ij")
+def field_image(
+    ax: Axes,
+    field: np.ndarray,
+    solid: np.ndarray,
+    extent: tuple[float, float, float, float],
+    cmap: str,
+    vmin: float,
+    vmax: float,
+) -> AxesImage:
+    """``field`` ``(H, W)`` drawn in metres (``extent``), its ``solid`` cells light grey."""
+    return ax.imshow(
+        np.ma.masked_where(solid, field),
+        cmap=_field_cmap(cmap),
+        origin="lower",
+        extent=extent,
+        interpolation="nearest",
+        vmin=vmin,
+        vmax=vmax,
+    )
+
+
+def wind_arrows(
+    ax: Axes,
+    wind: np.ndarray,
+    solid: np.ndarray,
+    res: float,
+    along: int = _ARROWS_ALONG,
+    width: float = 0.0045,
+) -> None:
+    """Unit-length direction arrows of ``wind`` ``(2, H, W)`` (m/s) on a sub-grid of free cells.
+
+    About ``along`` arrows along the longer side, each 0.7 of the sub-grid's step long,
+    where the speed is above 1e-3 of the largest; ``width``: the shafts' width as a
+    fraction of the axes' width.
+    """
+    H, W = solid.shape
+    speed = np.hypot(wind[0], wind[1])
+    step = max(1, math.ceil(max(H, W) / along))
+    ii, jj = np.meshgrid(np.arange(step // 2, H, step), np.arange(step // 2, W, step), indexing="ij")
     s = speed[ii, jj]
-    keep = (case.occupancy[ii, jj] == 0) & (s > 1e-3 * max(float(speed.max()), 1e-12))
+    keep = ~solid[ii, jj] & (s > 1e-3 * max(float(speed.max()), 1e-12))
     if not keep.any():
         return
     ii, jj, s = ii[keep], jj[keep], s[keep]
-    res = case.resolution
     length = 0.7 * step * res  # m
     ax.quiver(
         (jj + 0.5) * res,
         (ii + 0.5) * res,
-        case.wind[0][ii, jj] / s,
-        case.wind[1][ii, jj] / s,
+        wind[0][ii, jj] / s,
+        wind[1][ii, jj] / s,
         angles="xy",
         scale_units="xy",
         scale=1.0 / length,
@@ -360,7 +378,7 @@ def _quiver(ax: Axes, case: Case, speed: np.ndarray) -> None:
         color="white",
         edgecolor="black",
         linewidth=0.3,
-        width=0.0045,
+        width=width,
         headwidth=4,
         headlength=4.5,
         headaxislength=4,

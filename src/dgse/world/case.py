@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import zipfile
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -17,14 +18,14 @@ import numpy as np
 
 from dgse.errors import CaseFileError, InputDataError
 from dgse.files import atomic_open
-from dgse.world.grid import Grid
+from dgse.world.grid import OnGrid
 from dgse.world.layout import Layout
 
 REQUIRED_KEYS = ("occupancy", "wind", "concentration", "source", "resolution", "meta")
 
 
 @dataclass(frozen=True, eq=False)
-class Case:
+class Case(OnGrid):
     """One steady scenario.
 
     Attributes:
@@ -69,14 +70,6 @@ class Case:
             raise InputDataError("invalid case: " + "; ".join(problems))
 
     # -- derived views ------------------------------------------------------------------
-    @property
-    def grid(self) -> Grid:
-        return Grid(self.occupancy.shape, self.resolution)
-
-    @property
-    def free(self) -> np.ndarray:
-        return self.occupancy == 0
-
     @property
     def name(self) -> str:
         return str(self.meta.get("name", "case"))
@@ -153,12 +146,7 @@ class Case:
         for key in ("wind", "concentration", "source") + (("frames",) if "frames" in arrays else ()):
             if arrays[key].dtype != np.float32:
                 problems.append(f"{key} has dtype {arrays[key].dtype}, expected float32")
-        try:
-            meta = json.loads(str(arrays["meta"]))
-            if not isinstance(meta, dict):
-                raise ValueError("not a JSON object")
-        except ValueError as e:
-            raise CaseFileError(f"{origin}: meta is not a JSON object ({e})") from None
+        meta = read_meta(arrays, origin, CaseFileError)
         res = np.asarray(arrays["resolution"])
         if res.shape != () or not np.issubdtype(res.dtype, np.floating):
             problems.append(f"resolution must be a float scalar, got {res.dtype} {res.shape}")
@@ -176,6 +164,20 @@ class Case:
             )
         except InputDataError as e:
             raise CaseFileError(f"{origin}: {e}") from None
+
+
+def read_meta(arrays: Mapping[str, np.ndarray], origin: str, error: type[InputDataError]) -> dict:
+    """The ``meta`` entry of a case or layout file's arrays, a JSON object, as a dict.
+
+    Raises ``error`` naming ``origin`` (the file) when it is not a JSON object.
+    """
+    try:
+        meta = json.loads(str(arrays["meta"]))
+        if not isinstance(meta, dict):
+            raise ValueError("not a JSON object")
+    except ValueError as e:
+        raise error(f"{origin}: meta is not a JSON object ({e})") from None
+    return meta
 
 
 #: Largest wind speed (m/s) tolerated in a solid cell of a wind field given by a user (not a case file).

@@ -41,9 +41,11 @@ raised.  Nothing here imports the physics.
 
 from __future__ import annotations
 
+import inspect
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy import ndimage
@@ -510,40 +512,17 @@ def _generate(
 
 
 def random_layout_with_rooms(
-    rng_or_seed: RngLike = None,
-    *,
-    width_range: tuple[float, float] = (5.0, 10.0),
-    height_range: tuple[float, float] = (5.0, 10.0),
-    resolution: float = DEFAULT_RESOLUTION,
-    n_rooms: int | tuple[int, int] = (2, 6),
-    min_room_m: float = 1.5,
-    wall_thickness_range: tuple[float, float] = (0.1, 0.2),
-    door_width_range: tuple[float, float] = (0.8, 1.2),
-    opening_length_range: tuple[float, float] = (0.6, 1.5),
-    min_opening_gap_m: float = 2.0,
-    max_attempts: int = 100,
-    name: str | None = None,
+    rng_or_seed: RngLike = None, **options: Any
 ) -> tuple[Layout, list[tuple[float, float, float, float]]]:
     """A random training layout (spec section 3) and its rooms.
 
-    Like :func:`random_layout` (same arguments, same draws), also returning the
-    rooms: the free rectangles ``(x0, y0, x1, y1)`` in m of the partition (their
-    number is the room count; doorways lie between them).
+    ``options`` are the keyword arguments of :func:`random_layout` (same defaults, same
+    draws); this also returns the rooms: the free rectangles ``(x0, y0, x1, y1)`` in m of
+    the partition (their number is the room count; doorways lie between them).
     """
-    return _random_training(
-        rng_or_seed,
-        width_range=width_range,
-        height_range=height_range,
-        resolution=resolution,
-        n_rooms=n_rooms,
-        min_room_m=min_room_m,
-        wall_thickness_range=wall_thickness_range,
-        door_width_range=door_width_range,
-        opening_length_range=opening_length_range,
-        min_opening_gap_m=min_opening_gap_m,
-        max_attempts=max_attempts,
-        name=name,
-    )
+    bound = inspect.signature(random_layout).bind(rng_or_seed, **options)
+    bound.apply_defaults()
+    return _random_training(**bound.arguments)
 
 
 def random_layout(

@@ -119,6 +119,24 @@ class Grid:
 
 
 # -- integer refinement (a coarse map on a network's finer cells) ------------------------
+class OnGrid:
+    """What a map derives from its ``occupancy`` (``uint8 (H, W)``, 1 solid, 0 free) and its
+    ``resolution`` (m), for the classes that hold both (a case, a layout)."""
+
+    occupancy: np.ndarray
+    resolution: float
+
+    @property
+    def grid(self) -> Grid:
+        """The map's :class:`Grid`."""
+        return Grid(self.occupancy.shape, self.resolution)
+
+    @property
+    def free(self) -> np.ndarray:
+        """Boolean ``(H, W)`` mask of free cells."""
+        return self.occupancy == 0
+
+
 def refinement_factor(resolution: float, target: float) -> int | None:
     """``f`` with ``resolution == f * target`` (``f >= 1`` an integer, to 1e-6), else ``None``."""
     f = float(resolution) / float(target)

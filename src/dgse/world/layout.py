@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dgse.errors import InputDataError
-from dgse.world.grid import DEFAULT_RESOLUTION, Grid
+from dgse.world.grid import DEFAULT_RESOLUTION, Grid, OnGrid
 
 SIDES = ("west", "east", "south", "north")
 _SIDE_ALIASES = {"left": "west", "right": "east", "bottom": "south", "top": "north"}
@@ -74,7 +74,7 @@ class Opening:
 
 
 @dataclass(frozen=True)
-class Layout:
+class Layout(OnGrid):
     """An indoor layout: occupancy (1 solid, 0 free) on a grid, inlets and outlets.
 
     ``walls`` are the generating rectangles ``(x0, y0, x1, y1)`` in metres, kept
@@ -109,15 +109,6 @@ class Layout:
                 raise InputDataError(f"{o.describe(kind)} touches no free cell")
         if not (self.occupancy == 0).any():
             raise InputDataError("layout has no free cell")
-
-    @property
-    def grid(self) -> Grid:
-        return Grid(self.occupancy.shape, self.resolution)
-
-    @property
-    def free(self) -> np.ndarray:
-        """Boolean ``(H, W)`` mask of free cells."""
-        return self.occupancy == 0
 
     def opening_mask(self, kind: str) -> np.ndarray:
         """Boolean ``(H, W)`` mask of free boundary cells that touch an inlet or outlet."""

@@ -22,6 +22,7 @@ import numpy as np
 
 from dgse.errors import InputDataError
 from dgse.files import atomic_open
+from dgse.world.case import read_meta
 from dgse.world.grid import DEFAULT_RESOLUTION
 from dgse.world.layout import Layout, Opening
 
@@ -101,12 +102,7 @@ def load_layout(path: str | Path) -> Layout:
         raise InputDataError(f"{path}: occupancy has dtype {occ.dtype}, expected uint8")
     if occ.ndim != 2 or min(occ.shape) < 2:
         raise InputDataError(f"{path}: occupancy must be a 2-D map, got shape {occ.shape}")
-    try:
-        meta = json.loads(str(arrays["meta"]))
-        if not isinstance(meta, dict):
-            raise ValueError("not a JSON object")
-    except ValueError as e:
-        raise InputDataError(f"{path}: meta is not a JSON object ({e})") from None
+    meta = read_meta(arrays, str(path), InputDataError)
     try:
         res = float(meta.get("resolution", DEFAULT_RESOLUTION))
     except (TypeError, ValueError):
