@@ -43,31 +43,45 @@ only these), 2000-2019 test scenarios (never tuned on); ``../shared/reference-ca
           --variants steady filament --methods dgse-phys@openings --tag a \\
           -o benchmarks/results/phys_calibration50_floor_openings   # and --seeds 2010-2019 --tag b
       python benchmarks/phys.py robustness --seeds 2000-2019 --counts 50 --trials 2 \\
-          --variants steady filament --methods dgse-phys@map --tag map -E learned_floor=0.05 \\
-          -o benchmarks/results/phys_calibration50_floor          # -E misfit_threshold=2.0: _misfit
+          --variants steady filament --methods dgse-phys@map --tag map -E fusion.floor=0.05 \\
+          -o benchmarks/results/phys_calibration50_floor
       python benchmarks/phys.py robustness --seeds 2000-2019 --counts 20 50 150 --trials 2 \\
           --variants wind_smoothed steady wind_rotated wind_x2 filament --methods dgse-phys@wind \\
-          -o benchmarks/results/phys_robustness_wind_given   # -E given_wind_prior=1.0: ..._given1.0
+          -o benchmarks/results/phys_robustness_wind_given   # -E flows.given_wind_prior=1.0: ..._given1.0
       python benchmarks/phys.py robustness --seeds 900-923 --counts 50 150 --trials 2 \\
           --variants steady wind_smoothed wind_x2 wind_rotated filament --methods dgse-phys@wind \\
-          -E given_wind_prior=P -o benchmarks/results/phys_given_wind_validation/givenP
+          -E flows.given_wind_prior=P -o benchmarks/results/phys_given_wind_validation/givenP
       python benchmarks/phys.py robustness --seeds 900-923 --counts 50 150 --trials 5 \\
-          --variants steady filament --methods dgse-phys@openings -E 'noise_weights="W"' \\
-          -o benchmarks/results/phys_noise_weights_validation/openings_W
+          --variants steady filament --methods dgse-phys@openings \\
+          -o benchmarks/results/phys_noise_weights_validation/openings_mixture
 
-* ``calibration``: how much to flatten dgse-phys's source posterior, and when: every estimate
-  of the validation scenarios with its posterior flattened by a grid of powers and the
-  statistics of how well the best flow explains the readings, so that any rule is scored
-  without estimating again (``OUT/journal.jsonl``, ``OUT/summary.{json,md}``)::
+  The last is ``phys_noise_weights_validation/openings_mixture`` (``map_mixture`` and
+  ``wind_mixture``: ``--methods dgse-phys@map`` / ``@wind`` with the counts and trials their
+  ``summary.md`` names).  Two kinds of recorded folder ran dgse-phys options that are removed
+  with the experiments they served (``docs/decisions.md``; this script at commit 7ba21b2 takes
+  them): ``phys_calibration50_misfit`` flattened the posterior where the gas readings misfit
+  (``-E misfit_threshold=2.0``), and ``phys_noise_weights_validation/*_plug-in`` weighed the
+  noise by the plug-in alone (``-E 'noise_weights="plug-in"'``; the mixture is dgse-phys's only
+  gas evidence now).
+
+* ``calibration``: how well calibrated dgse-phys's source posterior is, and how much a
+  flattening would change that: every estimate of the validation scenarios with its
+  posterior flattened by a grid of powers (the estimator flattens nothing: the rules,
+  not adopted, are scored here from the journal) and the statistics of how well the best
+  flow explains the readings, so that any rule is scored without estimating again
+  (``OUT/journal.jsonl``, ``OUT/summary.{json,md}``)::
 
       python benchmarks/phys.py calibration --seeds 900-923 --counts 50 150 --trials 5 \\
           -o benchmarks/results/phys_calibration_tuning      # --knowledge map/wind: _map, _wind
       python benchmarks/phys.py calibration --seeds 900-923 --counts 150 300 --trials 2 \\
-          --variants steady --knowledge map -E effective_readings=E \\
-          -o benchmarks/results/phys_map_tempering_validation/...
+          --variants steady --knowledge map -E evidence.effective_readings=E \\
+          -E evidence.effective_growth=0 -o benchmarks/results/phys_map_tempering_validation/effE
       python benchmarks/phys.py calibration --seeds 900-923 --counts 150 300 --trials 2 \\
-          --variants steady --knowledge map [-E censored_tilt=false] \\
+          --variants steady --knowledge map [-E evidence.censored_tilt=false] \\
           -o benchmarks/results/phys_tilt_map_validation[/notilt]
+
+  (``phys_map_tempering_validation/sqrt18`` is the first of those without ``-E``: ``T =
+  sqrt(m / 18)`` is the default at ``map``.)
 
 * ``fusion``: how much of DGSE-S's source belief to keep in dgse-phys's: the physics'
   posterior and the network's for every validation estimate, the mixture scored for a grid of
@@ -78,8 +92,8 @@ only these), 2000-2019 test scenarios (never tuned on); ``../shared/reference-ca
       python benchmarks/phys.py fusion --knowledge map --counts 50 150 --trials 1 \\
           -o benchmarks/results/phys_fusion_tuning
       python benchmarks/phys.py fusion --knowledge wind --counts 50 150 --trials 2 --variants steady \\
-          filament wind_rotated wind_smoothed wind_x2 -o benchmarks/results/phys_fusion_tuning_wind_perturbed
-      # the same with the given field weighed against its openings' flows: ..._wind_given
+          filament wind_rotated wind_smoothed wind_x2 -o benchmarks/results/phys_fusion_tuning_wind_given
+      # the same with the given field alone (-E flows.given_wind_prior=1.0): ..._wind_perturbed
 
 * ``fields``: dgse-phys's field model error per knowledge level, chosen by the Gaussian log
   likelihood of the true fields on validation scenarios 900-911::
@@ -87,12 +101,19 @@ only these), 2000-2019 test scenarios (never tuned on); ``../shared/reference-ca
       python benchmarks/phys.py fields -o benchmarks/results/phys_field_tuning.json
 
 * ``sweep NAME``: settings of dgse-phys compared on the same readings of generated validation
-  scenarios, by SL error and CE (:data:`SWEEPS`): ``temperature`` (the tempering at
-  ``openings``), ``map`` (how much the physics is trusted at ``map``), ``learned`` (DGSE-S's
-  weight at ``map``).  Writes ``phys_temperature.json``, ``phys_map_tuning.json``,
-  ``phys_learned_tuning.json``::
+  scenarios, by SL error and CE (:data:`SWEEPS`; every other option at its default):
+  ``temperature`` (the tempering at ``openings``, ``evidence.effective_readings``), ``map``
+  (how many readings the gas evidence counts at ``map``), ``learned`` (DGSE-S's weight at
+  ``map``, ``fusion.weight`` and ``fusion.readings``).  Writes ``phys_temperature.json``,
+  ``phys_map_tuning.json``, ``phys_learned_tuning.json``::
 
       python benchmarks/phys.py sweep temperature
+
+  Two sweeps ran settings whose options are removed (``docs/decisions.md``) and run only what
+  remains: ``temperature`` compared constant temperatures ``T = 2, 4, 8`` too, and ``map`` a
+  tempering of the flow hypotheses' weights (``hypothesis_readings``); the recorded
+  ``phys_temperature.json`` and ``phys_map_tuning.json`` hold their rows, and this script at
+  commit 7ba21b2 runs them.
 
 * ``projection``: the settings of :mod:`dgse.physics.projection` (a given wind made
   mass-conserving and given an eddy viscosity): the plume on that flow against the
@@ -164,6 +185,20 @@ def _seeds(text: str) -> list[int]:
 
 def _parser(command: str, what: str) -> argparse.ArgumentParser:
     return argparse.ArgumentParser(prog=f"phys.py {command}", description=f"{what} (phys.py's module doc)")
+
+
+def phys_option_args(
+    ap: argparse.ArgumentParser, items: Sequence[str], base: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """``base`` updated with the ``-E KEY=VALUE`` items: dgse-phys options (dotted keys of its
+    settings), checked by building the estimator once, so that a wrong key or value is a usage
+    error before anything is estimated."""
+    try:
+        options = {**(base or {}), **parse_params(items, "-E")}
+        get_estimator("dgse-phys", **options)
+    except InputDataError as exc:
+        ap.error(str(exc))
+    return options
 
 
 # ------------------------------------------------------------------------------------------ gsl
@@ -520,7 +555,7 @@ def robustness(argv: list[str]) -> None:
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="a dgse-phys option, e.g. -E hypothesis_readings=10 (repeatable; give the run its own -o)",
+        help="a dgse-phys option, e.g. -E evidence.effective_readings=50 (repeatable; its own -o)",
     )
     ap.add_argument("--summary-only", action="store_true", help="summarize the journal, estimate nothing")
     ap.add_argument(
@@ -533,10 +568,7 @@ def robustness(argv: list[str]) -> None:
     args = ap.parse_args(argv)
     if any(n < 1 for n in args.counts):
         ap.error("--counts must be positive")
-    try:
-        phys_options = parse_params(args.estimator_option, "-E")
-    except InputDataError as exc:
-        ap.error(str(exc))
+    phys_options = phys_option_args(ap, args.estimator_option)
     if args.paired is not None:
         print(paired_summary(args.out, args.paired))
         return
@@ -649,10 +681,7 @@ def checked_options(
         ap.error("--counts must be positive")
     if args.knowledge != "wind" and any(v.startswith("wind_") for v in args.variants):
         ap.error("the wind_* variants change only what --knowledge wind is told")
-    try:
-        return {**base, **parse_params(args.estimator_option, "-E")}
-    except InputDataError as exc:
-        ap.error(str(exc))
+    return phys_option_args(ap, args.estimator_option, base)
 
 
 def validation_readings(
@@ -725,11 +754,41 @@ CORRELATION_RADII = (0.5, 1.0, 2.0)
 CORRELATIONS = (0.2, 0.3, 0.4, 0.5)
 
 
+def flattened(probs: np.ndarray, tau: float) -> np.ndarray:
+    """``probs ** (1 / tau)``, normalized (zeros stay zero): the same mode, less sure."""
+    p = np.asarray(probs, dtype=np.float64)
+    lp = np.full(p.shape, -np.inf)
+    pos = p > 0
+    lp[pos] = np.log(p[pos]) / float(tau)
+    q = np.exp(lp - lp.max())
+    return q / q.sum()
+
+
+def neighbour_correlation(xy: np.ndarray, residuals: np.ndarray, radius: float) -> float:
+    """How alike the residuals of readings at most ``radius`` apart are: ``mean(r_i r_j)`` over
+    such pairs ``i < j`` (at different places) over ``mean(r^2)``: about 0 for independent
+    noise, toward 1 where a model error shared by neighbouring places makes them.  ``xy``:
+    ``(m, 2)`` positions, ``radius`` in their unit; 0 when no such pair exists or every
+    residual is 0."""
+    p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    r = np.asarray(residuals, dtype=np.float64).reshape(-1)
+    if p.shape[0] != r.size:
+        raise InputDataError(f"{p.shape[0]} positions for {r.size} residuals")
+    scale = float(np.mean(r * r))
+    if r.size < 2 or not scale > 0:
+        return 0.0
+    d2 = ((p[:, None, :] - p[None, :, :]) ** 2).sum(axis=-1)
+    i, j = np.nonzero(np.triu((d2 <= radius * radius) & (d2 > 0), k=1))
+    if i.size == 0:
+        return 0.0
+    return float(np.mean(r[i] * r[j]) / scale)
+
+
 def residual_statistics(belief: Any, observations: Any, resolution: float) -> dict[str, float]:
-    """The neighbour correlation (:func:`~dgse.posterior.mixture.neighbour_correlation`) of the
-    gas readings' standardized residuals about the belief's most probable source, per radius
-    of :data:`CORRELATION_RADII` (``"corr1"``: 1 m)."""
-    from dgse.posterior.mixture import neighbour_correlation, standardized_residuals
+    """The neighbour correlation (:func:`neighbour_correlation`) of the gas readings'
+    standardized residuals about the belief's most probable source, per radius of
+    :data:`CORRELATION_RADII` (``"corr1"``: 1 m)."""
+    from dgse.posterior.mixture import standardized_residuals
     from dgse.world.grid import Grid
 
     model = belief.info["response_model"]
@@ -744,8 +803,8 @@ def residual_statistics(belief: Any, observations: Any, resolution: float) -> di
 def rules() -> dict[str, Callable[[dict[str, float]], float]]:
     """The flattening rules the summary compares: ``tau`` from the estimate's ``fit`` record
     (``chi2``: the gas readings' misfit; ``wind``: the best flow's relative wind misfit;
-    ``corr1``: :func:`residual_statistics`; the last two only in journals written since
-    2026-11-28 h, and a journal without them scores their rules as no flattening)."""
+    ``corr1``: :func:`residual_statistics`; a journal that lacks the last two, as the earliest
+    recorded ones do, scores their rules as no flattening)."""
     out: dict[str, Callable[[dict[str, float]], float]] = {
         "none": lambda fit: 1.0,
         "every estimate, tau 1.25": lambda fit: 1.25,
@@ -822,8 +881,6 @@ def calibration_summary(out: Path) -> None:
 
 def calibration(argv: list[str]) -> None:
     """``calibration``: how much to flatten dgse-phys's source posterior, and when (module doc)."""
-    from dgse.posterior.mixture import flattened
-
     ap = tuning_parser(
         "calibration",
         "how much to flatten dgse-phys's source posterior, and when (validation scenarios)",
@@ -831,8 +888,8 @@ def calibration(argv: list[str]) -> None:
         [50, 150],
     )
     args = ap.parse_args(argv)
-    # the posterior as it is before any flattening: the rules are applied afterwards
-    options = checked_options(ap, args, {"misfit_threshold": None})
+    # the estimator's posterior (it flattens nothing): the rules are applied afterwards
+    options = checked_options(ap, args, {})
     args.out.mkdir(parents=True, exist_ok=True)
     if args.summary_only:
         calibration_summary(args.out)
@@ -910,7 +967,7 @@ def fusion(argv: list[str]) -> None:
     )
     args = ap.parse_args(argv)
     # the physics alone: the mixtures are formed here
-    options = checked_options(ap, args, {"learned_levels": (), "learned_floor": 0.0})
+    options = checked_options(ap, args, {"fusion.weight": 0.0, "fusion.floor": 0.0})
     args.out.mkdir(parents=True, exist_ok=True)
     if args.summary_only:
         fusion_summary(args.out)
@@ -952,7 +1009,8 @@ def fields_collect(level: str, seeds: list[int], counts: list[int]) -> dict[int,
     for seed in seeds:
         t0 = time.perf_counter()
         case = random_cases(seed, n_sources=1)[0]
-        est = get_estimator("dgse-phys", knowledge=Knowledge.from_case(case, level), field_error=(0, 0, 0, 0))
+        k = Knowledge.from_case(case, level)
+        est = get_estimator("dgse-phys", knowledge=k, **{"fields.model_error": (0, 0, 0, 0)})
         free = np.argwhere(case.occupancy == 0)
         rng = np.random.default_rng(seed)
         pick = free[rng.choice(len(free), size=min(FIELD_CELLS, len(free)), replace=False)]
@@ -1034,7 +1092,7 @@ def fields(argv: list[str]) -> None:
         params = fields_fit(data)
         rows = fields_report(data, params)
         result["levels"][level] = {"field_error": list(params), "by_count": rows}
-        print(f"{level}: field_error (a, b, c, d) = {params}")
+        print(f"{level}: fields.model_error (a, b, c, d) = {params}")
         for n, r in rows.items():
             cov = {k: f"{v['cov_1sigma']:.2f}/{v['cov_2sigma']:.2f}" for k, v in r.items()}
             print(
@@ -1114,42 +1172,46 @@ def write_sweep(
 #: The sweeps of ``sweep NAME``: ``(level, settings by name, scenario seeds, counts, trials,
 #: default output)``; a setting is the dgse-phys options it runs with.
 SWEEPS: dict[str, tuple[str, dict[str, dict[str, Any]], range, tuple[int, ...], int, str]] = {
-    # the tempering at ``openings``: power posteriors with temperature T (the gas evidence
-    # divided by T), and the rule T = max(1, m / effective_readings)
+    # the tempering at ``openings``: the gas evidence divided by T = max(1, m / effective_readings)
+    # (``T=1``: never tempered); the constant temperatures of the recorded file are removed
     "temperature": (
         "openings",
         {
-            **{
-                f"T={t:g}": {"temperature": t, "effective_readings": float("inf")}
-                for t in (1.0, 2.0, 4.0, 8.0)
-            },
-            **{f"m_eff={m:g}": {"temperature": 1.0, "effective_readings": m} for m in (50.0, 100.0)},
+            "T=1" if math.isinf(m) else f"m_eff={m:g}": {
+                "evidence.effective_readings": m,
+                "evidence.effective_growth": 0.0,
+            }
+            for m in (math.inf, 50.0, 100.0)
         },
         range(900, 912),
         (20, 50, 150, 300),
         2,
         "phys_temperature.json",
     ),
-    # how much the physics is trusted at ``map``: the readings the comparison of flow hypotheses
-    # counts (``hypothesis_readings``) and the readings the gas evidence counts
-    # (``effective_readings``: temperature m / effective_readings)
+    # how much the physics is trusted at ``map``: the readings the gas evidence counts
+    # (T = m / effective_readings; the recorded file's rows ``(None, E)``); the tempering of the
+    # flow hypotheses' weights it also compared (``(5.0, 100.0)``) is removed
     "map": (
         "map",
         {
-            str((h, e)): {"hypothesis_readings": h, "effective_readings": e}
-            for h, e in ((None, 100.0), (5.0, 100.0), (None, 30.0), (None, 10.0), (None, 3.0))
+            f"m_eff={m:g}": {"evidence.effective_readings": m, "evidence.effective_growth": 0.0}
+            for m in (100.0, 30.0, 10.0, 3.0)
         },
         range(900, 908),
         (20, 50, 150),
         1,
         "phys_map_tuning.json",
     ),
-    # DGSE-S's weight in the source posterior at ``map``: learned_weight * max(0, 1 - m /
-    # learned_readings)
+    # DGSE-S's weight in the source posterior at ``map``: weight * max(0, 1 - m / readings)
+    # (``fusion.weight``, ``fusion.readings``; no floor at weight 0, as this was measured)
     "learned": (
         "map",
         {
-            str((w, m)): {"learned_weight": w, "learned_readings": m}
+            str((w, m)): {
+                "fusion.weight.map": w,
+                "fusion.readings": m,
+                **({"fusion.floor": 0.0} if w == 0 else {}),
+            }
             for w, m in ((0.0, 20.0), (0.5, 20.0), (0.9, 20.0), (0.5, 50.0), (0.9, 50.0), (1.0, 1e9))
         },
         range(900, 908),
@@ -1333,7 +1395,9 @@ def speed_rows(case: Case, speeds: list[float], readings: int, seed: int) -> lis
     knowledge = Knowledge.from_case(case, "openings")
     rows = []
     for v in speeds:
-        est = get_estimator("dgse-phys", knowledge=knowledge, speeds=(v,), refine_speeds=0)
+        est = get_estimator(
+            "dgse-phys", knowledge=knowledge, **{"flows.speeds": (v,), "flows.refine_speeds": 0}
+        )
         b = est.estimate(case.occupancy, case.resolution, obs)
         rows.append({"speed": v, "error_m": b.localization_error(case.source)})
         print(f"v_in {v:g} m/s: {rows[-1]['error_m']:.2f} m off")
@@ -1347,7 +1411,8 @@ def warm_start_row(case: Case, readings: int, seed: int) -> dict:
     row: dict = {}
     flows = {}
     for warm in (False, True):
-        est = get_estimator("dgse-phys", knowledge=knowledge, refine_speeds=0, warm_start=warm)
+        opts = {"flows.refine_speeds": 0, "flows.warm_start": warm}
+        est = get_estimator("dgse-phys", knowledge=knowledge, **opts)
         b = est.estimate(case.occupancy, case.resolution, obs)
         tag = "warm" if warm else "cold"
         row[f"{tag}_error_m"] = b.localization_error(case.source)

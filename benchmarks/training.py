@@ -36,15 +36,16 @@ under ``benchmarks/results/`` (``benchmarks/gpu_train.sh`` is the one-lease GPU 
           --run RUN_DIR --eval val=VAL.json --eval test=TEST.json --eval reference=REF.json \\
           --command "dgse train ..." -o src/dgse/assets/models/dgse-s.md
 
-* ``eta``: the entropy-termination threshold of a model (the utility planner stops when
-  ``H(pi_s) <= eta log N``), chosen on the validation split: per threshold the share of
-  validation estimates below it and their median localization error.  Writes
+* ``eta``: the entropy-termination threshold of a model (the utility planner's ``stop.eta``:
+  it stops when ``H(pi_s) <= eta log N``), chosen on the validation split: per threshold the
+  share of validation estimates below it and their median localization error.  Writes
   ``eta_validation.json``::
 
       python benchmarks/training.py eta STORE
 
 * ``few-readings``: how confident and how wrong the shipped DGSE-S is from very few random
-  readings (why ``min_observations``): its normalized source entropy and error per count::
+  readings (why the planner's ``stop.min_observations``): its normalized source entropy and
+  error per count::
 
       python benchmarks/training.py few-readings benchmarks/results/report/_scenarios/test-20 \\
           --counts 1 2 3 4 5 10 20 50 --trials 5 -o benchmarks/results/few_readings.json
@@ -451,7 +452,9 @@ def few_readings(argv: list[str]) -> None:
     ap.add_argument("cases", type=Path, help="folder of case files (.npz)")
     ap.add_argument("--counts", type=int, nargs="+", default=[1, 2, 3, 4, 5, 10, 20, 50])
     ap.add_argument("--trials", type=int, default=5)
-    ap.add_argument("--eta", type=float, default=0.78, help="threshold to count estimates below")
+    ap.add_argument(
+        "--eta", type=float, default=0.78, help="threshold to count estimates below (as stop.eta)"
+    )
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("-o", "--out", type=Path, required=True)
     args = ap.parse_args(argv)

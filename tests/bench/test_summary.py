@@ -349,3 +349,27 @@ def test_the_committed_summary_is_the_one_its_results_give(tmp_path: Path) -> No
     committed = COMMITTED / SUMMARY_NAME
     out = write_summary(COMMITTED, tmp_path / SUMMARY_NAME)
     assert out.read_text() == committed.read_text()
+
+
+@pytest.mark.parametrize(
+    "options",
+    [{"deadline_margin_s": 45.0}, {"deadline.margin_s": 45.0}, {"deadline": {"margin_s": 45.0}}],
+    ids=["recorded", "dotted", "nested"],
+)
+def test_the_deadline_margin_is_read_by_its_recorded_and_its_settings_name(
+    seeded: Path, options: dict[str, Any]
+) -> None:
+    """Results recorded before the planner's settings objects name the margin ``deadline_margin_s``;
+    a run now writes the dotted key (or a mapping under ``deadline``)."""
+    for kind in ("test", "filament"):
+        path = seeded / "search" / f"run_dgse-phys_{kind}.json"
+        d = json.loads(path.read_text())
+        d["settings"]["planner_options"] = options
+        path.write_text(json.dumps(d))
+    text, cited = build_summary(seeded)
+    assert "(45 s before the time limit)" in text
+    assert [c.how for c in cited if c.text == "45"] == [
+        "planner_options.deadline_margin_s"
+        if "deadline_margin_s" in options
+        else "planner_options.deadline.margin_s"
+    ]

@@ -12,7 +12,7 @@ Methods (estimator + planner, registry names):
 * **DGSE-S** (``dgse-s`` + ``utility``): the shipped weights, bf16 autocast
   where the CPU computes bf16 natively (``dtype="auto"``; float32 elsewhere),
   with channels-last convolutions (the demo's setting), ``K = T = 5``, the
-  utility planner with ``eta = ETA_TUNED`` (0.78, tuned for the shipped model
+  utility planner with ``stop.eta = ETA_TUNED`` (0.78, tuned for the shipped model
   on the validation split, ``benchmarks/results/eta_validation.json``; the
   paper's 0.65 belongs to the paper's model), the entropy test only from the
   5th reading on (``stop.min_observations``: the networks never saw fewer);
@@ -42,7 +42,7 @@ Parts:
 * DGSE-S alone on more test scenarios (steady and filament);
 * fig:path_compare: trial 0's paths of every method in two scenarios;
 * App. D (``de``): DGSE-S on out-of-domain layouts with the paper's
-  out-of-domain ``eta = 0.75`` and with ``ETA_OOD`` (the paper raises eta by
+  out-of-domain ``stop.eta = 0.75`` and with ``ETA_OOD`` (the paper raises eta by
   0.1 out of domain, 0.65 to 0.75; the tuned 0.78 + 0.1 = 0.88);
 * a search-process figure (fig:dgse_search_process-like) of one DGSE-S episode.
 

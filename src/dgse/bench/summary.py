@@ -880,16 +880,35 @@ def _search_phys(w: _Writer) -> str:
     return text
 
 
+#: Where a search result's ``planner_options`` hold the deadline margin: the dotted key a run
+#: writes, and the flat name of the results recorded before the planner's settings objects.
+_MARGIN_KEYS = ("deadline.margin_s", "deadline_margin_s")
+
+
+def _deadline_margin(settings: dict[str, Any]) -> tuple[Any, str] | None:
+    """``(margin, key)``: the deadline margin a search result's settings record and where, else None."""
+    options = settings.get("planner_options") or {}
+    for key in _MARGIN_KEYS:
+        if options.get(key) is not None:
+            return options[key], key
+    nested = options.get("deadline")
+    if isinstance(nested, dict) and nested.get("margin_s") is not None:
+        return nested["margin_s"], "deadline.margin_s"
+    return None
+
+
 def _search_stops(w: _Writer) -> str:
     from dgse.search.metrics import SUCCESS_RADIUS_M
 
-    episodes, margin = [], None
+    episodes, margin, margin_key = [], None, ""
     files = []
     for kind in ("test", "filament"):
         name = f"run_dgse-phys_{kind}.json"
         d = w.results.json("search", name)
         files.append(f"search/{name}")
-        margin = (d.get("settings") or {}).get("planner_options", {}).get("deadline_margin_s", margin)
+        found = _deadline_margin(d.get("settings") or {})
+        if found is not None:
+            margin, margin_key = found
         episodes += [t for c in d["per_case"] for t in c["trials"]]
     if not episodes:
         raise _Missing("episodes")
@@ -912,7 +931,7 @@ def _search_stops(w: _Writer) -> str:
         k = w.value(len(late), _int, files=files, how="reason deadline")
         text += f"; the other {k} ran to the deadline stop"
         if margin is not None:
-            s = w.value(margin, _int, files=files, how="planner_options.deadline_margin_s")
+            s = w.value(margin, _int, files=files, how=f"planner_options.{margin_key}")
             text += f" ({s} s before the time limit)"
         text += (
             f", {w.value(len(near), _int, files=files, how='deadline stops within')} of them within "
