@@ -152,6 +152,7 @@ from typing import Any
 import numpy as np
 
 from dgse.belief.knowledge import Knowledge
+from dgse.bench.commands import run_command
 from dgse.bench.scenarios import VARIANTS, parse_seeds, perturbed_wind, search_cases, variant_case
 from dgse.cli.common import parse_params
 from dgse.errors import InputDataError
@@ -1473,12 +1474,7 @@ COMMANDS: dict[str, Callable[[list[str]], None]] = {
 
 
 def main(argv: list[str] | None = None) -> None:
-    argv = sys.argv[1:] if argv is None else argv
-    if not argv or argv[0] in ("-h", "--help") or argv[0] not in COMMANDS:
-        print(__doc__)
-        print(f"commands: {', '.join(COMMANDS)}")
-        raise SystemExit(0 if argv and argv[0] in ("-h", "--help") else 2)
-    COMMANDS[argv[0]](argv[1:])
+    run_command(__doc__, COMMANDS, sys.argv[1:] if argv is None else argv)
 
 
 if __name__ == "__main__":

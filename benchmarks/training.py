@@ -104,6 +104,7 @@ from typing import Any
 
 import numpy as np
 
+from dgse.bench.commands import run_command
 from dgse.files import atomic_open, atomic_path, write_text
 
 REPO = Path(__file__).resolve().parents[1]
@@ -1042,15 +1043,9 @@ COMMANDS: dict[str, Callable[[list[str]], Any]] = {
 }
 
 
-def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    if not argv or argv[0] in ("-h", "--help") or argv[0] not in COMMANDS:
-        print(__doc__)
-        print(f"commands: {', '.join(COMMANDS)}")
-        return 0 if argv and argv[0] in ("-h", "--help") else 2
-    COMMANDS[argv[0]](argv[1:])
-    return 0
+def main(argv: list[str] | None = None) -> None:
+    run_command(__doc__, COMMANDS, sys.argv[1:] if argv is None else argv)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    main()

@@ -149,3 +149,18 @@ def test_told_wind_changes_only_the_wind_it_is_told() -> None:
     with pytest.raises(InputDataError, match="no wind variant"):
         ToldWind(inner, "filament")
     assert set(VARIANTS) > set(scenarios.WIND_VARIANTS)
+
+
+def test_run_command_dispatches_and_exits_with_the_usage(capsys) -> None:
+    import pytest
+
+    from dgse.bench.commands import run_command
+
+    seen: list[list[str]] = []
+    run_command("doc", {"go": seen.append}, ["go", "-x", "1"])
+    assert seen == [["-x", "1"]]
+    for argv, code in (([], 2), (["nope"], 2), (["--help"], 0)):
+        with pytest.raises(SystemExit) as e:
+            run_command("doc", {"go": seen.append}, argv)
+        assert e.value.code == code
+    assert "commands: go" in capsys.readouterr().out
