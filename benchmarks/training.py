@@ -1043,9 +1043,10 @@ COMMANDS: dict[str, Callable[[list[str]], Any]] = {
 }
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None) -> int:
     run_command(__doc__, COMMANDS, sys.argv[1:] if argv is None else argv)
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())
