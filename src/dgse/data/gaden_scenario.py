@@ -271,12 +271,13 @@ def _source_in(d: Mapping, where: Path) -> tuple[float, float, float] | None:
         pos = _floats(src["position"], "source position", where)
         if len(pos) in (2, 3):
             return (pos[0], pos[1], pos[2] if len(pos) == 3 else 0.0)
-    for prefix in _SOURCE_PREFIXES:
-        if f"{prefix}x" in d and f"{prefix}y" in d:
-            keys = [f"{prefix}{a}" for a in "xyz" if f"{prefix}{a}" in d]
-            x, y, *z = _floats([d[k] for k in keys], f"{prefix}x/y/z", where)
-            return (x, y, z[0] if z else 0.0)
-    return None
+    with_xy = [p for p in _SOURCE_PREFIXES if f"{p}x" in d and f"{p}y" in d]
+    if not with_xy:
+        return None
+    prefix = next((p for p in with_xy if f"{p}z" in d), with_xy[0])  # one with a height first
+    keys = [f"{prefix}{a}" for a in "xyz" if f"{prefix}{a}" in d]
+    x, y, *z = _floats([d[k] for k in keys], f"{prefix}x/y/z", where)
+    return (x, y, z[0] if z else 0.0)
 
 
 def _start_in(d: Mapping, where: Path) -> tuple[float, float] | None:
