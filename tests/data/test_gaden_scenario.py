@@ -110,6 +110,33 @@ def test_older_formats_launch_xml_source_and_numbered_outlets(tmp_path):
     sc = load_gaden_scenario(d)
     assert sc.source == pytest.approx(g.SOURCE) and sc.files["simulation"] == "launch/GADEN.launch"
     assert sc.files["outlets"] == ["cad_models/door_east.stl"]
+    # a second configuration with other openings and its own wind simulation (by its prefix)
+    other = d / "launch" / "B2"
+    other.mkdir()
+    (other / "GADEN_preprocessing.launch").write_text(
+        '<launch>\n <arg name="simulation" default="calm" />\n <node pkg="gaden_preprocessing">\n'
+        '  <param name="outlets_model_0" value="$(find-pkg-share env)/B/cad_models/door_west.stl"/>\n'
+        '  <param name="outlets_model_1" value="$(find-pkg-share env)/B/cad_models/door_north.stl"/>\n'
+        '  <param name="wind_files"\n'
+        '   value="$(find-pkg-share env)/B/wind_simulations/$(var simulation)/$(var simulation)"/>\n'
+        " </node>\n</launch>\n"
+    )
+    g.write_ascii_stl(d / "cad_models/door_north.stl", g._box(0.0, 0.4, 2.4, 2.5, 0.0, 2.0))
+    calm = d / "wind_simulations" / "calm"
+    calm.mkdir()
+    for t, src in enumerate(sorted((d / "wind_simulations/1ms").glob("*.csv"))):
+        text = src.read_text().splitlines()
+        rows = np.loadtxt(text[1:], delimiter=",")
+        rows[:, 1] = -rows[:, 0]  # blows south instead: in at the north door, out at the west one
+        rows[:, 0] = 0.0
+        np.savetxt(calm / f"calm_{t}.csv", rows, delimiter=",", header=text[0], comments="", fmt="%.6f")
+    with pytest.raises(InputDataError, match="several lists of outlet models"):
+        load_gaden_scenario(d)
+    b2 = load_gaden_scenario(d, settings_path=other / "GADEN_preprocessing.launch")
+    assert b2.files["wind"] == ["wind_simulations/calm/calm_0.csv", "wind_simulations/calm/calm_1.csv"]
+    assert [(o.side, o.start_m, o.end_m) for o in b2.layout.inlets] == [("north", 1.0, 1.4)]
+    assert [o.side for o in b2.layout.outlets] == ["west"]
+    (other / "GADEN_preprocessing.launch").unlink()
     # two scenes with other starts: which one is asked for
     (d / "scene2.yaml").write_text("robots:\n  - position: [0.5, 0.5, 0.0]\n")
     with pytest.raises(InputDataError, match="several robot starts"):

@@ -303,6 +303,10 @@ def import_gaden_scenario_cmd(
         Path | None,
         typer.Option("--scene", help="The robot scene with the start (default: the folder's one start)."),
     ] = None,
+    settings: Annotated[
+        Path | None,
+        typer.Option("--settings", help="The preprocessing settings listing the outlet models."),
+    ] = None,
     inlet: Annotated[
         list[str] | None,
         typer.Option("--inlet", metavar="FILE", help="An outlet model that is an inlet (repeatable)."),
@@ -348,6 +352,7 @@ def import_gaden_scenario_cmd(
         map_path=map_path,
         simulation=simulation,
         scene=scene,
+        settings_path=settings,
         inlets=inlet or (),
         outlets=outlet or (),
         wind_files=wind or (),

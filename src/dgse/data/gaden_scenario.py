@@ -12,18 +12,21 @@ one experiment in files that GADEN's tools write or read:
 * STL models (ASCII or binary) of the walls and of the *outlets*: the openings
   of the building, listed under ``outlets_models`` in the preprocessing
   settings (a ``config.yaml`` or a ROS parameter file; GADEN's older numbered
-  ``outlets_model_N`` parameters of a launch XML are read too), or, when no
-  settings list them, the STL files whose name contains ``outlet``;
+  ``outlets_model_N`` parameters of a launch XML are read too; files listing
+  different models need ``settings_path``), or, when no settings list them,
+  the STL files whose name contains ``outlet``;
 * a simulation file with the gas source: ``source: {position: [x, y, z]}``
   (GADEN 2's ``sim.yaml``), or ``source_position_{x,y,z}``, ``source_{x,y,z}``,
   ``source_location_{x,y,z}``, ``source_0_position_{x,y,z}`` (older YAML files
   and launch XML ``<arg>``/``<param>`` entries);
 * a robot scene (BasicSim's YAML: ``robots: [{position: [x, y, z]}, ...]``)
   giving the robot's start;
-* the CFD wind as ParaView exports it, ``wind_at_cell_centers_<t>.csv``: a
-  header, then one row per CFD cell centre with its point ``Points:0..2`` and
-  wind ``U:0..2`` in m/s (either order; columns found by name, else by GADEN's
-  rule: points first when the first header field names ``Points``).
+* the CFD wind as ParaView exports it, ``<prefix>_<t>.csv`` with the prefix
+  the settings give (``unprocessed_wind_files`` or ``wind_files``), else
+  ``wind_at_cell_centers_<t>.csv``: a header, then one row per CFD cell centre
+  with its point ``Points:0..2`` and wind ``U:0..2`` in m/s (either order;
+  columns found by name, else by GADEN's rule: points first when the first
+  header field names ``Points``).
 
 :func:`load_gaden_scenario` reads them into a :class:`GadenScenario`:
 
@@ -83,6 +86,7 @@ _WIND_GLOB = "*wind_at_cell_center*.csv"
 #: Key prefixes of a source position (``<prefix>x``, ``<prefix>y``, ``<prefix>z``), in the order tried.
 _SOURCE_PREFIXES = ("source_position_", "source_location_", "source_0_position_", "source_")
 _SUBST = re.compile(r"\$\((?:var|arg)\s+([\w-]+)\)")
+_ANY_SUBST = re.compile(r"\$\([^)]*\)")
 
 
 @dataclass(frozen=True, eq=False)
@@ -245,7 +249,7 @@ class _Settings:
 
     def resolve(self, base: Path, name: str) -> Path:
         """A file named in a settings file: relative to it, or (ROS substitutions) found by name."""
-        cleaned = _SUBST.sub("", name).strip()
+        cleaned = _ANY_SUBST.sub("", name).strip()
         for cand in (base.parent / cleaned, self.directory / cleaned):
             if cleaned and cand.is_file():
                 return cand
@@ -340,9 +344,16 @@ def _find_map(settings: _Settings, map_path: Path | None) -> Path:
     return top[0]
 
 
-def _outlet_models(settings: _Settings) -> list[Path]:
-    models: list[Path] = []
-    for p, doc in settings.docs:
+def _outlet_lists(settings: _Settings, path: Path | None) -> tuple[Path | None, list[Path], str | None]:
+    """The settings file listing the outlet models, the models (resolved) and its wind-file prefix.
+
+    Files listing the same models count once; different lists need ``path`` (``--settings``).
+    Without a list: the STL files named ``*outlet*`` and no settings file.
+    """
+    lists: list[tuple[Path, list[Path], str | None]] = []
+    for p, doc in settings.only(path):
+        models: list[Path] = []
+        prefix = None
         for d in _mappings(doc):
             listed = d.get("outlets_models")
             if isinstance(listed, list):
@@ -355,16 +366,24 @@ def _outlet_models(settings: _Settings) -> list[Path]:
                 if isinstance(k, str) and (m := re.fullmatch(r"outlets?_model_(\d+)", k))
             )
             models += [settings.resolve(p, str(d[k])) for _, k in numbered]
-    if not models:
-        models = sorted(
-            q
+            for key in ("unprocessed_wind_files", "wind_files"):
+                if isinstance(d.get(key), str) and prefix is None:
+                    prefix = d[key]
+        if models:
+            lists.append((p, list(dict.fromkeys(m.resolve() for m in models)), prefix))
+    if path is not None and not lists:
+        raise InputDataError(f"{path}: lists no outlet models (outlets_models or outlets_model_N)")
+    if not lists:
+        found = sorted(
+            q.resolve()
             for q in settings.directory.rglob("*")
             if q.suffix.lower() == ".stl" and "outlet" in q.name.lower()
         )
-    seen: dict[Path, None] = {}
-    for m in models:
-        seen.setdefault(m.resolve(), None)
-    return list(seen)
+        return None, found, None
+    if len({tuple(sorted(m)) for _, m, _ in lists}) > 1:
+        listing = "; ".join(f"{p.relative_to(settings.directory)}: {len(m)} models" for p, m, _ in lists[:4])
+        raise InputDataError(f"several lists of outlet models ({listing}): give --settings FILE")
+    return lists[0]
 
 
 def _named(names: Sequence[str | Path], models: list[Path], directory: Path, option: str) -> list[Path]:
@@ -459,9 +478,20 @@ def read_wind_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     return pts, wind
 
 
-def _wind_files(directory: Path, given: Sequence[Path]) -> list[Path]:
+def _wind_files(
+    settings: _Settings, given: Sequence[Path], base: Path | None, prefix: str | None
+) -> list[Path]:
+    """The wind CSV files: ``given``; else ``<prefix>_<t>.csv`` of the settings (found by name
+    under the folder); else the one folder of ``wind_at_cell_centers*.csv`` files."""
+    directory = settings.directory
     if given:
         return list(given)
+    if prefix is not None and base is not None:
+        stem = Path(_ANY_SUBST.sub("", prefix).strip()).name
+        pattern = re.compile(re.escape(stem) + r"_\d+\.csv$")
+        files = sorted(q for q in directory.rglob("*.csv") if pattern.fullmatch(q.name))
+        if files and len({f.parent for f in files}) == 1:
+            return files
     files = sorted(directory.rglob(_WIND_GLOB))
     folders = sorted({f.parent for f in files})
     if len(folders) > 1:
@@ -519,6 +549,7 @@ def load_gaden_scenario(
     map_path: str | Path | None = None,
     simulation: str | Path | None = None,
     scene: str | Path | None = None,
+    settings_path: str | Path | None = None,
     inlets: Sequence[str | Path] = (),
     outlets: Sequence[str | Path] = (),
     wind_files: Sequence[str | Path] = (),
@@ -540,6 +571,8 @@ def load_gaden_scenario(
         map_path: the map YAML (default: the one in the folder).
         simulation: the file with the source (default: the one source the folder's files give).
         scene: the robot scene with the start (default: the one start the folder's files give).
+        settings_path: the preprocessing settings listing the outlet models (default: the one
+            list the folder's files give).
         inlets, outlets: outlet models (paths, file names or stems) that are inlets or outlets;
             models not named are told apart by the wind.
         wind_files: the wind CSV files (default: the folder's one wind simulation).
@@ -600,7 +633,9 @@ def load_gaden_scenario(
         )
         start_file, st = (None, None) if found is None else found
 
-    models = _outlet_models(settings)
+    settings_file, models, wind_prefix = _outlet_lists(
+        settings, None if settings_path is None else Path(settings_path)
+    )
     named_in = _named(inlets, models, d, "--inlet")
     named_out = _named(outlets, models, d, "--outlet")
     both = set(named_in) & set(named_out)
@@ -617,7 +652,8 @@ def load_gaden_scenario(
     openings = {m: _opening(read_stl(m), origin, grid, edge_tolerance, m) for m in models}
 
     z = sz if height is None else float(height)
-    wind_paths = _wind_files(d, [Path(w) for w in wind_files]) if use_wind else []
+    given_wind = [Path(w) for w in wind_files]
+    wind_paths = _wind_files(settings, given_wind, settings_file, wind_prefix) if use_wind else []
     # a provisional layout (every model an outlet but one) to slice the wind on the map's free cells
     ms = list(openings)
     provisional = layout_from_floorplan(
@@ -687,6 +723,7 @@ def load_gaden_scenario(
     files = {
         "directory": str(d),
         "map": rel(map_yaml),
+        "settings": rel(settings_file),
         "simulation": rel(src_file),
         "scene": rel(start_file),
         "inlets": [rel(m) for m in ins],
