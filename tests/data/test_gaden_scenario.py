@@ -167,3 +167,16 @@ def test_bad_folders_are_one_error_line(tmp_path, capsys, kwargs, args, fragment
     assert code == 2 and line.startswith("error: ") and "\n" not in line, (out, err)
     assert fragment in line, line
     assert "Traceback" not in out + err and not (tmp_path / "x.npz").exists()
+
+
+def test_source_and_start_options_are_map_frame(folder, tmp_path, capsys):
+    out = tmp_path / "opt.npz"
+    args = ("--source", "0.0", "1.0", "--height", "0.5", "--start", "2.5", "0.0")
+    code, _, err = _run(capsys, folder, "-o", out, *args)
+    assert code == 0, err
+    with np.load(out) as z:
+        meta = json.loads(str(z["meta"]))
+    assert meta["source_m"] == pytest.approx((1.0, 1.5)) and meta["start_m"] == pytest.approx((3.5, 0.5))
+    assert meta["gaden"]["simulation"] is None and meta["gaden"]["scene"] is None
+    code, _, err = _run(capsys, folder, "-o", out, "--source", "0.0", "1.0")  # no --height: slice at z 0
+    assert code == 2 and "give --height" in err

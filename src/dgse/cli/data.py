@@ -321,7 +321,8 @@ def import_gaden_scenario_cmd(
     ] = None,
     use_wind: Annotated[bool, typer.Option("--wind-files/--no-wind", help="Read the CFD wind.")] = True,
     source: Annotated[
-        tuple[float, float] | None, typer.Option("--source", metavar="X Y", help="Source, m (map frame).")
+        tuple[float, float] | None,
+        typer.Option("--source", metavar="X Y", help="Source, m (map frame; give --height too)."),
     ] = None,
     start: Annotated[
         tuple[float, float] | None, typer.Option("--start", metavar="X Y", help="Robot start, m (map frame).")

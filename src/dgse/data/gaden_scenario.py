@@ -578,7 +578,8 @@ def load_gaden_scenario(
         wind_files: the wind CSV files (default: the folder's one wind simulation).
         use_wind: read no wind when False.
         source, start: map-frame ``(x, y)`` in m instead of the files'.
-        height: map-frame z of the wind slice (default: the source's z).
+        height: map-frame z of the wind slice (default: the source's z from the files; 0
+            with ``source``).
         height_tolerance: wind points within this distance of ``height`` are used, m.
         edge_tolerance: how far an outlet's footprint may lie from the map's edge, m.
         carve_depth_m: outer wall an opening is cut through, m.
@@ -606,7 +607,8 @@ def load_gaden_scenario(
     grid, origin = fp.grid, fp.origin
 
     if source is not None:
-        src_file, (sx, sy, sz) = None, (*_floats(source, "--source", d), 0.0 if height is None else height)
+        sx, sy = _floats(source, "--source", d)
+        src_file, sz = None, 0.0 if height is None else float(height)
     else:
         found = _find(
             settings,
