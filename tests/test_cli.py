@@ -35,6 +35,7 @@ COMMANDS = [
     "export",
     "import",
     "import-gaden",
+    "import-gaden-scenario",
     "search",
     "estimate",
     "evaluate",

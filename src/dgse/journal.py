@@ -63,7 +63,7 @@ def journal_path(json_path: str | os.PathLike[str]) -> Path:
 
 
 def case_fingerprint(case: Case) -> str:
-    """A short hash (16 hex digits) of a case's arrays, resolution and frame spacing.
+    """A short hash (16 hex digits) of a case's arrays, resolution, frame spacing and start (if any).
 
     Pieces of work are kept with the fingerprint of their case, so a case file
     that changed since the journal was written is noticed.
@@ -78,6 +78,8 @@ def case_fingerprint(case: Case) -> str:
         h.update(f"{c.dtype.str}{c.shape};".encode())
         h.update(c.data)
     h.update(repr((float(case.resolution), case.meta.get("frame_dt"))).encode())
+    if "start_m" in case.meta:  # a case's own start fixes its episodes' starts
+        h.update(repr(case.meta["start_m"]).encode())
     return h.hexdigest()[:16]
 
 

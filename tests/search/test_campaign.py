@@ -196,3 +196,46 @@ def test_torn_last_line_is_dropped_and_redone(tmp_path):
     again = _campaign(d, journal=journal, trials=1, on_episode=lambda p, c, r, res: calls.append(p.stem))
     assert calls == ["b"] and _trials(again) == _trials(whole)
     assert journal.read_text().endswith("\n") and count_records(journal) == 2
+
+
+def test_fixed_start_from_the_argument_or_the_case_file(tmp_path):
+    import numpy as np
+
+    from dgse.search.campaign import fixed_start
+
+    occ = np.zeros((10, 30), np.uint8)
+    occ[:, 12] = 1  # a wall with a door at rows 4-5
+    occ[4:6, 12] = 0
+    walled = corridor_case(occupancy=occ)
+    assert fixed_start(walled) is None  # nothing given: every trial draws its start
+    assert fixed_start(walled, (0.25, 0.85)) == (8, 2)
+    assert fixed_start(walled.with_meta(start_m=[0.25, 0.85])) == (8, 2)
+    with pytest.raises(
+        InputDataError, match=r"start \(1.25, 0.15\) m \(start_m\) lies in a wall of case \(cell \(1, 12\)\)"
+    ):
+        fixed_start(walled, (1.25, 0.15))
+    with pytest.raises(InputDataError, match=r"lies outside the map of a\.npz"):
+        fixed_start(walled.with_meta(start_m=[9.0, 0.5]), origin="a.npz")
+    sealed = occ.copy()
+    sealed[4:6, 12] = 1
+    with pytest.raises(InputDataError, match="cannot be reached"):
+        fixed_start(corridor_case(occupancy=sealed), (0.25, 0.85))
+
+    # every trial of every case starts there: the first cell of each trajectory
+    walled.save(tmp_path / "a.npz")
+    corridor_case(source_cell=(5, 20)).with_meta(start_m=[2.95, 0.05]).save(tmp_path / "b.npz")
+    firsts: dict[str, list] = {"a": [], "b": []}
+
+    def first(path, case, r, res):
+        firsts[path.stem].append(res.trajectory_cells[0].tolist())
+
+    common = {"trials": 2, "seed": 1, "time_limit": 30.0, "on_episode": first}
+    data = run_trials(tmp_path, PeakEstimator(), UtilityPlanner(), start_m=(0.25, 0.85), **common)
+    assert firsts == {"a": [[8, 2], [8, 2]], "b": [[8, 2], [8, 2]]}
+    assert data["settings"]["start_m"] == [0.25, 0.85]
+    assert [t["start_cell"] for c in data["per_case"] for t in c["trials"]] == [[8, 2]] * 4
+    firsts = {"a": [], "b": []}
+    data = run_trials(tmp_path, PeakEstimator(), UtilityPlanner(), **common)
+    assert firsts["b"] == [[0, 29], [0, 29]]  # the case file's start
+    assert len({tuple(c) for c in firsts["a"]}) == 2  # drawn, as without a start
+    assert "start_m" not in data["settings"]

@@ -255,3 +255,26 @@ def test_step_text_and_default_names():
         "searching: step 4, 123 of 2000 s simulated, entropy 0.71 of log N (stops at 0.78), error 0.46 m"
     )
     assert str(default_output("search", "my/model x", "utility")) == "dgse-out/search-my_model_x-utility.json"
+
+
+def test_start_option_fixes_the_start_and_refuses_a_wall(peak, tmp_path, capsys):
+    cases, _ = peak
+    out = tmp_path / "s.json"
+    code, _, err = _run(
+        capsys, cases / "a.npz", *PEAK, "--start", "0.25", "0.55", "--json", out, "--no-progress"
+    )
+    assert code == 0, err
+    data = json.loads(out.read_text())
+    assert data["settings"]["start_m"] == [0.25, 0.55]
+    assert [t["start_cell"] for t in data["per_case"][0]["trials"]] == [[5, 2], [5, 2]]
+    walled = corridor_case()
+    occ = walled.occupancy.copy()
+    occ[:, 2] = 1
+    occ[0, 2] = 0
+    corridor_case(occupancy=occ).save(tmp_path / "w.npz")
+    code, out_text, err = _run(capsys, tmp_path / "w.npz", *PEAK, "--start", "0.25", "0.55", "--no-progress")
+    line = err.strip()
+    assert code == 2 and "\n" not in line and "Traceback" not in out_text + err
+    assert (
+        line == f"error: start (0.25, 0.55) m (--start) lies in a wall of {tmp_path / 'w.npz'} (cell (5, 2))"
+    )

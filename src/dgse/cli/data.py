@@ -1,8 +1,8 @@
-"""Dataset commands: ``generate``, ``export``, ``import``, ``stats``.
+"""Dataset commands: ``generate``, ``export``, ``import``, ``import-gaden[-scenario]``, ``stats``.
 
 :func:`register` attaches them to the ``dgse`` command: ``generate``,
-``export``, ``import`` and ``import-gaden`` at the top level, ``stats`` under a
-``data`` group (``dgse data stats``).
+``export``, ``import``, ``import-gaden`` and ``import-gaden-scenario`` at the
+top level, ``stats`` under a ``data`` group (``dgse data stats``).
 
 Every error a user can cause (:class:`~dgse.errors.DGSEError`, or a file that
 cannot be written) prints one red line ``error: <message>`` and exits with
@@ -38,6 +38,7 @@ __all__ = [
     "generate_cmd",
     "import_cmd",
     "import_gaden_cmd",
+    "import_gaden_scenario_cmd",
     "register",
     "stats_cmd",
 ]
@@ -285,6 +286,103 @@ def import_gaden_cmd(
     console.print(f"wrote [cyan]{path_text(path)}[/]: {case.grid.width}x{case.grid.height} cells, {n} frames")
 
 
+@user_errors
+def import_gaden_scenario_cmd(
+    directory: Annotated[Path, typer.Argument(metavar="DIR", help="A GADEN scenario folder.")],
+    out: Annotated[
+        Path, typer.Option("--out", "-o", help="Layout file (.npz) to write (a case file with --solve).")
+    ],
+    map_path: Annotated[
+        Path | None, typer.Option("--map", help="The ROS map YAML (default: the folder's).")
+    ] = None,
+    simulation: Annotated[
+        Path | None,
+        typer.Option("--simulation", help="The file with the source (default: the folder's one source)."),
+    ] = None,
+    scene: Annotated[
+        Path | None,
+        typer.Option("--scene", help="The robot scene with the start (default: the folder's one start)."),
+    ] = None,
+    settings: Annotated[
+        Path | None,
+        typer.Option("--settings", help="The preprocessing settings listing the outlet models."),
+    ] = None,
+    inlet: Annotated[
+        list[str] | None,
+        typer.Option("--inlet", metavar="FILE", help="An outlet model that is an inlet (repeatable)."),
+    ] = None,
+    outlet: Annotated[
+        list[str] | None,
+        typer.Option("--outlet", metavar="FILE", help="An outlet model that is an outlet (repeatable)."),
+    ] = None,
+    wind: Annotated[
+        list[Path] | None,
+        typer.Option("--wind", metavar="FILE", help="A wind_at_cell_centers CSV (repeatable)."),
+    ] = None,
+    use_wind: Annotated[bool, typer.Option("--wind-files/--no-wind", help="Read the CFD wind.")] = True,
+    source: Annotated[
+        tuple[float, float] | None,
+        typer.Option("--source", metavar="X Y", help="Source, m (map frame; give --height too)."),
+    ] = None,
+    start: Annotated[
+        tuple[float, float] | None, typer.Option("--start", metavar="X Y", help="Robot start, m (map frame).")
+    ] = None,
+    height: Annotated[
+        float | None,
+        typer.Option("--height", help="Map-frame height of the wind slice, m (default: the source's)."),
+    ] = None,
+    resolution: Annotated[float, typer.Option("--resolution", help="Cell size, m.")] = 0.1,
+    solve: Annotated[bool, typer.Option("--solve", help="Solve the layout and write a case file.")] = False,
+    inlet_velocity: Annotated[
+        float | None,
+        typer.Option("--inlet-velocity", help="Inlet speed for --solve, m/s (default: the wind's)."),
+    ] = None,
+    rate: Annotated[float | None, typer.Option("--rate", help="Release rate for --solve, g/s.")] = None,
+) -> None:
+    """Make a layout (or, with --solve, a case) file from a GADEN scenario folder: its map, outlet
+    models, source, robot start and CFD wind."""
+    from dgse.data.gaden_scenario import import_gaden_scenario
+
+    check_output_file(out, "case file" if solve else "layout file")
+    path, sc = import_gaden_scenario(
+        directory,
+        out,
+        solve=solve,
+        inlet_velocity=inlet_velocity,
+        release_rate=rate,
+        map_path=map_path,
+        simulation=simulation,
+        scene=scene,
+        settings_path=settings,
+        inlets=inlet or (),
+        outlets=outlet or (),
+        wind_files=wind or (),
+        use_wind=use_wind,
+        source=source,
+        start=start,
+        height=height,
+        resolution=resolution,
+    )
+    g = sc.layout.grid
+
+    def fmt(o) -> str:
+        return f"{o.side} {o.start_m:g}-{o.end_m:g} m"
+
+    lines = [
+        f"{escape(sc.layout.name)}: {g.width_m:g} x {g.height_m:g} m, {g.width} x {g.height} cells "
+        f"(map origin {sc.origin[0]:g}, {sc.origin[1]:g} m)",
+        f"inlets: {escape(', '.join(fmt(o) for o in sc.layout.inlets))}; "
+        f"outlets: {escape(', '.join(fmt(o) for o in sc.layout.outlets))}",
+        f"source ({sc.source[0]:.2f}, {sc.source[1]:.2f}) m"
+        + ("" if sc.start is None else f", start ({sc.start[0]:.2f}, {sc.start[1]:.2f}) m")
+        + " (grid frame)"
+        + ("" if sc.wind is None else f"; wind at z = {sc.height:g} m, inflow {sc.inlet_speed or 0:.3g} m/s"),
+    ]
+    for line in lines:
+        console.print(line)
+    console.print(f"wrote {'case' if solve else 'layout'} [cyan]{path_text(path)}[/]")
+
+
 def register(app: typer.Typer) -> typer.Typer:
     """Attach the commands to ``app``: generate/export/import at top level, ``data stats``.
 
@@ -294,6 +392,7 @@ def register(app: typer.Typer) -> typer.Typer:
     app.command("export")(export_cmd)
     app.command("import")(import_cmd)
     app.command("import-gaden")(import_gaden_cmd)
+    app.command("import-gaden-scenario")(import_gaden_scenario_cmd)
     sub = new_app("data", "Dataset tools.")
     sub.command("stats")(stats_cmd)
     app.add_typer(sub, name="data")

@@ -10,7 +10,7 @@ Commands (``dgse COMMAND --help`` for each):
   DGSE-S model (:mod:`dgse.cli.demo`);
 * ``scenario``: a random multi-room scenario with four sources, solved, with figures;
 * ``engines``: the physics engines and why a missing one is missing;
-* ``generate``, ``export``, ``import``, ``import-gaden``, ``data stats``: datasets
+* ``generate``, ``export``, ``import``, ``import-gaden``, ``import-gaden-scenario``, ``data stats``: datasets
   (:mod:`dgse.cli.data`);
 * ``estimate``, ``evaluate``, ``export-onnx``: estimators on cases (:mod:`dgse.cli.models`);
 * ``plume``: time-varying filament readings of a case as ``frames`` (:mod:`dgse.cli.plume`);
@@ -574,7 +574,7 @@ def engines_cmd() -> None:
 #: lists them, with the commands each adds (``data`` is a group: ``dgse data stats``).
 COMMAND_MODULES: dict[str, tuple[str, ...]] = {
     "dgse.cli.demo": ("demo",),
-    "dgse.cli.data": ("generate", "export", "import", "import-gaden", "data"),
+    "dgse.cli.data": ("generate", "export", "import", "import-gaden", "import-gaden-scenario", "data"),
     "dgse.cli.models": ("estimate", "evaluate", "export-onnx"),
     "dgse.cli.plume": ("plume",),
     "dgse.cli.search": ("search",),

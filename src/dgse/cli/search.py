@@ -201,6 +201,14 @@ def search_cmd(
             "2 m success radius would make a trial trivial).",
         ),
     ] = PROTOCOL.min_start_distance,
+    start: Annotated[
+        tuple[float, float] | None,
+        typer.Option(
+            "--start",
+            metavar="X Y",
+            help="Start every trial here, m (default: a case file's start_m, else drawn).",
+        ),
+    ] = None,
     compute_time: Annotated[
         bool,
         typer.Option(
@@ -350,6 +358,7 @@ def search_cmd(
                 journal=journal,
                 restart=restart,
                 knowledge=level,
+                start_m=start,
             )
         finally:
             bar.stop()

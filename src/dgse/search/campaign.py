@@ -18,6 +18,11 @@ Seeds: trial ``r`` of the case file ``<stem>.npz`` uses
 cells and the sensor noise depend neither on the method, the planner nor the
 other cases: every method meets the same starts.
 
+Fixed starts (:func:`fixed_start`): ``start_m`` (m, the grid frame) or a case
+file's ``meta["start_m"]`` (e.g. from ``dgse import-gaden-scenario``) is the
+start of every trial on that case instead of a drawn one; it must be a free
+cell from which the source can be reached.
+
 For DGSE methods (``dgse-*``) the estimator gets ``model="default"`` (the
 shipped weights) and ``seed=`` unless given (:func:`estimator_options`).
 
@@ -139,6 +144,48 @@ def estimator_options(
     return kw
 
 
+def fixed_start(
+    case: Case, start_m: Sequence[float] | None = None, origin: str = "case", connectivity: int = 8
+) -> tuple[int, int] | None:
+    """The start cell of every trial on ``case``: ``start_m`` (``(x, y)`` m), else the case's
+    ``meta["start_m"]``, else None (each trial draws one).
+
+    Raises:
+        InputDataError: a start that is not two numbers, lies outside the map or in a wall, or
+            from which the source cannot be reached (``origin`` names the case in the message).
+    """
+    from dgse.planning.paths import graph_for
+
+    given = start_m is not None
+    xy = start_m if given else case.meta.get("start_m")
+    if xy is None:
+        return None
+    where = "{start}" if given else f"meta start_m of {origin}"
+    try:
+        x, y = (float(v) for v in xy)
+    except (TypeError, ValueError):
+        raise InputDataError(
+            f"start ({where}) must be two numbers x y in m, got {xy!r}", names={"start": "start_m"}
+        ) from None
+    label = f"start ({x:.2f}, {y:.2f}) m ({where})"
+    try:
+        i, j = case.grid.cell_of(x, y)
+    except InputDataError:
+        raise InputDataError(
+            f"{label} lies outside the map of {origin}", names={"start": "start_m"}
+        ) from None
+    if not case.free[i, j]:
+        raise InputDataError(
+            f"{label} lies in a wall of {origin} (cell ({i}, {j}))", names={"start": "start_m"}
+        )
+    graph = graph_for(case.occupancy, case.resolution, connectivity)
+    if not math.isfinite(graph.distance((i, j), case.source_cell)):
+        raise InputDataError(
+            f"{label}: the source of {origin} cannot be reached from it", names={"start": "start_m"}
+        )
+    return (i, j)
+
+
 def _check_settings(trials: int, time_limit: float, speed: float, dwell: float, min_start: float) -> None:
     """Raise :class:`InputDataError` naming the argument (``{name}``: each front end spells it)."""
     if trials < 1:
@@ -179,6 +226,7 @@ def run_trials(
     journal: str | os.PathLike[str] | None = None,
     restart: bool = False,
     knowledge: str = DEFAULT_LEVEL,
+    start_m: Sequence[float] | None = None,
 ) -> dict[str, Any]:
     """Run ``trials`` search episodes on every case and return the metrics (module docstring).
 
@@ -216,6 +264,8 @@ def run_trials(
         restart: discard an existing journal instead of resuming it.
         knowledge: what the estimator is told about each case besides its readings
             (:mod:`dgse.belief.knowledge`); recorded in ``settings``.
+        start_m: the start ``(x, y)`` in m of every trial on every case (:func:`fixed_start`;
+            recorded in ``settings``); None: a case file's ``meta["start_m"]``, else drawn.
 
     Returns:
         ``{"settings", "aggregate", "per_case"}``, JSON-ready.
@@ -260,6 +310,9 @@ def run_trials(
             "include_compute_time": include_compute_time,
         }
     )
+    if start_m is not None:
+        settings["start_m"] = [float(v) for v in start_m]
+    starts = {path: fixed_start(case, start_m, str(path)) for path, case in pairs}
     identity = {**{k: v for k, v in settings.items() if k != "trials"}, "steps": bool(steps)}
     book = None if journal is None else Journal(journal, "search", identity, restart=restart, unit="episode")
     kept = {} if book is None else {(r.get("case"), r.get("trial")): r for r in book.records}
@@ -293,6 +346,7 @@ def run_trials(
                         case,
                         est,
                         plan,
+                        start=starts[path],
                         rng=trial_seed(seed, path.stem, r),
                         speed=speed,
                         dwell=dwell,

@@ -15,8 +15,9 @@ from __future__ import annotations
 
 import json
 import zipfile
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -39,11 +40,15 @@ def _npz_path(path: str | Path) -> Path:
     return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
 
 
-def save_layout(layout: Layout, path: str | Path) -> Path:
-    """Write ``layout`` as a layout file (``.npz`` appended if missing); returns the path."""
+def save_layout(layout: Layout, path: str | Path, meta: Mapping[str, Any] | None = None) -> Path:
+    """Write ``layout`` as a layout file (``.npz`` appended if missing); returns the path.
+
+    ``meta``: further JSON-able entries of the file's ``meta`` (e.g. a source or a
+    start position); the layout's own keys take precedence.
+    """
     path = _npz_path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    meta = {"kind": "layout", "name": layout.name, **layout.meta()}
+    meta = {**(meta or {}), "kind": "layout", "name": layout.name, **layout.meta()}
     with atomic_open(path, "wb") as fh:
         np.savez_compressed(fh, occupancy=layout.occupancy.astype(np.uint8), meta=np.array(json.dumps(meta)))
     return path
