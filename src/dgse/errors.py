@@ -63,6 +63,8 @@ class UnsupportedError(DGSEError):
 class ConvergenceError(DGSEError):
     """A solver that did not converge within its budget."""
 
-    def __init__(self, message: str, info: dict | None = None, *, names: Mapping[str, str] | None = None) -> None:
+    def __init__(
+        self, message: str, info: dict | None = None, *, names: Mapping[str, str] | None = None
+    ) -> None:
         super().__init__(message, names=names)
         self.info = info or {}
