@@ -128,6 +128,16 @@ def test_resolve_case_keeps_the_scenario(two_rooms_layout, tmp_path):
     assert back.meta == new.meta and np.array_equal(back.concentration, new.concentration)
 
 
+def test_a_source_on_a_cell_edge_keeps_the_cell_it_was_released_in(two_rooms_layout, tmp_path):
+    """x = 0.9 m, y = 1.3 m are cell edges (float64 0.9 / 0.1 = 9, float32 0.9 / 0.1 < 9): the
+    saved case's source cell is the solver's release cell, the peak of the steady field."""
+    case = solve_cases(two_rooms_layout, 1.0, [((0.9, 1.3), 0.5)])[0]
+    back = Case.load(case.save(tmp_path / "edge.npz"))
+    assert back.source.dtype == np.float32 and case.source_cell == back.source_cell == (13, 9)
+    peak = np.unravel_index(np.argmax(back.concentration), back.concentration.shape)
+    assert tuple(int(v) for v in peak) == back.source_cell
+
+
 def test_non_convergence_is_reported(two_rooms_layout):
     engine = BuiltinEngine(settings=FlowSettings(max_iterations=3))
     with pytest.raises(ConvergenceError, match="did not converge in 3 iterations"):

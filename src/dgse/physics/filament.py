@@ -103,7 +103,7 @@ from dgse.files import json_safe
 from dgse.physics.constants import DEFAULT_PHYSICS, RECOMMENDED_MAX_FILAMENTS, Physics
 from dgse.world.case import Case
 from dgse.world.generate import RngLike, as_generator
-from dgse.world.grid import DEFAULT_RESOLUTION
+from dgse.world.grid import DEFAULT_RESOLUTION, cell_index
 
 if TYPE_CHECKING:
     from dgse.physics.rans import FlowSettings
@@ -934,7 +934,7 @@ def _check_inputs(
     src = np.asarray(source_xy, dtype=np.float64).reshape(-1)
     if src.shape != (2,) or not np.isfinite(src).all():
         raise InputDataError(f"source must be a finite (x, y) in m, got {source_xy!r}")
-    i, j = math.floor(src[1] / resolution), math.floor(src[0] / resolution)
+    i, j = cell_index(src[1], resolution), cell_index(src[0], resolution)
     if not (0 <= i < H and 0 <= j < W):
         raise InputDataError(f"source ({src[0]:.3f}, {src[1]:.3f}) m lies outside the map")
     if occ[i, j]:
