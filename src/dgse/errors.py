@@ -68,3 +68,8 @@ class ConvergenceError(DGSEError):
     ) -> None:
         super().__init__(message, names=names)
         self.info = info or {}
+
+
+class MassBalanceError(DGSEError):
+    """A solver's gas field that breaks the conservation of the released gas (spec section 4:
+    the scalar flux out of the outlets equals the release rate at steady state)."""

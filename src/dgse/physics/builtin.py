@@ -14,10 +14,10 @@ import numpy as np
 
 from dgse.errors import ConvergenceError, InputDataError
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
-from dgse.physics.engines import FlowField, Solution, Source
+from dgse.physics.engines import FlowField, Solution, Source, check_mass_balance
 from dgse.physics.fv import Mesh, build_mesh
 from dgse.physics.rans import FlowSettings, FlowState, face_fluxes, scale_state, solve_flow
-from dgse.physics.transport import TransportSolver
+from dgse.physics.transport import TransportSolver, check_release_cells
 from dgse.world.layout import Layout
 
 
@@ -104,6 +104,7 @@ class BuiltinEngine:
                 raise InputDataError(f"source at ({x:g}, {y:g}) m lies in a solid cell")
             if not s.release_rate > 0:
                 raise InputDataError(f"release rate must be positive, got {s.release_rate}")
+        check_release_cells(build_mesh(layout), cells)
         t0 = time.perf_counter()
         flow, ts = flow_and_transport(layout, inlet_velocity, self.physics, self.settings)
         t_flow = time.perf_counter() - t0
@@ -130,7 +131,7 @@ class BuiltinEngine:
                 "layout_total": time.perf_counter() - t0,
             },
         }
-        return Solution(flow, list(sources), ppm, ratios, info)
+        return check_mass_balance(Solution(flow, list(sources), ppm, ratios, info))
 
 
 def require_converged(

@@ -104,6 +104,45 @@ def build_mesh(layout: Layout) -> Mesh:
     return Mesh(layout.resolution, free, index, np.stack([ii, jj], axis=1), nb, ft)
 
 
+def parts(mesh: Mesh) -> tuple[np.ndarray, int]:
+    """The 4-connected parts of the free cells: ``(labels (n,), count)``, labels ``0 .. count-1``."""
+    from scipy.sparse.csgraph import connected_components  # imported here: few meshes need it
+
+    c, d = np.nonzero(mesh.nb >= 0)
+    adjacency = sp.csr_matrix((np.ones(c.size), (c, mesh.nb[c, d])), shape=(mesh.n, mesh.n))
+    count, labels = connected_components(adjacency, directed=False)
+    return labels, int(count)
+
+
+def unreached(mesh: Mesh, face_type: int) -> np.ndarray:
+    """``bool (n,)``: the free cells whose part (:func:`parts`) has no face of ``face_type``.
+
+    A Dirichlet condition on the faces of ``face_type`` (the outlet pressure, the inlet
+    concentration) does not reach these cells: the equation of such a part (a closed room, a
+    free cell walled in on all sides) is singular, its solution fixed only up to a constant.
+    """
+    has = (mesh.ft == face_type).any(axis=1)
+    if mesh.n == 0:
+        return has
+    labels, count = parts(mesh)
+    reached = np.zeros(count, dtype=bool)
+    reached[labels[has]] = True
+    return ~reached[labels]
+
+
+def anchors(mesh: Mesh, face_type: int) -> np.ndarray:
+    """``bool (n,)``: one cell (the lowest-numbered) of each part of the free cells that has no face
+    of ``face_type`` (:func:`unreached`), where a solver fixes its unknown to make the part regular."""
+    loose = unreached(mesh, face_type)
+    out = np.zeros(mesh.n, dtype=bool)
+    if loose.any():
+        labels, _ = parts(mesh)
+        cells = np.flatnonzero(loose)
+        _, first = np.unique(labels[cells], return_index=True)
+        out[cells[first]] = True
+    return out
+
+
 class StencilMatrix:
     """CSR matrices ``aP phi_P - sum a phi_nb`` on a fixed pattern built once per mesh."""
 

@@ -54,7 +54,7 @@ import numpy as np
 
 from dgse.errors import ConvergenceError, DGSEError, InputDataError, UnsupportedError
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
-from dgse.physics.engines import FlowField, Solution, Source
+from dgse.physics.engines import FlowField, Solution, Source, check_mass_balance
 from dgse.world.layout import INWARD_NORMAL, Layout, Opening
 
 __all__ = [
@@ -1215,6 +1215,8 @@ class OpenFOAMEngine:
             "n_procs": self.n_procs,
             "seconds": seconds,
         }
-        return Solution(
-            flow=flow, sources=sources, concentrations=concentrations, outlet_flux_ratio=ratios, info=info
+        return check_mass_balance(
+            Solution(
+                flow=flow, sources=sources, concentrations=concentrations, outlet_flux_ratio=ratios, info=info
+            )
         )

@@ -41,6 +41,7 @@ from dgse.physics.fv import (
     WALL,
     Mesh,
     StencilMatrix,
+    anchors,
     assemble,
     bound,
     boundary_gamma,
@@ -54,6 +55,7 @@ from dgse.physics.fv import (
     residual_norm,
     row_dot,
     row_sum,
+    unreached,
 )
 from dgse.world.layout import Layout
 
@@ -750,6 +752,13 @@ def solve_flow(
     coarse start, ``coarse``: the coarse solve's info (without its history).
     """
     s = settings or FlowSettings()
+    dead_end = unreached(mesh, OUTLET) & (mesh.ft == INLET).any(axis=1)
+    if dead_end.any():
+        i, j = (int(v) for v in mesh.cells[np.flatnonzero(dead_end)[0]])
+        raise InputDataError(
+            f"layout {layout.name!r}: an inlet opens into a free region that no outlet reaches "
+            f"(at cell ({i}, {j})): its air has nowhere to go"
+        )
     t0 = time.perf_counter()
     start = "rest" if initial is None else "initial"
     coarse_info = None
@@ -803,6 +812,18 @@ def _coarse_start(
     if not (settled and np.isfinite(cst.ux).all()):
         return None, coarse_info
     return prolong_state(cmesh, cst, mesh, inlet_velocity), coarse_info
+
+
+def _pinned(
+    lapP: np.ndarray, lapA: np.ndarray, pin: np.ndarray, nb: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The pressure Laplacian ``(lapP, lapA)`` with the unknowns of ``pin`` held at 0: their rows
+    and columns out (the matrix stays symmetric), a positive diagonal on their rows."""
+    lapA = lapA.copy()
+    lapA[pin] = 0.0
+    lapA[(nb >= 0) & pin[np.maximum(nb, 0)]] = 0.0
+    diag = np.where(pin & (lapP <= 0.0), 1.0, lapP)
+    return diag, lapA
 
 
 def _converged(residuals: dict[str, float], s: FlowSettings) -> bool:
@@ -884,6 +905,11 @@ def _simplec(
     zero4 = np.zeros((n, 4))
     stencil = StencilMatrix(mesh)
     psolver = PressureSolver(s.max_krylov, s.pressure_solver, s.lu_cells)
+    # a part of the free cells without an outlet (a closed room, a walled-in cell) has no
+    # pressure level: its pressure equation is singular.  One cell of each such part is held at
+    # p = 0 in the matrix solved; the part's equation is consistent (no net flux leaves it), so
+    # this picks one of its solutions, and the fluxes come from the full equation
+    p_pin = anchors(mesh, OUTLET)
 
     if initial is None:
         st = FlowState(
@@ -967,7 +993,11 @@ def _simplec(
             hbyay = hbyay - (rAU - rAtU) * gp[:, 1]
         p_rhs = -row_sum(phb)
         residuals["p"] = residual_norm(lapP, lapA, p_rhs, nb, st.p)
-        p_new = psolver.solve(stencil.assemble(lapP, lapA), p_rhs, st.p, s.p_rel_tol)
+        if p_pin.any():
+            P = stencil.assemble(*_pinned(lapP, lapA, p_pin, nb))
+            p_new = psolver.solve(P, np.where(p_pin, 0.0, p_rhs), np.where(p_pin, 0.0, st.p), s.p_rel_tol)
+        else:
+            p_new = psolver.solve(stencil.assemble(lapP, lapA), p_rhs, st.p, s.p_rel_tol)
         st.F = corrected_flux(phb, lapA, rAtU, p_new, nb, ft)
         st.p = s.alpha_p * p_new + (1.0 - s.alpha_p) * st.p
         gp = gradient(st.p, zero4, outlet, nb, ft, h, False)
