@@ -105,13 +105,12 @@ def build_mesh(layout: Layout) -> Mesh:
 
 
 def parts(mesh: Mesh) -> tuple[np.ndarray, int]:
-    """The 4-connected parts of the free cells: ``(labels (n,), count)``, labels ``0 .. count-1``."""
-    from scipy.sparse.csgraph import connected_components  # imported here: few meshes need it
+    """The 4-connected parts of the free cells (:func:`~dgse.world.generate.free_components`):
+    ``(labels (n,), count)``, labels ``0 .. count-1``."""
+    from dgse.world.generate import free_components  # imported here: few meshes need it
 
-    c, d = np.nonzero(mesh.nb >= 0)
-    adjacency = sp.csr_matrix((np.ones(c.size), (c, mesh.nb[c, d])), shape=(mesh.n, mesh.n))
-    count, labels = connected_components(adjacency, directed=False)
-    return labels, int(count)
+    grid_labels, count = free_components((~mesh.free).astype(np.uint8))
+    return grid_labels[mesh.cells[:, 0], mesh.cells[:, 1]] - 1, count
 
 
 def unreached(mesh: Mesh, face_type: int) -> np.ndarray:

@@ -55,8 +55,8 @@ from dgse.physics.fv import (
     residual_norm,
     row_dot,
     row_sum,
-    unreached,
 )
+from dgse.world.generate import ventilated_cells
 from dgse.world.layout import Layout
 
 _jit = numba.njit(cache=True, nogil=True)
@@ -752,13 +752,7 @@ def solve_flow(
     coarse start, ``coarse``: the coarse solve's info (without its history).
     """
     s = settings or FlowSettings()
-    dead_end = unreached(mesh, OUTLET) & (mesh.ft == INLET).any(axis=1)
-    if dead_end.any():
-        i, j = (int(v) for v in mesh.cells[np.flatnonzero(dead_end)[0]])
-        raise InputDataError(
-            f"layout {layout.name!r}: an inlet opens into a free region that no outlet reaches "
-            f"(at cell ({i}, {j})): its air has nowhere to go"
-        )
+    ventilated_cells(layout)  # raises on an inlet whose air cannot leave
     t0 = time.perf_counter()
     start = "rest" if initial is None else "initial"
     coarse_info = None
