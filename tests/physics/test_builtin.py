@@ -271,3 +271,13 @@ def test_solve_writes_no_case_whose_gas_fails_its_mass_balance(monkeypatch, caps
     line = err.strip()
     assert line.startswith("error: ") and "\n" not in line and "fails its mass balance" in line
     assert "outlet flux / release rate = 99" in line  # 1e3 times the true ratio, 0.99...
+
+
+def test_a_singular_transport_operator_is_a_convergence_error():
+    """No flux and no diffusion: the operator is 0 and SuperLU cannot factorize it."""
+    from dgse.physics.constants import DEFAULT_PHYSICS
+
+    mesh = build_mesh(two_rooms())
+    ts = TransportSolver(mesh, np.zeros((mesh.n, 4)), np.zeros(mesh.n), DEFAULT_PHYSICS, "upwind")
+    with pytest.raises(ConvergenceError, match="cannot be factorized"):
+        ts.solve_cells([(5, 5)], [1.0])

@@ -30,7 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from dgse.errors import InputDataError
+from dgse.errors import ConvergenceError, InputDataError
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
 from dgse.physics.fv import (
     AXIS,
@@ -331,7 +331,11 @@ class PressureSolver:
             if self._M is None or rebuild:
                 # symmetric positive definite: minimum degree on A^T + A, no pivoting
                 opts = {"SymmetricMode": True}
-                lu = spla.splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options=opts)
+                try:
+                    lu = spla.splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options=opts)
+                except RuntimeError as e:  # SuperLU's "Factor is exactly singular"
+                    # (not from a closed region: those are held, see _pinned)
+                    raise ConvergenceError(f"the pressure equation cannot be factorized ({e})") from None
                 self._M = lu.solve
                 self.factorizations += 1
             return self._M

@@ -231,6 +231,11 @@ class TransportSolver:
             if change < self.tolerance:
                 break
         self.info = {"outer_iterations": it, "converged": change < self.tolerance, "last_change": change}
+        if not np.isfinite(X).all():
+            raise ConvergenceError(
+                f"the gas transport's deferred correction diverged in {it} iterations (non-finite values)",
+                self.info,
+            )
         return X
 
     def outflow(self, conc: np.ndarray) -> tuple[float, float]:
