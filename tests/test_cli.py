@@ -212,7 +212,7 @@ def test_import_floorplan_of_a_generated_office_floor(capsys, tmp_path):
     assert code == 0, err
     lay = load_layout(tmp_path / "f.npz")
     assert np.array_equal(lay.occupancy, floor.occupancy) and lay.name == "office-3"
-    assert (lay.inlets, lay.outlets) == ((i,), (o,))  # the CLI takes one inlet and one outlet
+    assert (lay.inlets, lay.outlets) == ((i,), (o,))
 
 
 def test_solve_layout_writes_a_valid_case(solved, capsys):
@@ -319,6 +319,21 @@ def test_import_floorplan(capsys, tmp_path):
         tmp_path / "x.npz",
     )
     _assert_user_error(code, out, err, "unknown boundary side 'up'")
+
+
+def test_import_floorplan_keeps_every_inlet_and_outlet(capsys, tmp_path):
+    """Repeated --inlet/--outlet options each become an opening, in the order given."""
+    img = np.full((30, 40), 255, np.uint8)  # 4 x 3 m at 0.1 m per pixel, no inner wall
+    Image.fromarray(img).save(tmp_path / "plan.png")
+    args = ["--inlet", "west", "0.5", "1.5", "--inlet", "south", "0.3", "1.2"]
+    args += ["--outlet", "east", "1.5", "2.5", "--outlet", "north", "2.5", "3.5"]
+    args += ["--outlet", "east", "0.2", "0.9", "-o", tmp_path / "plan.npz"]
+    code, out, err = _run(capsys, "import-floorplan", tmp_path / "plan.png", *args)
+    assert code == 0, err
+    lay = load_layout(tmp_path / "plan.npz")
+    assert lay.inlets == (Opening("west", 0.5, 1.5), Opening("south", 0.3, 1.2))
+    assert lay.outlets == (Opening("east", 1.5, 2.5), Opening("north", 2.5, 3.5), Opening("east", 0.2, 0.9))
+    assert "inlets west 0.5-1.5 m, south 0.3-1.2 m;" in " ".join(out.split())
 
 
 # -- errors: exit 2, one line, no traceback (no solver run) ------------------------------

@@ -63,6 +63,13 @@ class UnsupportedError(DGSEError):
 class ConvergenceError(DGSEError):
     """A solver that did not converge within its budget."""
 
-    def __init__(self, message: str, info: dict | None = None) -> None:
-        super().__init__(message)
+    def __init__(
+        self, message: str, info: dict | None = None, *, names: Mapping[str, str] | None = None
+    ) -> None:
+        super().__init__(message, names=names)
         self.info = info or {}
+
+
+class MassBalanceError(DGSEError):
+    """A solver's gas field that breaks the conservation of the released gas (spec section 4:
+    the scalar flux out of the outlets equals the release rate at steady state)."""

@@ -128,6 +128,16 @@ def test_resolve_case_keeps_the_scenario(two_rooms_layout, tmp_path):
     assert back.meta == new.meta and np.array_equal(back.concentration, new.concentration)
 
 
+def test_a_source_on_a_cell_edge_keeps_the_cell_it_was_released_in(two_rooms_layout, tmp_path):
+    """x = 0.9 m, y = 1.3 m are cell edges (float64 0.9 / 0.1 = 9, float32 0.9 / 0.1 < 9): the
+    saved case's source cell is the solver's release cell, the peak of the steady field."""
+    case = solve_cases(two_rooms_layout, 1.0, [((0.9, 1.3), 0.5)])[0]
+    back = Case.load(case.save(tmp_path / "edge.npz"))
+    assert back.source.dtype == np.float32 and case.source_cell == back.source_cell == (13, 9)
+    peak = np.unravel_index(np.argmax(back.concentration), back.concentration.shape)
+    assert tuple(int(v) for v in peak) == back.source_cell
+
+
 def test_non_convergence_is_reported(two_rooms_layout):
     engine = BuiltinEngine(settings=FlowSettings(max_iterations=3))
     with pytest.raises(ConvergenceError, match="did not converge in 3 iterations"):
@@ -175,3 +185,99 @@ def test_mesh_classifies_openings(two_rooms_layout):
     # 31 x faces a row: 2 on the domain edge, 2 against the wall (none in the 4 door rows);
     # every internal face is seen from both of its cells
     assert (mesh.ft[:, :2] == INTERNAL).sum() == 2 * (20 * 27 + 4 * 2)
+
+
+# -- closed regions and the mass balance -------------------------------------------------------
+def _rooms_with_pockets() -> Layout:
+    """``two_rooms`` with a closed room (5 x 5 free cells walled in) and one walled-in free cell."""
+    occ = two_rooms().occupancy.copy()
+    occ[12:19, 3:10] = 1
+    occ[13:18, 4:9] = 0
+    occ[2:5, 21:24] = 1
+    occ[3, 22] = 0
+    return Layout(occ, (Opening("west", 0.2, 1.0),), (Opening("east", 0.2, 1.0),), name="pockets")
+
+
+def test_closed_regions_leave_the_flow_and_the_gas_regular():
+    """Free cells no opening reaches made the pressure and transport operators singular
+    ("Factor is exactly singular"): now they stay at rest and gas-free, and the open part is
+    solved as before, divergence-free and conserving the released gas."""
+    layout = _rooms_with_pockets()
+    mesh = build_mesh(layout)
+    closed = np.zeros(layout.occupancy.shape, bool)
+    closed[13:18, 4:9] = closed[3, 22] = True
+    flow, ts = flow_and_transport(layout, 1.0)
+    assert flow.info["converged"]
+    assert np.abs(flow.wind[:, closed]).max() < 1e-9
+    open_cells = ~closed[mesh.cells[:, 0], mesh.cells[:, 1]]
+    inflow = -ts.F[mesh.ft == INLET].sum()
+    assert inflow == pytest.approx(0.8)  # v_in * inlet width
+    net = ts.F.sum(axis=1)  # volume flux out of each cell
+    assert np.abs(net[open_cells]).max() < 1e-4 * inflow  # as on a map without closed regions
+    assert np.abs(ts.F[~open_cells]).max() < 1e-12
+    sol = BuiltinEngine().solve(layout, 1.0, [Source((2.05, 0.55), 0.5)])
+    assert sol.outlet_flux_ratio[0] == pytest.approx(1.0, abs=0.01)
+    assert np.abs(sol.concentrations[0][closed]).max() == 0.0
+    assert np.isfinite(sol.concentrations[0]).all()
+    with pytest.raises(InputDataError, match="closed region that no inlet reaches"):
+        BuiltinEngine().solve(layout, 1.0, [Source((0.65, 1.55), 0.5)])
+
+
+def test_an_inlet_into_a_region_without_outlet_is_refused():
+    occ = two_rooms().occupancy.copy()
+    occ[:, 15] = 1  # no door: the west room has the inlet, the east one the outlet
+    layout = Layout(occ, (Opening("west", 0.2, 1.0),), (Opening("east", 0.2, 1.0),), name="split")
+    with pytest.raises(InputDataError, match="no outlet reaches"):
+        BuiltinEngine().solve(layout, 1.0, [Source((0.55, 0.55), 0.5)])
+
+
+def _solution(ratio: float, conc: np.ndarray):
+    from dgse.physics.engines import FlowField, Solution
+
+    z = np.zeros_like(conc)
+    flow = FlowField(np.zeros((2, *conc.shape)), z, z, z, z)
+    return Solution(flow, [Source((0.55, 0.55), 0.5)], [conc], [ratio], {"engine": "test"})
+
+
+def test_a_field_failing_its_mass_balance_is_an_error():
+    from dgse.errors import MassBalanceError
+    from dgse.physics.engines import MASS_BALANCE_TOLERANCE, check_mass_balance
+
+    ok = np.ones((4, 4))
+    good = _solution(1.0 + 0.5 * MASS_BALANCE_TOLERANCE, ok)
+    assert check_mass_balance(good) is good
+    for ratio in (2.1e243, 1.0 + 2 * MASS_BALANCE_TOLERANCE, 1.0 - 2 * MASS_BALANCE_TOLERANCE, float("nan")):
+        with pytest.raises(MassBalanceError, match="fails its mass balance") as e:
+            check_mass_balance(_solution(ratio, ok))
+        assert f"{ratio:.4g}" in str(e.value) and "source 0 at (0.55, 0.55) m" in str(e.value)
+    with pytest.raises(MassBalanceError, match="non-finite"):
+        check_mass_balance(_solution(1.0, np.full((4, 4), np.inf)))
+
+
+def test_solve_writes_no_case_whose_gas_fails_its_mass_balance(monkeypatch, capsys, tmp_path):
+    """A transport solve that returns a wrong field (here 1e3 times too much gas) is a one-line
+    error of ``dgse solve``, exit status 2, and no case file."""
+    from dgse.cli.main import main
+    from dgse.world.layout_io import save_layout
+
+    solve_cells = TransportSolver.solve_cells
+    monkeypatch.setattr(TransportSolver, "solve_cells", lambda self, *a: 1e3 * solve_cells(self, *a))
+    lay = save_layout(two_rooms(), tmp_path / "rooms.npz")
+    out = tmp_path / "case.npz"
+    args = ["solve", str(lay), "-o", str(out), "-v", "1.0", "--source", "0.55", "0.55", "-q", "0.5"]
+    code = main(args)
+    _, err = capsys.readouterr()
+    assert code == 2 and not out.exists()
+    line = err.strip()
+    assert line.startswith("error: ") and "\n" not in line and "fails its mass balance" in line
+    assert "outlet flux / release rate = 99" in line  # 1e3 times the true ratio, 0.99...
+
+
+def test_a_singular_transport_operator_is_a_convergence_error():
+    """No flux and no diffusion: the operator is 0 and SuperLU cannot factorize it."""
+    from dgse.physics.constants import DEFAULT_PHYSICS
+
+    mesh = build_mesh(two_rooms())
+    ts = TransportSolver(mesh, np.zeros((mesh.n, 4)), np.zeros(mesh.n), DEFAULT_PHYSICS, "upwind")
+    with pytest.raises(ConvergenceError, match="cannot be factorized"):
+        ts.solve_cells([(5, 5)], [1.0])

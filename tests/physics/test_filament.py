@@ -358,3 +358,39 @@ def test_cli_writes_a_loadable_case_with_frames(tmp_path):
     assert bad.exit_code == 2 and "error:" in bad.output
     bad = CliRunner().invoke(app, [*args, "--dt", "0", "--noise", "constant"])
     assert bad.exit_code == 2 and "dt" in bad.output
+
+
+def test_an_unconverged_flow_is_refused_not_used():
+    """nu_t of a flow that missed its tolerance, or a case whose flow did not converge, is an error."""
+    from dgse.errors import ConvergenceError
+    from dgse.physics.rans import FlowSettings
+
+    occ, wind, _ = _channel(10, 20)
+    layout = Layout(occ, (Opening("west", 0.0, 1.0),), (Opening("east", 0.0, 1.0),), name="channel")
+    meta = {**layout.meta(), "name": "channel", "inlet_velocity": 0.5, "release_rate_gps": 0.2}
+    case = Case(occ, wind, np.zeros(occ.shape), np.array([0.55, 0.55]), RES, meta)
+    settings = FilamentSettings(warmup=0.0, duration=0.5, frame_dt=0.5)
+    capped = FlowSettings(max_iterations=2, retry_relaxation=None, coarse_retry=False)
+    with pytest.raises(ConvergenceError, match="did not converge in 2 iterations") as e:
+        make_filament_case(case, settings, flow_settings=capped)
+    assert 'noise="constant"' in str(e.value) and e.value.info["converged"] is False
+    out = make_filament_case(case, settings)  # the same case, its flow solved to convergence
+    assert out.meta["filament"]["nut_source"] == "builtin flow (converged)"
+    with pytest.raises(ConvergenceError, match="flow_converged false"):
+        make_filament_case(case.with_meta(flow_converged=False), settings.with_(noise="constant"))
+
+
+def test_cli_refuses_a_case_whose_flow_did_not_converge(tmp_path):
+    app = new_app("dgse", "test")
+
+    @app.callback()
+    def _root() -> None:
+        """Test app."""
+
+    register(app)
+    src, out = tmp_path / "in.npz", tmp_path / "out.npz"
+    _channel_case(src).with_meta(flow_converged=False).save(src)
+    result = CliRunner().invoke(app, ["plume", str(src), "-o", str(out), "--noise", "constant"])
+    assert result.exit_code == 2 and not out.exists()
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and "did not converge" in errors[0] and "Traceback" not in result.output

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dgse.errors import ConvergenceError, UnsupportedError
+from dgse.errors import ConvergenceError, InputDataError, UnsupportedError
 from dgse.physics import engines
 from dgse.physics import openfoam as of
 from dgse.physics.constants import Physics
@@ -151,6 +151,26 @@ def test_several_openings_and_obstacle():
     for ratio, gi in zip(sol.outlet_flux_ratio, sol.info["gas"], strict=True):
         assert ratio == pytest.approx(1.0, abs=0.02)
         assert gi["total_out_ratio"] == pytest.approx(1.0, abs=1e-4)
+
+
+@needs_openfoam
+def test_a_closed_room_is_left_at_rest_and_gas_free():
+    """Free cells that no opening reaches (a closed room, a walled-in cell) stay out of the
+    OpenFOAM mesh: wind and gas are 0 there, and the open part balances its gas."""
+    occ = _two_rooms().occupancy.copy()
+    occ[12:19, 3:10] = 1
+    occ[13:18, 4:9] = 0
+    occ[2:5, 21:24] = 1
+    occ[3, 22] = 0
+    layout = Layout(occ, (Opening("west", 0.2, 1.0),), (Opening("east", 0.2, 1.0),), name="pockets")
+    closed = np.zeros(occ.shape, bool)
+    closed[13:18, 4:9] = closed[3, 22] = True
+    sol = of.OpenFOAMEngine().solve(layout, 1.0, [Source((2.05, 0.55), 0.5)])
+    assert sol.flow.info["converged"]
+    assert np.all(sol.flow.wind[:, closed] == 0) and np.all(sol.concentrations[0][closed] == 0)
+    assert sol.outlet_flux_ratio[0] == pytest.approx(1.0, abs=0.02)
+    with pytest.raises(InputDataError, match="closed region"):
+        of.OpenFOAMEngine().solve(layout, 1.0, [Source((0.65, 1.55), 0.5)])
 
 
 @needs_openfoam

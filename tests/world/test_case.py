@@ -117,3 +117,26 @@ def test_grid_geometry():
     assert emb.shape == (4, 4) and emb[0, 0] == 0 and emb[3, 3] == -1
     assert np.array_equal(g2.crop(emb), field)
     assert g2.valid_mask((4, 4)).sum() == 6
+
+
+@pytest.mark.parametrize("resolution", [0.1, 0.05, 0.25])
+def test_a_point_on_a_cell_edge_is_in_the_same_cell_as_float32_and_float64(resolution):
+    """Edge ``k * resolution`` belongs to cell ``k`` whichever precision holds the position."""
+    g = Grid((400, 400), resolution)
+    for k in range(1, 400):
+        edge = k * resolution
+        for x in (edge, float(np.float32(edge)), float(np.float64(np.float32(edge)))):
+            assert g.cell_of(x, 0.5 * resolution) == (0, k), (k, x)
+    # off an edge: the cell that holds the point
+    assert g.cell_of(0.3 * resolution, 2.7 * resolution) == (2, 0)
+    assert g.cell_of(3 * resolution * (1 - 1e-2), 0.0) == (0, 2)
+
+
+def test_a_source_on_a_cell_edge_keeps_its_cell_after_save_and_load(tmp_path):
+    """A source at x = 0.3 m, the edge of a free cell (3) and a wall (2), is valid and stays in cell 3."""
+    occ = np.zeros((10, 10), np.uint8)
+    occ[:, 2] = 1
+    z = np.zeros((10, 10), np.float32)
+    case = Case(occ, np.zeros((2, 10, 10)), z, np.array([0.3, 0.9]), 0.1, {"name": "edge"})
+    back = Case.load(case.save(tmp_path / "edge.npz"))
+    assert case.source_cell == back.source_cell == Grid((10, 10), 0.1).cell_of(0.3, 0.9) == (9, 3)

@@ -48,14 +48,21 @@ from dgse.files import write_text
 try:  # the copy of click that recent typer releases carry
     from typer._click import exceptions as _click_exceptions
     from typer._click import globals as _click_globals
+    from typer._click import types as _click_types
 except ImportError:  # older typer runs on the click package
     from click import exceptions as _click_exceptions  # type: ignore[no-redef]
     from click import globals as _click_globals  # type: ignore[no-redef]
+    from click import types as _click_types  # type: ignore[no-redef]
 
 #: click's errors of a command line that does not parse, and of the help a bare group shows.
 UsageError = _click_exceptions.UsageError
 ClickException = _click_exceptions.ClickException
 NoArgsIsHelpError: type[Exception] | None = getattr(_click_exceptions, "NoArgsIsHelpError", None)
+
+#: The value type of a repeatable option of three words ``SIDE START END`` (an opening):
+#: typer cannot declare a list of tuples, so such an option is ``list[tuple]`` with this
+#: ``click_type`` and each use of it gives one ``(str, float, float)``.
+OPENING_ARGS = _click_types.Tuple([str, float, float])
 
 #: Exit status of every user-caused error.
 EXIT_USER_ERROR = 2

@@ -48,6 +48,7 @@ from dgse.cli.common import (
     EXIT_INTERRUPTED,
     EXIT_USER_ERROR,
     NOTHING_KEPT,
+    OPENING_ARGS,
     ClickException,
     NoArgsIsHelpError,
     UsageError,
@@ -268,17 +269,24 @@ def import_floorplan_cmd(
         typer.Argument(metavar="MAP", help="ROS map_server YAML (with its PGM/PNG) or a floor plan image."),
     ],
     inlet: Annotated[
-        tuple[str, float, float],
+        list[tuple],
         typer.Option(
             "--inlet",
+            click_type=OPENING_ARGS,
             metavar="SIDE START END",
             help="Inlet on side west/east/south/north from START to END m along it "
-            "(x for south/north, y for west/east; m from the map's lower-left corner).",
+            "(x for south/north, y for west/east; m from the map's lower-left corner); "
+            "repeat for several inlets.",
         ),
     ],
     outlet: Annotated[
-        tuple[str, float, float],
-        typer.Option("--outlet", metavar="SIDE START END", help="Outlet, as --inlet."),
+        list[tuple],
+        typer.Option(
+            "--outlet",
+            click_type=OPENING_ARGS,
+            metavar="SIDE START END",
+            help="Outlet, as --inlet; repeat for several.",
+        ),
     ],
     out: Annotated[Path, typer.Option("--out", "-o", help="Layout file to write.")],
     resolution: Annotated[
@@ -319,7 +327,7 @@ def import_floorplan_cmd(
         fp = load_png_map(floorplan, resolution, pixel_size=pixel_size, width_m=width_m)
         where = ""
     layout = layout_from_floorplan(
-        fp, None, [inlet], [outlet], name=name or floorplan.stem, carve_depth_m=carve_depth_m
+        fp, None, inlet, outlet, name=name or floorplan.stem, carve_depth_m=carve_depth_m
     )
     g = fp.grid
     console.print(

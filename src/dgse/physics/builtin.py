@@ -7,17 +7,17 @@ field (one solve per sensor), use :func:`flow_and_transport`.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from dgse.errors import ConvergenceError, InputDataError
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
-from dgse.physics.engines import FlowField, Solution, Source
+from dgse.physics.engines import FlowField, Solution, Source, check_mass_balance
 from dgse.physics.fv import Mesh, build_mesh
 from dgse.physics.rans import FlowSettings, FlowState, face_fluxes, scale_state, solve_flow
-from dgse.physics.transport import TransportSolver
+from dgse.physics.transport import TransportSolver, check_release_cells
 from dgse.world.layout import Layout
 
 
@@ -104,22 +104,12 @@ class BuiltinEngine:
                 raise InputDataError(f"source at ({x:g}, {y:g}) m lies in a solid cell")
             if not s.release_rate > 0:
                 raise InputDataError(f"release rate must be positive, got {s.release_rate}")
+        check_release_cells(build_mesh(layout), cells)
         t0 = time.perf_counter()
         flow, ts = flow_and_transport(layout, inlet_velocity, self.physics, self.settings)
         t_flow = time.perf_counter() - t0
-        if not flow.info["converged"] and not self.allow_unconverged:
-            why = (
-                "diverged"
-                if flow.info["diverged"]
-                else "stalled (residuals stopped falling)"
-                if flow.info["stalled"]
-                else "hit its iteration or time limit"
-            )
-            raise ConvergenceError(
-                f"flow did not converge in {flow.info['iterations']} iterations: {why} "
-                f"(residuals {_fmt(flow.info['residuals'])})",
-                flow.info,
-            )
+        if not self.allow_unconverged:
+            require_converged(flow.info)
         t1 = time.perf_counter()
         conc = ts.solve_cells(cells, [s.release_rate for s in sources]) if sources else []
         ratios = []
@@ -141,8 +131,37 @@ class BuiltinEngine:
                 "layout_total": time.perf_counter() - t0,
             },
         }
-        return Solution(flow, list(sources), ppm, ratios, info)
+        return check_mass_balance(Solution(flow, list(sources), ppm, ratios, info))
 
 
-def _fmt(res: dict) -> str:
+def require_converged(
+    info: Mapping, what: str = "flow", advice: str = "", names: Mapping[str, str] | None = None
+) -> None:
+    """Raise :class:`ConvergenceError` saying why unless the :func:`~dgse.physics.rans.solve_flow`
+    ``info`` of a flow says it converged.
+
+    Args:
+        info: the flow's ``info`` (``converged``, ``diverged``, ``stalled``, ``iterations``,
+            ``residuals``).
+        what: what did not converge, the message's subject.
+        advice: appended to the message (what to do instead), if given.
+        names: the arguments ``advice`` names as ``{name}`` (:class:`~dgse.errors.DGSEError`).
+    """
+    if info.get("converged"):
+        return
+    why = (
+        "diverged"
+        if info.get("diverged")
+        else "stalled (residuals stopped falling)"
+        if info.get("stalled")
+        else "hit its iteration or time limit"
+    )
+    message = (
+        f"{what} did not converge in {info.get('iterations', '?')} iterations: {why} "
+        f"(residuals {_fmt(info.get('residuals') or {})})"
+    )
+    raise ConvergenceError(f"{message}; {advice}" if advice else message, dict(info), names=names)
+
+
+def _fmt(res: Mapping) -> str:
     return ", ".join(f"{k} {v:.1e}" for k, v in res.items())

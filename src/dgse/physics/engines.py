@@ -9,13 +9,14 @@ there; an optional one (``openfoam``) says why it cannot run here
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
 
-from dgse.errors import UnsupportedError
+from dgse.errors import MassBalanceError, UnsupportedError
 from dgse.registry import Entry, Registry
 from dgse.world.layout import Layout
 
@@ -67,6 +68,39 @@ class Solution:
     concentrations: list[np.ndarray]
     outlet_flux_ratio: list[float]
     info: dict = field(default_factory=dict)
+
+
+#: The largest ``|outlet flux / release rate - 1|`` of a gas field an engine returns
+#: (:func:`check_mass_balance`; its value: ``docs/decisions.md``).
+MASS_BALANCE_TOLERANCE = 0.05
+
+
+def check_mass_balance(solution: Solution, tolerance: float = MASS_BALANCE_TOLERANCE) -> Solution:
+    """``solution`` when every gas field is finite and carries its release rate out of the outlets.
+
+    Spec section 4: at steady state the scalar flux out of the outlets equals the release
+    rate.  Every engine calls this on its solution before returning it, so no case file
+    holds a field that fails its own balance.
+
+    Raises:
+        MassBalanceError: a field with non-finite values, or an ``outlet_flux_ratio`` off 1 by
+            more than ``tolerance``; the message names the source and the numbers.
+    """
+    engine = solution.info.get("engine", "the")
+    for n, (src, conc, ratio) in enumerate(
+        zip(solution.sources, solution.concentrations, solution.outlet_flux_ratio, strict=True)
+    ):
+        x, y = src.position
+        where = f"{engine} engine's gas field of source {n} at ({x:g}, {y:g}) m"
+        if not np.isfinite(conc).all():
+            raise MassBalanceError(f"the {where} has non-finite values")
+        if not (math.isfinite(ratio) and abs(ratio - 1.0) <= tolerance):
+            raise MassBalanceError(
+                f"the {where} fails its mass balance: outlet flux / release rate = {ratio:.4g} "
+                f"({ratio * src.release_rate:.4g} of {src.release_rate:g} g/s), more than "
+                f"{tolerance:g} off 1"
+            )
+    return solution
 
 
 class Engine(Protocol):

@@ -93,17 +93,20 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass, field, fields, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numba
 import numpy as np
 
-from dgse.errors import InputDataError
+from dgse.errors import ConvergenceError, InputDataError
 from dgse.files import json_safe
 from dgse.physics.constants import DEFAULT_PHYSICS, RECOMMENDED_MAX_FILAMENTS, Physics
 from dgse.world.case import Case
 from dgse.world.generate import RngLike, as_generator
-from dgse.world.grid import DEFAULT_RESOLUTION
+from dgse.world.grid import DEFAULT_RESOLUTION, cell_index
+
+if TYPE_CHECKING:
+    from dgse.physics.rans import FlowSettings
 
 __all__ = [
     "NOISE_MODELS",
@@ -931,7 +934,7 @@ def _check_inputs(
     src = np.asarray(source_xy, dtype=np.float64).reshape(-1)
     if src.shape != (2,) or not np.isfinite(src).all():
         raise InputDataError(f"source must be a finite (x, y) in m, got {source_xy!r}")
-    i, j = math.floor(src[1] / resolution), math.floor(src[0] / resolution)
+    i, j = cell_index(src[1], resolution), cell_index(src[0], resolution)
     if not (0 <= i < H and 0 <= j < W):
         raise InputDataError(f"source ({src[0]:.3f}, {src[1]:.3f}) m lies outside the map")
     if occ[i, j]:
@@ -1142,6 +1145,7 @@ def make_filament_case(
     *,
     nut: np.ndarray | None = None,
     physics: Physics = DEFAULT_PHYSICS,
+    flow_settings: FlowSettings | None = None,
 ) -> Case:
     """The case with ``frames`` from a filament simulation on its wind, from its source.
 
@@ -1153,15 +1157,23 @@ def make_filament_case(
     simulation starts from the case's steady concentration.  The steady
     ``concentration`` is kept; ``meta["frame_dt"]`` and ``meta["filament"]``
     (settings, seed, counts, timings, where ``nu_t`` came from) are added.
+    ``flow_settings``: the iteration controls of that flow solve.
 
     Raises:
         InputDataError: bad settings; a case whose meta lacks its openings, its
             release rate (unless ``settings.release_rate`` is set) or, to solve
             the flow for ``nu_t``, its inlet velocity.
+        ConvergenceError: a case whose meta says its flow did not converge
+            (``flow_converged`` false), or a flow solved for ``nu_t`` that did not.
     """
     settings = FilamentSettings() if settings is None else settings
     if not isinstance(case, Case):
         raise InputDataError(f"make_filament_case needs a Case, got {type(case).__name__}")
+    if case.meta.get("flow_converged") is False:
+        raise ConvergenceError(
+            f"case {case.name!r} was solved on a flow that did not converge (meta flow_converged "
+            "false): its wind is not a steady flow to carry filaments; solve the case again"
+        )
     if settings.release_rate is None:
         if "release_rate_gps" not in case.meta:
             raise InputDataError(
@@ -1174,7 +1186,7 @@ def make_filament_case(
     t_flow = 0.0
     if settings.noise == "turbulent":
         if nut is None:
-            from dgse.physics.builtin import flow_and_transport
+            from dgse.physics.builtin import flow_and_transport, require_converged
 
             if "inlet_velocity" not in case.meta:
                 raise InputDataError(
@@ -1183,10 +1195,18 @@ def make_filament_case(
                     names={"noise": "noise"},
                 )
             t0 = time.perf_counter()
-            flow, _ = flow_and_transport(layout, case.inlet_velocity, physics)
+            flow, _ = flow_and_transport(layout, case.inlet_velocity, physics, flow_settings)
             t_flow = time.perf_counter() - t0
+            # an unconverged flow's nu_t is far from the converged one (often orders of magnitude
+            # too large), and its random walk spreads the plume to nothing
+            require_converged(
+                flow.info,
+                f"the flow of case {case.name!r} solved for nu_t",
+                'use {noise}="constant" (or, from Python, pass nut=)',
+                names={"noise": "noise"},
+            )
             nut = flow.nut
-            nut_source = "builtin flow (converged)" if flow.info.get("converged") else "builtin flow"
+            nut_source = "builtin flow (converged)"
         else:
             nut_source = "given"
     seed_value = seed if isinstance(seed, int) and not isinstance(seed, bool) else None

@@ -104,6 +104,44 @@ def build_mesh(layout: Layout) -> Mesh:
     return Mesh(layout.resolution, free, index, np.stack([ii, jj], axis=1), nb, ft)
 
 
+def parts(mesh: Mesh) -> tuple[np.ndarray, int]:
+    """The 4-connected parts of the free cells (:func:`~dgse.world.generate.free_components`):
+    ``(labels (n,), count)``, labels ``0 .. count-1``."""
+    from dgse.world.generate import free_components  # imported here: few meshes need it
+
+    grid_labels, count = free_components((~mesh.free).astype(np.uint8))
+    return grid_labels[mesh.cells[:, 0], mesh.cells[:, 1]] - 1, count
+
+
+def unreached(mesh: Mesh, face_type: int) -> np.ndarray:
+    """``bool (n,)``: the free cells whose part (:func:`parts`) has no face of ``face_type``.
+
+    A Dirichlet condition on the faces of ``face_type`` (the outlet pressure, the inlet
+    concentration) does not reach these cells: the equation of such a part (a closed room, a
+    free cell walled in on all sides) is singular, its solution fixed only up to a constant.
+    """
+    has = (mesh.ft == face_type).any(axis=1)
+    if mesh.n == 0:
+        return has
+    labels, count = parts(mesh)
+    reached = np.zeros(count, dtype=bool)
+    reached[labels[has]] = True
+    return ~reached[labels]
+
+
+def anchors(mesh: Mesh, face_type: int) -> np.ndarray:
+    """``bool (n,)``: one cell (the lowest-numbered) of each part of the free cells that has no face
+    of ``face_type`` (:func:`unreached`), where a solver fixes its unknown to make the part regular."""
+    loose = unreached(mesh, face_type)
+    out = np.zeros(mesh.n, dtype=bool)
+    if loose.any():
+        labels, _ = parts(mesh)
+        cells = np.flatnonzero(loose)
+        _, first = np.unique(labels[cells], return_index=True)
+        out[cells[first]] = True
+    return out
+
+
 class StencilMatrix:
     """CSR matrices ``aP phi_P - sum a phi_nb`` on a fixed pattern built once per mesh."""
 

@@ -54,7 +54,8 @@ import numpy as np
 
 from dgse.errors import ConvergenceError, DGSEError, InputDataError, UnsupportedError
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
-from dgse.physics.engines import FlowField, Solution, Source
+from dgse.physics.engines import FlowField, Solution, Source, check_mass_balance
+from dgse.world.generate import ventilated_cells
 from dgse.world.layout import INWARD_NORMAL, Layout, Opening
 
 __all__ = [
@@ -930,12 +931,18 @@ class OpenFOAMEngine:
         if not (inlet_velocity > 0 and math.isfinite(inlet_velocity)):
             raise InputDataError(f"inlet velocity must be positive, got {inlet_velocity}")
         g = layout.grid
+        ventilated = ventilated_cells(layout)
         src_cells = []
         for s in sources:
             i, j = g.cell_of(*s.position)
+            x, y = s.position
             if layout.occupancy[i, j]:
-                x, y = s.position
                 raise InputDataError(f"source at ({x:g}, {y:g}) m lies in a solid cell")
+            if not ventilated[i, j]:
+                raise InputDataError(
+                    f"source at ({x:g}, {y:g}) m lies in a closed region that no inlet reaches: "
+                    "its gas has nowhere to go and no steady concentration"
+                )
             if not (s.release_rate > 0 and math.isfinite(s.release_rate)):
                 raise InputDataError(f"release rate must be positive, got {s.release_rate}")
             src_cells.append((i, j))
@@ -1002,7 +1009,9 @@ class OpenFOAMEngine:
         res = g.resolution
         depth = phys.slab_depth
         inlets, outlets = self._patches(layout)
-        free = layout.free
+        # the cells no inlet's air reaches (a closed room) are at rest and gas-free: left out
+        # of the mesh as solid cells are, they leave no singular pressure or gas equation
+        free = ventilated_cells(layout)
         free_labels = np.flatnonzero(free.ravel())  # blockMesh numbers cells x fastest
         n_cells = int(free_labels.size)
         seconds: dict = {}
@@ -1215,6 +1224,8 @@ class OpenFOAMEngine:
             "n_procs": self.n_procs,
             "seconds": seconds,
         }
-        return Solution(
-            flow=flow, sources=sources, concentrations=concentrations, outlet_flux_ratio=ratios, info=info
+        return check_mass_balance(
+            Solution(
+                flow=flow, sources=sources, concentrations=concentrations, outlet_flux_ratio=ratios, info=info
+            )
         )

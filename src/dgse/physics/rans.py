@@ -30,7 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from dgse.errors import InputDataError
+from dgse.errors import ConvergenceError, InputDataError
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
 from dgse.physics.fv import (
     AXIS,
@@ -41,6 +41,7 @@ from dgse.physics.fv import (
     WALL,
     Mesh,
     StencilMatrix,
+    anchors,
     assemble,
     bound,
     boundary_gamma,
@@ -55,6 +56,7 @@ from dgse.physics.fv import (
     row_dot,
     row_sum,
 )
+from dgse.world.generate import ventilated_cells
 from dgse.world.layout import Layout
 
 _jit = numba.njit(cache=True, nogil=True)
@@ -329,7 +331,11 @@ class PressureSolver:
             if self._M is None or rebuild:
                 # symmetric positive definite: minimum degree on A^T + A, no pivoting
                 opts = {"SymmetricMode": True}
-                lu = spla.splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options=opts)
+                try:
+                    lu = spla.splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options=opts)
+                except RuntimeError as e:  # SuperLU's "Factor is exactly singular"
+                    # (not from a closed region: those are held, see _pinned)
+                    raise ConvergenceError(f"the pressure equation cannot be factorized ({e})") from None
                 self._M = lu.solve
                 self.factorizations += 1
             return self._M
@@ -750,6 +756,7 @@ def solve_flow(
     coarse start, ``coarse``: the coarse solve's info (without its history).
     """
     s = settings or FlowSettings()
+    ventilated_cells(layout)  # raises on an inlet whose air cannot leave
     t0 = time.perf_counter()
     start = "rest" if initial is None else "initial"
     coarse_info = None
@@ -803,6 +810,18 @@ def _coarse_start(
     if not (settled and np.isfinite(cst.ux).all()):
         return None, coarse_info
     return prolong_state(cmesh, cst, mesh, inlet_velocity), coarse_info
+
+
+def _pinned(
+    lapP: np.ndarray, lapA: np.ndarray, pin: np.ndarray, nb: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The pressure Laplacian ``(lapP, lapA)`` with the unknowns of ``pin`` held at 0: their rows
+    and columns out (the matrix stays symmetric), a positive diagonal on their rows."""
+    lapA = lapA.copy()
+    lapA[pin] = 0.0
+    lapA[(nb >= 0) & pin[np.maximum(nb, 0)]] = 0.0
+    diag = np.where(pin & (lapP <= 0.0), 1.0, lapP)
+    return diag, lapA
 
 
 def _converged(residuals: dict[str, float], s: FlowSettings) -> bool:
@@ -884,6 +903,11 @@ def _simplec(
     zero4 = np.zeros((n, 4))
     stencil = StencilMatrix(mesh)
     psolver = PressureSolver(s.max_krylov, s.pressure_solver, s.lu_cells)
+    # a part of the free cells without an outlet (a closed room, a walled-in cell) has no
+    # pressure level: its pressure equation is singular.  One cell of each such part is held at
+    # p = 0 in the matrix solved; the part's equation is consistent (no net flux leaves it), so
+    # this picks one of its solutions, and the fluxes come from the full equation
+    p_pin = anchors(mesh, OUTLET)
 
     if initial is None:
         st = FlowState(
@@ -967,7 +991,11 @@ def _simplec(
             hbyay = hbyay - (rAU - rAtU) * gp[:, 1]
         p_rhs = -row_sum(phb)
         residuals["p"] = residual_norm(lapP, lapA, p_rhs, nb, st.p)
-        p_new = psolver.solve(stencil.assemble(lapP, lapA), p_rhs, st.p, s.p_rel_tol)
+        if p_pin.any():
+            P = stencil.assemble(*_pinned(lapP, lapA, p_pin, nb))
+            p_new = psolver.solve(P, np.where(p_pin, 0.0, p_rhs), np.where(p_pin, 0.0, st.p), s.p_rel_tol)
+        else:
+            p_new = psolver.solve(stencil.assemble(lapP, lapA), p_rhs, st.p, s.p_rel_tol)
         st.F = corrected_flux(phb, lapA, rAtU, p_new, nb, ft)
         st.p = s.alpha_p * p_new + (1.0 - s.alpha_p) * st.p
         gp = gradient(st.p, zero4, outlet, nb, ft, h, False)

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from dgse.physics.constants import DEFAULT_PHYSICS
-from dgse.physics.engines import Engine, Solution, Source, get_engine
+from dgse.physics.engines import Engine, Solution, Source, check_mass_balance, get_engine
 from dgse.world.case import Case
 from dgse.world.layout import Layout
 
@@ -60,7 +60,8 @@ def solve_cases(
     """Solve one layout for several sources and return one case per source."""
     eng = get_engine(engine) if isinstance(engine, str) else engine
     srcs = [s if isinstance(s, Source) else Source(tuple(s[0]), float(s[1])) for s in sources]
-    sol = eng.solve(layout, inlet_velocity, srcs)
+    # the engines check their own solutions; this covers an engine from a plugin too
+    sol = check_mass_balance(eng.solve(layout, inlet_velocity, srcs))
     return solution_to_cases(layout, inlet_velocity, sol, name)
 
 

@@ -17,15 +17,17 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from dgse.errors import InputDataError
+from dgse.errors import ConvergenceError, InputDataError
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
 from dgse.physics.fv import (
     INLET,
     INTERNAL,
     OUTLET,
     Mesh,
+    anchors,
     gradient,
     ho_source,
+    unreached,
 )
 
 SCHEMES = ("limitedLinearUpwind", "linearUpwind", "upwind")
@@ -90,11 +92,34 @@ def transport_matrix(
             add(P, up, coef * w_c[up])
             add(P, i_p[up], coef * w_p[up])
             add(P, i_m[up], coef * w_m[up])
-    A = sp.coo_matrix(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
-    ).tocsr()
+    r, c, v = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
+    # a part of the free cells that no inlet reaches (a closed room, a walled-in cell) has no
+    # concentration level: without the inlet's c = 0 its operator is singular.  No gas reaches
+    # it (a source there is refused, :func:`check_release_cells`), so its steady concentration
+    # is 0: one cell of each such part reads c = 0, which makes the part's equations regular
+    pin = anchors(mesh, INLET)
+    if pin.any():
+        keep = ~pin[r]
+        fixed = np.flatnonzero(pin)
+        r, c, v = np.r_[r[keep], fixed], np.r_[c[keep], fixed], np.r_[v[keep], np.ones(fixed.size)]
+    A = sp.coo_matrix((v, (r, c)), shape=(n, n)).tocsr()
     A.eliminate_zeros()
     return A
+
+
+def check_release_cells(mesh: Mesh, cells) -> None:
+    """Raise :class:`InputDataError` unless every ``(i, j)`` of ``cells`` is a free cell of ``mesh``
+    that an inlet reaches: gas released where none can leave has no steady state."""
+    closed = None
+    for i, j in cells:
+        if not (0 <= i < mesh.shape[0] and 0 <= j < mesh.shape[1]) or not mesh.free[i, j]:
+            raise InputDataError(f"source cell ({i}, {j}) is not a free cell of the map")
+        closed = unreached(mesh, INLET) if closed is None else closed
+        if closed[mesh.index[i, j]]:
+            raise InputDataError(
+                f"source cell ({i}, {j}) lies in a closed region that no inlet reaches: "
+                "its gas has nowhere to go and no steady concentration"
+            )
 
 
 @dataclass
@@ -150,15 +175,20 @@ class TransportSolver:
 
     def factor(self, scheme: str):
         if scheme not in self._lu:
-            self._lu[scheme] = spla.splu(self.matrix(scheme).tocsc())
+            try:
+                self._lu[scheme] = spla.splu(self.matrix(scheme).tocsc())
+            except RuntimeError as e:  # SuperLU's "Factor is exactly singular"
+                raise ConvergenceError(
+                    f"the {scheme} transport operator of this flow cannot be factorized ({e}): "
+                    "no unique steady concentration"
+                ) from None
         return self._lu[scheme]
 
     def _rhs(self, cells, rates) -> np.ndarray:
         m = self.mesh
+        check_release_cells(m, cells)
         B = np.zeros((m.n, len(cells)))
         for n, ((i, j), q) in enumerate(zip(cells, rates, strict=True)):
-            if not (0 <= i < m.shape[0] and 0 <= j < m.shape[1]) or not m.free[i, j]:
-                raise InputDataError(f"source cell ({i}, {j}) is not a free cell of the map")
             B[m.index[i, j], n] = q / self.physics.slab_depth  # g/s per m of depth
         return B
 
@@ -181,6 +211,7 @@ class TransportSolver:
         m = self.mesh
         lu = self.factor("upwind")
         fixed = m.ft == INLET  # c = 0 at inlets; zero gradient elsewhere
+        pin = anchors(m, INLET)
         bval = np.zeros((m.n, 4))
         X = lu.solve(B)
         change = np.inf
@@ -192,6 +223,7 @@ class TransportSolver:
                 x = np.ascontiguousarray(X[:, k])
                 g = gradient(x, bval, fixed, m.nb, m.ft, m.h, True)
                 S[:, k] = ho_source(x, g, self.F, m.nb, m.ft, m.h)
+            S[pin] = 0.0  # the cells that read c = 0 (transport_matrix)
             X_new = lu.solve(B + S)
             scale = np.abs(X_new).max(axis=0) + 1e-300
             change = float((np.abs(X_new - X).max(axis=0) / scale).max())
@@ -199,6 +231,11 @@ class TransportSolver:
             if change < self.tolerance:
                 break
         self.info = {"outer_iterations": it, "converged": change < self.tolerance, "last_change": change}
+        if not np.isfinite(X).all():
+            raise ConvergenceError(
+                f"the gas transport's deferred correction diverged in {it} iterations (non-finite values)",
+                self.info,
+            )
         return X
 
     def outflow(self, conc: np.ndarray) -> tuple[float, float]:

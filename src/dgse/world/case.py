@@ -18,7 +18,7 @@ import numpy as np
 
 from dgse.errors import CaseFileError, InputDataError
 from dgse.files import atomic_open
-from dgse.world.grid import OnGrid
+from dgse.world.grid import OnGrid, cell_index
 from dgse.world.layout import Layout
 
 REQUIRED_KEYS = ("occupancy", "wind", "concentration", "source", "resolution", "meta")
@@ -236,7 +236,7 @@ def validate_arrays(occ, wind, conc, source, resolution, meta, frames=None) -> l
         p.append(f"source has shape {source.shape}, expected (2,)")
     elif resolution > 0:
         x, y = float(source[0]), float(source[1])
-        j, i = int(np.floor(x / resolution)), int(np.floor(y / resolution))
+        j, i = cell_index(x, resolution), cell_index(y, resolution)
         if not (0 <= i < H and 0 <= j < W):
             p.append(f"source ({x:.3f}, {y:.3f}) m lies outside the map")
         elif occ[i, j] != 0:

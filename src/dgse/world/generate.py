@@ -125,6 +125,30 @@ def free_components(occupancy: np.ndarray) -> tuple[np.ndarray, int]:
     return labels, int(n)
 
 
+def ventilated_cells(layout: Layout) -> np.ndarray:
+    """``bool (H, W)``: the free cells an inlet's air reaches (their 4-connected part holds an
+    inlet cell).
+
+    The others (a closed room, a walled-in cell, a part with outlets only) hold air at rest and
+    no gas in the steady solution (spec section 4); a solver leaves them out or holds them there.
+
+    Raises:
+        InputDataError: an inlet opening into a part that no outlet reaches (its air has
+            nowhere to go: no steady flow).
+    """
+    labels, _ = free_components(layout.occupancy)
+    with_in = np.unique(labels[layout.opening_mask("inlet")])
+    with_out = np.unique(labels[layout.opening_mask("outlet")])
+    dead = np.setdiff1d(with_in[with_in > 0], with_out)
+    if dead.size:
+        i, j = (int(v[0]) for v in np.nonzero(labels == dead[0]))
+        raise InputDataError(
+            f"layout {layout.name!r}: an inlet opens into a free region that no outlet reaches "
+            f"(the region of cell ({i}, {j})): its air has nowhere to go"
+        )
+    return np.isin(labels, with_in[with_in > 0])
+
+
 def _connected(layout: Layout) -> bool:
     """True when the free cells form one 4-connected region holding every opening cell."""
     labels, n = free_components(layout.occupancy)

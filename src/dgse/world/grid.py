@@ -16,6 +16,27 @@ from dgse.errors import InputDataError
 
 DEFAULT_RESOLUTION = 0.1
 
+#: A coordinate within this fraction of a cell of a cell edge lies on that edge, and an edge
+#: belongs to the cell above it (to the right of it): a case file keeps its source as float32,
+#: which moves a position by up to 6e-8 of its value (6e-5 cells at 100 m on 0.1 m cells), and
+#: ``0.3 / 0.1`` is 2.9999999999999996 in float64 but 3.0000001 from float32 0.3, so a plain
+#: ``floor`` puts a source on an edge in one cell before saving and in the next one after.
+EDGE_TOLERANCE_CELLS = 1e-3
+
+
+def cell_index(coordinate: float, resolution: float) -> int:
+    """The index along one axis of the cell holding ``coordinate`` m on cells of ``resolution`` m.
+
+    ``floor(coordinate / resolution)``, except that a coordinate within
+    :data:`EDGE_TOLERANCE_CELLS` of a cell edge is on the edge and in the cell that starts there,
+    whatever the rounding of its float32 or float64 value.  The one definition of a point's cell:
+    :meth:`Grid.cell_of` (the cell a solver releases a source in, a case's ``source_cell``)
+    and every check of a source position use it.
+    """
+    k = float(coordinate) / float(resolution)
+    edge = round(k)
+    return int(edge) if abs(k - edge) <= EDGE_TOLERANCE_CELLS else math.floor(k)
+
 
 @dataclass(frozen=True)
 class Grid:
@@ -76,9 +97,9 @@ class Grid:
         return np.meshgrid(self.x, self.y)
 
     def cell_of(self, x: float, y: float) -> tuple[int, int]:
-        """The ``(i, j)`` of the cell containing point ``(x, y)``; raises if outside."""
-        j = math.floor(x / self.resolution)
-        i = math.floor(y / self.resolution)
+        """The ``(i, j)`` of the cell containing point ``(x, y)`` (:func:`cell_index`); raises if outside."""
+        j = cell_index(x, self.resolution)
+        i = cell_index(y, self.resolution)
         if not (0 <= i < self.height and 0 <= j < self.width):
             raise InputDataError(
                 f"point ({x:.3f}, {y:.3f}) m lies outside the {self.width_m} x {self.height_m} m map"
