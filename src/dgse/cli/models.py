@@ -93,7 +93,7 @@ DeviceOption = Annotated[str | None, typer.Option("--device", help="DGSE device 
 
 @dataclass(frozen=True)
 class EstimatorOptions:
-    """The estimator options ``estimate`` and ``evaluate`` share (:func:`option_bundle`).
+    """The estimator options ``estimate`` and ``evaluate`` share (:func:`~dgse.cli.common.option_bundle`).
 
     The shortcut options go to the estimators that take them (the DGSE networks:
     ``model``, ``K``, ``T``, ``device``, ``dtype``); any estimator takes keyword
