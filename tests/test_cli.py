@@ -10,10 +10,13 @@ import json
 import os
 import subprocess
 import sys
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated
 
 import numpy as np
 import pytest
+import typer
 from PIL import Image
 
 from dgse.cli.main import main
@@ -457,3 +460,46 @@ def test_console_script_exits_with_mains_status_and_sets_the_collector(monkeypat
     finally:
         gc.unfreeze()
         gc.set_threshold(*before)
+
+
+@dataclass(frozen=True)
+class _Pair:
+    """A bundle of two options (for the option_bundle test)."""
+
+    a: Annotated[int, typer.Option("--a", help="first")] = 1
+    b: Annotated[str | None, typer.Option("--b", help="second")] = None
+
+
+_SEEN: list[tuple[int, _Pair, int]] = []
+
+
+def _bundled_cmd(
+    first: Annotated[int, typer.Option("--first")] = 0,
+    pair: _Pair = _Pair(),
+    last: Annotated[int, typer.Option("--last")] = 0,
+) -> None:
+    _SEEN.append((first, pair, last))
+
+
+def test_option_bundle_declares_shared_options_once():
+    """The bundle's options stand where its parameter stood and reach the command as one object."""
+    from typer.testing import CliRunner
+
+    from dgse.cli.common import option_bundle
+
+    cmd = option_bundle("pair", _Pair)(_bundled_cmd)
+    app = typer.Typer()
+    app.command("cmd")(cmd)
+    app.command("other")(lambda: None)
+    runner = CliRunner()
+    _SEEN.clear()
+    assert runner.invoke(app, ["cmd", "--a", "3", "--last", "2"]).exit_code == 0
+    assert runner.invoke(app, ["cmd", "--b", "x", "--first", "5"]).exit_code == 0
+    assert _SEEN == [(0, _Pair(3, None), 2), (5, _Pair(1, "x"), 0)]
+    help_text = runner.invoke(app, ["cmd", "--help"]).output
+    order = [help_text.index(flag) for flag in ("--first", "--a", "--b", "--last")]
+    assert order == sorted(order) and "--pair" not in help_text
+    cmd(first=1, last=4)  # called from Python: the bundle's defaults
+    assert _SEEN[-1] == (1, _Pair(), 4)
+    with pytest.raises(TypeError, match="no parameter 'nope'"):
+        option_bundle("nope", _Pair)(_bundled_cmd)

@@ -27,6 +27,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from dgse.bench.core import BenchContext
 from dgse.registry import Entry, Registry
@@ -103,34 +104,15 @@ def suite_names() -> list[str]:
     return SUITES.names()
 
 
-def run_suite(
-    name: str,
-    out: str | os.PathLike[str],
-    *,
-    quick: bool = False,
-    data: str | os.PathLike[str] | None = None,
-    seed: int = 0,
-    knowledge: str = "map",
-    progress: bool = False,
-    command: str | None = None,
-) -> Path:
+def run_suite(name: str, out: str | os.PathLike[str], **options: Any) -> Path:
     """Run suite ``name`` into ``out/<name>/`` and return its manifest path.
 
-    ``knowledge``: what every method is told besides its readings (methods that do
-    not work at that level are left out, and the manifest says so).
+    ``options``: the run's keyword arguments of :class:`~dgse.bench.core.BenchContext`
+    (``quick``, ``data``, ``seed``, ``knowledge``, ``progress``, ``command``); at a
+    ``knowledge`` level where some methods do not work, those are left out, and the
+    manifest says so.
     """
     info = SUITES.entry(name)
-    ctx = BenchContext(
-        name,
-        out,
-        quick=quick,
-        data=data,
-        seed=seed,
-        knowledge=knowledge,
-        progress=progress,
-        command=command,
-        title=info.display,
-        description=info.description,
-    )
+    ctx = BenchContext(name, out, title=info.display, description=info.description, **options)
     SUITES.factory(name)(ctx)
     return ctx.finish()

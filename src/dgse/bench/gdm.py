@@ -45,6 +45,7 @@ __all__ = [
     "case_label",
     "eval_time_text",
     "evaluate_cached",
+    "labelled_scenarios",
     "run",
 ]
 
@@ -131,6 +132,16 @@ def case_label(case: Any) -> str:
     return name + (f"\n({', '.join(extra)})" if extra else "")
 
 
+def labelled_scenarios(ctx: BenchContext, n: int) -> tuple[Path, list[Path], dict[str, str]]:
+    """The first ``n`` test scenarios: their folder, their case files (sorted) and the panel label
+    (:func:`case_label`) of each case id (the file's stem), in file order."""
+    from dgse.world.case import Case
+
+    cases_dir = ctx.scenarios(n, "test")
+    files = sorted(cases_dir.glob("*.npz"))
+    return cases_dir, files, {f.stem: case_label(Case.load(f)) for f in files}
+
+
 def _fmt(v: float | None, digits: int = 3) -> str:
     if v is None or not math.isfinite(v):
         return "n/a"
@@ -212,15 +223,37 @@ _CASE_COLUMNS = [
 ]  # fmt: skip
 
 
-def _overall_rows(results: dict[str, dict[str, Any]], space: str) -> list[dict[str, Any]]:
+#: The statistics over trials of each metric in the pooled tables.
+_OVERALL_STATS = ("mean", "median", "std")
+#: The pooled tables: name, the metric keys, the caption.
+_OVERALL_TABLES = (
+    (
+        "gdm_overall_ppm",
+        ("cf_rmse_ppm", "cf_nll_ppm"),
+        "All scenarios pooled: concentration RMSE and NLL in ppm per method and count.",
+    ),
+    (
+        "gdm_overall_log",
+        ("cf_rmse", "cf_nll"),
+        "All scenarios pooled, log(1 + ppm) space (DGSE-S's training space): RMSE of the log mean and "
+        "Gaussian NLL of log(1 + c). For the baselines these are the moments of the lognormal moment match "
+        "of their ppm mean and variance (dgse.mapping.ppm_to_log_moments), not a prediction they make.",
+    ),
+)
+
+
+def _overall_stats(keys: tuple[str, ...]) -> list[str]:
+    """The columns of the statistics of the metrics ``keys``: ``cf_rmse_mean``, ..."""
+    return [f"{k}_{s}" for k in keys for s in _OVERALL_STATS]
+
+
+def _overall_rows(results: dict[str, dict[str, Any]], keys: tuple[str, ...]) -> list[dict[str, Any]]:
+    """Per method and count, all scenarios pooled: the statistics of the metrics ``keys``."""
     rows = []
-    keys = ("cf_rmse_ppm", "cf_nll_ppm") if space == "ppm" else ("cf_rmse", "cf_nll")
     for method, res in results.items():
         for n, a in sorted(res["aggregate"].items(), key=lambda kv: int(kv[0])):
             row: dict[str, Any] = {"method": method, "n_obs": int(n), "estimates": a["n_estimates"]}
-            for k in keys:
-                for s in ("mean", "median", "std"):
-                    row[f"{k}_{s}"] = a.get(f"{k}_{s}")
+            row.update({c: a.get(c) for c in _overall_stats(keys)})
             row["nll_comparable"] = method in NLL_METHODS
             rows.append(row)
     return rows
@@ -425,8 +458,6 @@ def run(ctx: BenchContext) -> None:
     """Evaluate DGSE-S and the GDM baselines; write fig8, fig7 and fig9 with their tables."""
     import torch
 
-    from dgse.world.case import Case
-
     threads = torch.get_num_threads()  # now: compiled numba/OpenMP code may change it later
     n_scen = ctx.pick(5, 2)
     counts = ctx.pick([50, 100, 150, 200, 250], [50, 100])
@@ -435,10 +466,8 @@ def run(ctx: BenchContext) -> None:
     method_trials = {m: trials for m in METHODS}
     method_trials["gwgmrf"] = ctx.pick(5, 1)
     map_obs = 100 if 100 in counts else counts[-1]
-    cases_dir = ctx.scenarios(n_scen, "test")
-    files = sorted(cases_dir.glob("*.npz"))
-    cases = [f.stem for f in files]
-    labels = {f.stem: case_label(Case.load(f)) for f in files}
+    cases_dir, files, labels = labelled_scenarios(ctx, n_scen)
+    cases = list(labels)
 
     results: dict[str, dict[str, Any]] = {}
     for m in METHODS:
@@ -498,26 +527,9 @@ def run(ctx: BenchContext) -> None:
         "nll_comparable = False: NLL not comparable (left out of the figure, as in the paper).",
         _CASE_COLUMNS,
     )
-    ppm_cols = ["method", "n_obs", "estimates"] + [
-        f"{k}_{s}" for k in ("cf_rmse_ppm", "cf_nll_ppm") for s in ("mean", "median", "std")
-    ] + ["nll_comparable"]  # fmt: skip
-    sec.table(
-        "gdm_overall_ppm",
-        _overall_rows(results, "ppm"),
-        "All scenarios pooled: concentration RMSE and NLL in ppm per method and count.",
-        ppm_cols,
-    )
-    log_cols = ["method", "n_obs", "estimates"] + [
-        f"{k}_{s}" for k in ("cf_rmse", "cf_nll") for s in ("mean", "median", "std")
-    ] + ["nll_comparable"]  # fmt: skip
-    sec.table(
-        "gdm_overall_log",
-        _overall_rows(results, "log"),
-        "All scenarios pooled, log(1 + ppm) space (DGSE-S's training space): RMSE of the log mean and "
-        "Gaussian NLL of log(1 + c). For the baselines these are the moments of the lognormal moment match "
-        "of their ppm mean and variance (dgse.mapping.ppm_to_log_moments), not a prediction they make.",
-        log_cols,
-    )
+    for name, keys, caption in _OVERALL_TABLES:
+        columns = ["method", "n_obs", "estimates", *_overall_stats(keys), "nll_comparable"]
+        sec.table(name, _overall_rows(results, keys), caption, columns)
 
     sec7 = ctx.section(
         f"Maps at {map_obs} observations (fig7)",

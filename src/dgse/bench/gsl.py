@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from dgse.bench.core import BenchContext
-from dgse.bench.gdm import case_label, eval_time_text, evaluate_cached
+from dgse.bench.gdm import eval_time_text, evaluate_cached, labelled_scenarios
 from dgse.bench.plots import plt, seconds_bars, style_of
 
 __all__ = ["EXCLUDED", "METHODS", "ORACLES", "run"]
@@ -195,7 +195,6 @@ def run(ctx: BenchContext) -> None:
     import torch
 
     from dgse.estimators.registry import ESTIMATORS
-    from dgse.world.case import Case
 
     threads = torch.get_num_threads()  # now: compiled numba/OpenMP code may change it later
     n_obs = 50
@@ -210,10 +209,8 @@ def run(ctx: BenchContext) -> None:
         m: ctx.pick(None, 1) if {"slow", "flow-solves"} & set(tags[m]) else None for m in METHODS
     }
     methods, left_out = ctx.methods_at_level(METHODS)
-    cases_dir = ctx.scenarios(n_scen, "test")
-    files = sorted(cases_dir.glob("*.npz"))
-    cases = [f.stem for f in files]
-    labels = {f.stem: case_label(Case.load(f)) for f in files}
+    cases_dir, _, labels = labelled_scenarios(ctx, n_scen)
+    cases = list(labels)
 
     results: dict[str, dict[str, Any]] = {}
     for m in methods:

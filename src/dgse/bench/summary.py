@@ -75,16 +75,19 @@ def _f3(x: float) -> str:
     return f"{x:.3f}"
 
 
+def _by_size(x: float, steps: tuple[tuple[float, str], ...], rest: str) -> str:
+    """``x`` in the format of the first ``(threshold, format)`` step whose threshold ``|x|``
+    reaches, else in ``rest``."""
+    a = abs(x)
+    for threshold, spec in steps:
+        if a >= threshold:
+            return format(x, spec)
+    return format(x, rest)
+
+
 def _sig3(x: float) -> str:
     """Three significant digits below 1000 (6.69, 13.8), thousands separators above."""
-    a = abs(x)
-    if a >= 1000:
-        return f"{x:,.0f}"
-    if a >= 100:
-        return f"{x:.0f}"
-    if a >= 10:
-        return f"{x:.1f}"
-    return f"{x:.2f}"
+    return _by_size(x, ((1000, ",.0f"), (100, ".0f"), (10, ".1f")), ".2f")
 
 
 def _sig2(x: float) -> str:
@@ -106,14 +109,7 @@ def _int(x: float) -> str:
 
 def _seconds(x: float) -> str:
     """Seconds: 0.086, 0.32, 2.7, 1,359."""
-    a = abs(x)
-    if a >= 100:
-        return f"{x:,.0f}"
-    if a >= 1:
-        return f"{x:.1f}"
-    if a >= 0.1:
-        return f"{x:.2f}"
-    return f"{x:.3f}"
+    return _by_size(x, ((100, ",.0f"), (1, ".1f"), (0.1, ".2f")), ".3f")
 
 
 def _nominal(k: float) -> float:

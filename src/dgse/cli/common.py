@@ -370,6 +370,33 @@ ThreadsOption = Annotated[int | None, typer.Option("--threads", help=THREADS_HEL
 ProgressOption = Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")]
 
 
+def option_bundle(name: str, bundle: Callable[..., Any]) -> Callable[[F], F]:
+    """Give a command the options of ``bundle`` in place of its parameter ``name``.
+
+    ``bundle`` (a function or a dataclass) declares options that several commands share, once:
+    its parameters (typer-annotated, each with a default) stand on the command line where
+    ``name`` stands in the command's signature, and the command receives ``bundle(**those
+    options)`` as ``name``.
+    """
+    bundled = list(inspect.signature(bundle, eval_str=True).parameters.values())
+
+    def decorate(fn: F) -> F:
+        sig = inspect.signature(fn, eval_str=True)
+        if name not in sig.parameters:
+            raise TypeError(f"{fn.__name__} has no parameter {name!r}")
+        params = [q for p in sig.parameters.values() for q in (bundled if p.name == name else [p])]
+
+        @functools.wraps(fn)
+        def wrapper(*args: Any, **kwargs: Any) -> Any:
+            kwargs[name] = bundle(**{p.name: kwargs.pop(p.name, p.default) for p in bundled})
+            return fn(*args, **kwargs)
+
+        wrapper.__signature__ = sig.replace(parameters=params)  # type: ignore[attr-defined]
+        return wrapper  # type: ignore[return-value]
+
+    return decorate
+
+
 def journal_output(what: str, default: str, kept: str) -> Any:
     """The ``-o/--out/--json`` option of a command that keeps its finished ``kept`` (say,
     ``"episodes"``) in a journal beside its JSON file of ``what`` (default path ``default``)."""

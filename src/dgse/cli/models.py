@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any
@@ -47,6 +48,7 @@ from dgse.cli.common import (
     check_output_file,
     console,
     journal_output,
+    option_bundle,
     parse_params,
     path_text,
     restart_option,
@@ -89,51 +91,68 @@ TOption = Annotated[int | None, typer.Option("-T", help="DGSE-S concentration sa
 DeviceOption = Annotated[str | None, typer.Option("--device", help="DGSE device (cpu, cuda, ...).")]
 
 
-def _set_threads(threads: int | None) -> None:
-    """``torch.set_num_threads(threads)`` when given (PyTorch is imported only then)."""
-    if threads is None:
-        return
-    if threads < 1:
-        raise InputDataError(f"--threads must be at least 1, got {threads}")
-    import torch
-
-    torch.set_num_threads(threads)
-
-
-def _estimator_kwargs(
-    method: str,
-    model: str | None,
-    k: int | None,
-    t: int | None,
-    device: str | None,
-    dtype: Dtype | None,
-    params: Sequence[str] | None,
-) -> dict[str, Any]:
-    """Keyword arguments of ``get_estimator(method, ...)`` from the command's options.
+@dataclass(frozen=True)
+class EstimatorOptions:
+    """The estimator options ``estimate`` and ``evaluate`` share (:func:`~dgse.cli.common.option_bundle`).
 
     The shortcut options go to the estimators that take them (the DGSE networks:
-    ``model``, ``K``, ``T``, ``device``, ``dtype``); given to one that does not,
-    they are an error that names the options it takes.
+    ``model``, ``K``, ``T``, ``device``, ``dtype``); any estimator takes keyword
+    arguments as ``--param KEY=VALUE``; ``--threads`` sets PyTorch's CPU threads.
     """
-    from dgse.estimators.registry import ESTIMATORS, estimator_names
 
-    given = {"--model": ("model", model), "-K": ("K", k), "-T": ("T", t), "--device": ("device", device),
-             "--dtype": ("dtype", None if dtype is None else Dtype(dtype).value)}  # fmt: skip
-    for name, v in (("-K", k), ("-T", t)):
-        if v is not None and v < 1:
-            raise InputDataError(f"{name} must be at least 1, got {v}")
-    kwargs: dict[str, Any] = {}
-    for flag, (key, v) in given.items():
-        if v is None:
-            continue
-        if method in estimator_names() and not ESTIMATORS.accepts(method, key):
-            raise InputDataError(
-                f"{flag} does not apply to {method} (it takes no {key!r}); "
-                f"give {method}'s options as --param KEY=VALUE"
-            )
-        kwargs[key] = v
-    kwargs.update(parse_params(params))
-    return kwargs
+    model: ModelOption = None
+    k: KOption = None
+    t: TOption = None
+    device: DeviceOption = None
+    dtype: DtypeOption = None
+    params: ParamOption = None
+    threads: ThreadsOption = None
+
+    def resolve(self, method: str | None, level: str) -> tuple[Any, dict[str, Any]]:
+        """The named ``method`` at knowledge ``level`` (:func:`dgse.presets.resolve`, no search)
+        and its estimator's keyword arguments: the method's, overridden by these options."""
+        from dgse.presets import resolve
+
+        run = resolve(method, level, search=False)
+        return run, {**run.estimator_options, **self.estimator_kwargs(run.estimator)}
+
+    def estimator_kwargs(self, method: str) -> dict[str, Any]:
+        """Keyword arguments of ``get_estimator(method, ...)`` from these options.
+
+        Raises:
+            InputDataError: a shortcut option given to an estimator that does not take it
+                (the message names the options it takes), or ``-K``/``-T`` below 1.
+        """
+        from dgse.estimators.registry import ESTIMATORS, estimator_names
+
+        dtype = None if self.dtype is None else Dtype(self.dtype).value
+        given = {"--model": ("model", self.model), "-K": ("K", self.k), "-T": ("T", self.t),
+                 "--device": ("device", self.device), "--dtype": ("dtype", dtype)}  # fmt: skip
+        for name, v in (("-K", self.k), ("-T", self.t)):
+            if v is not None and v < 1:
+                raise InputDataError(f"{name} must be at least 1, got {v}")
+        kwargs: dict[str, Any] = {}
+        for flag, (key, v) in given.items():
+            if v is None:
+                continue
+            if method in estimator_names() and not ESTIMATORS.accepts(method, key):
+                raise InputDataError(
+                    f"{flag} does not apply to {method} (it takes no {key!r}); "
+                    f"give {method}'s options as --param KEY=VALUE"
+                )
+            kwargs[key] = v
+        kwargs.update(parse_params(self.params))
+        return kwargs
+
+    def set_threads(self) -> None:
+        """``torch.set_num_threads(threads)`` when given (PyTorch is imported only then)."""
+        if self.threads is None:
+            return
+        if self.threads < 1:
+            raise InputDataError(f"--threads must be at least 1, got {self.threads}")
+        import torch
+
+        torch.set_num_threads(self.threads)
 
 
 def _fmt(v: Any, digits: int = 3) -> str:
@@ -169,6 +188,7 @@ def _save_figure(fig: Any, path: Path, dpi: int = 120) -> Path:
 
 # -- estimate -----------------------------------------------------------------------------------
 @user_errors
+@option_bundle("estimator", EstimatorOptions)
 def estimate_cmd(
     case_file: Annotated[Path, typer.Argument(metavar="CASE", help="A case file (.npz).")],
     observations: Annotated[
@@ -177,13 +197,7 @@ def estimate_cmd(
     out: Annotated[Path, typer.Option("--out", "-o", help="Estimate file (.npz) to write.")],
     seed: SeedOption = 0,
     method: MethodOption = None,
-    model: ModelOption = None,
-    k: KOption = None,
-    t: TOption = None,
-    device: DeviceOption = None,
-    dtype: DtypeOption = None,
-    params: ParamOption = None,
-    threads: ThreadsOption = None,
+    estimator: EstimatorOptions = EstimatorOptions(),
     plot: Annotated[Path | None, typer.Option("--plot", help="Also save a figure of the belief.")] = None,
     knowledge: KnowledgeOption = DEFAULT_LEVEL,
 ) -> None:
@@ -196,14 +210,12 @@ def estimate_cmd(
     """
     from dgse.estimators.registry import get_estimator
     from dgse.evaluation.evaluate import estimate_once, save_estimate
-    from dgse.presets import resolve
     from dgse.world.case import Case
 
     level = check_level(knowledge)
-    run = resolve(method, level, search=False)
+    run, kwargs = estimator.resolve(method, level)
     method = run.method
-    kwargs = {**run.estimator_options, **_estimator_kwargs(run.estimator, model, k, t, device, dtype, params)}
-    _set_threads(threads)
+    estimator.set_threads()
     check_output_file(out, "estimate file")
     if plot is not None:
         _check_figure_path(plot)
@@ -349,6 +361,7 @@ def _aggregate_table(result: dict[str, Any]) -> Table:
 
 
 @user_errors
+@option_bundle("estimator", EstimatorOptions)
 def evaluate_cmd(
     ctx: typer.Context,
     args: Annotated[
@@ -379,13 +392,7 @@ def evaluate_cmd(
     ] = None,
     restart: Annotated[bool, restart_option("estimates")] = False,
     split: Annotated[str, typer.Option("--split", help="Split of a dataset store.")] = "test",
-    model: ModelOption = None,
-    k: KOption = None,
-    t: TOption = None,
-    device: DeviceOption = None,
-    dtype: DtypeOption = None,
-    params: ParamOption = None,
-    threads: ThreadsOption = None,
+    estimator: EstimatorOptions = EstimatorOptions(),
     limit: Annotated[int | None, typer.Option("--limit", help="Only the first N cases.")] = None,
     progress: ProgressOption = True,
     knowledge: KnowledgeOption = DEFAULT_LEVEL,
@@ -403,19 +410,17 @@ def evaluate_cmd(
     from dgse.cli.common import default_output, interruptible, kept_note, resume_command, resume_note
     from dgse.evaluation.evaluate import evaluate, write_json
     from dgse.journal import count_records, journal_path
-    from dgse.presets import resolve
 
     level = check_level(knowledge)
     cases, counts = _split_positionals(args, observations)
-    run = resolve(method, level, search=False)
+    run, kwargs = estimator.resolve(method, level)
     method = run.method
-    kwargs = {**run.estimator_options, **_estimator_kwargs(run.estimator, model, k, t, device, dtype, params)}
     names = (method,) if level == DEFAULT_LEVEL else (method, level)
     out = out if out is not None else default_output("evaluate", *names)
     journal = journal_path(out)
     check_output_file(out, "JSON file")
     check_output_file(journal, "journal")
-    _set_threads(threads)
+    estimator.set_threads()
 
     def started(kept: int, total: int) -> None:
         console.print(kept_note(journal, "estimate", kept))

@@ -8,9 +8,8 @@ KEY=VALUE`` overrides (values in YAML syntax; ``model_overrides.<key>`` and
 (``--network``, ``--data``, ``--epochs``, ...).  An error names what caused
 it: the YAML file, the ``--set`` item or the option (``--batch-size 0``).
 
-Every error a user can cause (:class:`~dgse.errors.DGSEError`, or a file that
-cannot be written) prints one red line ``error: <message>`` and exits with
-status 2.
+Errors a user can cause end the command as in every ``dgse`` command
+(:mod:`dgse.cli.common`).
 """
 
 from __future__ import annotations
@@ -29,6 +28,7 @@ from dgse.cli.common import (
     check_output_file,
     console,
     interruptible,
+    path_text,
     print_interrupted,
     resume_command,
 )
@@ -36,10 +36,6 @@ from dgse.cli.common import user_errors as _user_errors
 from dgse.errors import InputDataError
 
 __all__ = ["parse_devices", "parse_set", "register", "train_cmd"]
-
-
-def _p(path: Path | str) -> str:
-    return escape(str(path))
 
 
 def parse_devices(text: str) -> int | str | list[int]:
@@ -273,14 +269,15 @@ def train_cmd(
         console.print(
             f"{what} [bold]{escape(config.model)}[/] (preset {escape(config.preset)}, base width "
             f"{mc.base_width}, depth {mc.depth}, {n_params / 1e6:.3f} M parameters) "
-            f"on [cyan]{_p(config.data)}[/]: "
+            f"on [cyan]{path_text(config.data)}[/]: "
             f"{config.epochs} epochs, batch {config.batch_size}, precision {escape(config.precision)}"
             + (", fast dev run" if config.fast_dev_run else "")
         )
         console.print(
-            f"metrics -> [cyan]{_p(out_dir / 'history.csv')}[/] and "
-            f"[cyan]{_p(out_dir / 'logs')}/version_N/metrics.csv[/]; checkpoints -> "
-            f"[cyan]{_p(out_dir / 'last.safetensors')}[/], [cyan]{_p(out_dir / 'best.safetensors')}[/]"
+            f"metrics -> [cyan]{path_text(out_dir / 'history.csv')}[/] and "
+            f"[cyan]{path_text(out_dir / 'logs')}/version_N/metrics.csv[/]; checkpoints -> "
+            f"[cyan]{path_text(out_dir / 'last.safetensors')}[/], "
+            f"[cyan]{path_text(out_dir / 'best.safetensors')}[/]"
         )
     with interruptible(lambda: _kept_run(out_dir, ctx), sigterm=False):  # Lightning handles SIGTERM
         result = train(config, resume=resume)
@@ -309,12 +306,13 @@ def train_cmd(
     )
     if result.metrics_csv is not None:
         console.print(
-            f"wrote metrics [cyan]{_p(result.metrics_csv)}[/] and [cyan]{_p(result.history_csv)}[/]"
+            f"wrote metrics [cyan]{path_text(result.metrics_csv)}[/] and "
+            f"[cyan]{path_text(result.history_csv)}[/]"
         )
     ckpts = [result.last_path] + ([result.best_path] if result.best_path is not None else [])
-    console.print("checkpoints " + ", ".join(f"[cyan]{_p(p)}[/]" for p in ckpts))
+    console.print("checkpoints " + ", ".join(f"[cyan]{path_text(p)}[/]" for p in ckpts))
     if result.export_path is not None:
-        console.print(f"exported model [cyan]{_p(result.export_path)}[/]")
+        console.print(f"exported model [cyan]{path_text(result.export_path)}[/]")
     if result.stop_reason == "max_time":
         console.print("continue with the same command and --resume")
 

@@ -14,7 +14,9 @@ import numba as nb
 __all__ = ["expansions"]
 
 
-@nb.njit(cache=True)
+# not cached: numba cannot link a generator loaded from its cache into a caller it compiles
+# afresh (the caller's cache outdated by an edit), so it is compiled with each caller
+@nb.njit
 def expansions(heap, done, free, step):  # pragma: no cover - numba
     """Settle cells in order of distance and yield each open neighbour of a settled cell.
 

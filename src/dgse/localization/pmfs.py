@@ -421,10 +421,11 @@ def _advect(
 
 
 @nb.njit(cache=True)
-def _simulate_one(
-    free, open_mask, edges_open, wx, wy, rel, res, dt, noise, n_per, min_warm, max_warm, n_rec, seed
-):  # pragma: no cover - numba
-    """Hit frequencies ``(H, W)`` of one source hypothesis (release cells ``rel`` (k, 2))."""
+def _simulate_one(world, rel, sim, seed):  # pragma: no cover - numba
+    """Hit frequencies ``(H, W)`` of one source hypothesis (release cells ``rel`` (k, 2)) in
+    ``world`` (:func:`_prepare`) with the settings ``sim`` (:func:`_settings`)."""
+    free, open_mask, edges_open, wx, wy = world
+    res, dt, noise, n_per, min_warm, max_warm, n_rec = sim
     state = np.empty(1, dtype=np.uint64)
     state[0] = np.uint64(seed) * np.uint64(0x9E3779B97F4A7C15) + np.uint64(0x632BE59BD9B4E019)
     if state[0] == 0:
@@ -466,27 +467,7 @@ def _simulate_one(
 
 @nb.njit(cache=True, parallel=True)
 def _simulate_many(
-    free,
-    open_mask,
-    edges_open,
-    wx,
-    wy,
-    rel,
-    starts,
-    counts,
-    res,
-    dt,
-    noise,
-    n_per,
-    min_warm,
-    max_warm,
-    n_rec,
-    seeds,
-    fidx,
-    ph,
-    cf,
-    beta,
-    keep_maps,
+    world, rel, starts, counts, sim, seeds, fidx, ph, cf, beta, keep_maps
 ):  # pragma: no cover - numba
     """``log L`` of many hypotheses (release cells ``rel[starts[k]:starts[k] + counts[k]]``), in parallel.
 
@@ -495,24 +476,9 @@ def _simulate_many(
     n = starts.size
     scores = np.zeros(n)
     maps = np.zeros((n if keep_maps else 0, fidx.size), dtype=np.float32)
-    W = free.shape[1]
+    W = world[0].shape[1]
     for k in nb.prange(n):
-        hm = _simulate_one(
-            free,
-            open_mask,
-            edges_open,
-            wx,
-            wy,
-            rel[starts[k] : starts[k] + counts[k]],
-            res,
-            dt,
-            noise,
-            n_per,
-            min_warm,
-            max_warm,
-            n_rec,
-            seeds[k],
-        )
+        hm = _simulate_one(world, rel[starts[k] : starts[k] + counts[k]], sim, seeds[k])
         s = 0.0
         for m in range(fidx.size):
             h = hm[fidx[m] // W, fidx[m] % W]
@@ -524,10 +490,26 @@ def _simulate_many(
 
 
 def _prepare(occupancy: np.ndarray, wind: np.ndarray, open_mask: np.ndarray | None) -> tuple[Any, ...]:
+    """The world of the filament kernels: free cells, open boundary cells, whether every edge is
+    open (no ``open_mask``), and the wind's x and y components, as contiguous arrays."""
     free = np.ascontiguousarray(np.asarray(occupancy) == 0)
     om = np.zeros(free.shape, dtype=np.bool_) if open_mask is None else np.ascontiguousarray(open_mask, bool)
     w = np.asarray(wind, dtype=np.float64)
     return free, om, open_mask is None, np.ascontiguousarray(w[0]), np.ascontiguousarray(w[1])
+
+
+def _settings(p: PMFSParams, resolution: float) -> tuple[float, float, float, int, int, int, int]:
+    """The simulation settings of the filament kernels: cell size, time step, wind noise,
+    filaments per iteration, least and most warm-up iterations, recorded iterations."""
+    return (
+        float(resolution),
+        p.dt,
+        p.noise,
+        int(p.filaments_per_iteration),
+        int(p.min_warmup),
+        int(p.max_warmup),
+        int(p.n_record),
+    )
 
 
 def simulate_hits(
@@ -551,26 +533,12 @@ def simulate_hits(
         seed: random seed.
     """
     p = params or PMFSParams()
-    free, om, edges_open, wx, wy = _prepare(occupancy, wind, open_mask)
+    world = _prepare(occupancy, wind, open_mask)
+    free = world[0]
     rel = np.ascontiguousarray(np.asarray(release_cells, dtype=np.int64).reshape(-1, 2))
     if len(rel) == 0 or not free[rel[:, 0], rel[:, 1]].all():
         raise InputDataError("release cells must be free cells (at least one)")
-    return _simulate_one(
-        free,
-        om,
-        edges_open,
-        wx,
-        wy,
-        rel,
-        float(resolution),
-        p.dt,
-        p.noise,
-        int(p.filaments_per_iteration),
-        int(p.min_warmup),
-        int(p.max_warmup),
-        int(p.n_record),
-        int(seed),
-    )
+    return _simulate_one(world, rel, _settings(p, resolution), int(seed))
 
 
 # -- quadtree ---------------------------------------------------------------------------------------
@@ -693,7 +661,8 @@ class PMFSEstimator(KnowledgeUser):
         ph = phit.reshape(-1)[fidx]
         cf = conf.reshape(-1)[fidx]
         n_sims = 0
-        free_c, om, edges_open, wx, wy = _prepare(occ, wind, open_mask)
+        world = _prepare(occ, wind, open_mask)
+        sim = _settings(p, res)
 
         def run(leaves: list[Leaf], keep_maps: bool) -> tuple[np.ndarray, np.ndarray]:
             nonlocal n_sims
@@ -702,29 +671,8 @@ class PMFSEstimator(KnowledgeUser):
             starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
             seeds = base_seed + n_sims + np.arange(len(leaves), dtype=np.int64)
             n_sims += len(leaves)
-            return _simulate_many(
-                free_c,
-                om,
-                edges_open,
-                wx,
-                wy,
-                np.ascontiguousarray(np.concatenate(rels)),
-                starts,
-                counts,
-                res,
-                p.dt,
-                p.noise,
-                int(p.filaments_per_iteration),
-                int(p.min_warmup),
-                int(p.max_warmup),
-                int(p.n_record),
-                seeds,
-                fidx,
-                ph,
-                cf,
-                p.beta,
-                keep_maps,
-            )
+            rel = np.ascontiguousarray(np.concatenate(rels))
+            return _simulate_many(world, rel, starts, counts, sim, seeds, fidx, ph, cf, p.beta, keep_maps)
 
         leaves = _initial_leaves(free, int(p.leaf_cells))
         logl = np.full(occ.shape, -np.inf)

@@ -183,6 +183,14 @@ class MappingInputs:
 def check_inputs(occupancy: np.ndarray, resolution: float, observations: Observations) -> MappingInputs:
     """Validate a map and its readings for a mapping method.
 
+    The arguments of every mapping function (:func:`~dgse.mapping.kernel.kdmv`,
+    :func:`~dgse.mapping.gmrf.ggmrf`, ...):
+
+    Args:
+        occupancy: ``(H, W)`` map, 1 solid, 0 free.
+        resolution: cell size in m.
+        observations: at least one reading, all on free cells.
+
     Raises:
         InputDataError: a map that is not 2-D or has no free cell, a bad
             resolution, something that is not :class:`Observations`, no readings,

@@ -289,9 +289,9 @@ def gabp(
     """GaBP+ gas mean and loopy-BP variance (ppm) on the free cells.
 
     Args:
-        occupancy: ``(H, W)`` map, 1 solid, 0 free.
-        resolution: cell size in m (parameters are per cell, used as given).
-        observations: at least one reading, all on free cells (wildfire order = reading order).
+        occupancy, resolution, observations: the map and its readings
+            (:func:`dgse.mapping.check_inputs`; the parameters are per cell, used as given;
+            wildfire order = reading order).
         params: :class:`GaBPParams` (reference defaults when None).
 
     Raises:

@@ -53,7 +53,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -77,6 +77,7 @@ __all__ = [
     "free_graph",
     "gas_precision",
     "ggmrf",
+    "gmrf_info",
     "gmrf_inputs",
     "selected_inverse_diag",
 ]
@@ -434,6 +435,36 @@ def gmrf_inputs(
     return inp, scale, graph, graph.index[inp.cells[:, 0], inp.cells[:, 1]]
 
 
+def gmrf_info(
+    method: str,
+    variance_kind: str,
+    gas_scale: float,
+    params: dict[str, Any],
+    details: dict[str, Any],
+    seconds: tuple[float, float],
+    variance_info: dict[str, Any],
+) -> dict[str, Any]:
+    """The ``info`` of a GMRF map: its method and variance, the ``gas_scale`` (ppm per unit)
+    and ``params`` it used, the method's ``details``, the solve's seconds, the variance
+    computation's ``variance_info``, and the seconds of the whole map.
+
+    ``seconds``: the map's start (a :func:`time.perf_counter` reading) and the solve's seconds.
+    """
+    t0, t_solve = seconds
+    return {
+        "method": method,
+        "variance_kind": variance_kind,
+        "nll_comparable": True,
+        "obstacle_aware": True,
+        "gas_scale": gas_scale,
+        "params": params,
+        **details,
+        "solve_seconds": t_solve,
+        **variance_info,
+        "map_seconds": time.perf_counter() - t0,
+    }
+
+
 def ggmrf(
     occupancy: np.ndarray,
     resolution: float,
@@ -445,9 +476,8 @@ def ggmrf(
     """G-GMRF gas mean and marginal variance (ppm) on the free cells.
 
     Args:
-        occupancy: ``(H, W)`` map, 1 solid, 0 free.
-        resolution: cell size in m (parameters are per cell, used as given).
-        observations: at least one reading, all on free cells.
+        occupancy, resolution, observations: the map and its readings
+            (:func:`dgse.mapping.check_inputs`; the parameters are per cell, used as given).
         params: :class:`GGMRFParams` (gdm defaults when None).
         variance: one of :data:`VARIANCE_METHODS`.
         n_samples: draws for ``variance="sampling"``.
@@ -463,24 +493,21 @@ def ggmrf(
     mean = fac.solve(b)
     t_solve = time.perf_counter() - t0
     var, vinfo = fac.inverse_diagonal(variance, n_samples)
-    info: dict[str, Any] = {
-        "method": "ggmrf",
-        "variance_kind": "marginal posterior variance diag(H^-1)",
-        "nll_comparable": True,
-        "obstacle_aware": True,
-        "gas_scale": scale,
-        "params": {"sigma_z": p.sigma_z, "sigma_r": p.sigma_r, "sigma_b": p.sigma_b},
-        "n_free": graph.n,
-        "n_edges": int(graph.edge_a.size),
-        "solve_seconds": t_solve,
-        **vinfo,
-        "map_seconds": time.perf_counter() - t0,
-    }
+    info = gmrf_info(
+        "ggmrf",
+        "marginal posterior variance diag(H^-1)",
+        scale,
+        {"sigma_z": p.sigma_z, "sigma_r": p.sigma_r, "sigma_b": p.sigma_b},
+        {"n_free": graph.n, "n_edges": int(graph.edge_a.size)},
+        (t0, t_solve),
+        vinfo,
+    )
     return GasMap(graph.scatter(mean * scale), graph.scatter(np.maximum(var, 0.0) * scale**2), info=info)
 
 
 class GMRFEstimator(MappingEstimator):
-    """The Estimator side shared by the GMRF methods (``params_class``, ``name`` set by each).
+    """The Estimator side shared by the GMRF methods (``name``, ``params_class`` and the map
+    function ``solve`` set by each).
 
     Args:
         tuning: optional tuning file (or mapping) whose ``name`` entry overrides the defaults.
@@ -490,6 +517,8 @@ class GMRFEstimator(MappingEstimator):
     """
 
     params_class: type
+    #: the method's map function, ``solve(occupancy, resolution, observations, params, variance, n_samples)``
+    solve: Callable[..., GasMap]
 
     def __init__(
         self,
@@ -503,12 +532,13 @@ class GMRFEstimator(MappingEstimator):
         self.variance = variance
         self.n_samples = int(n_samples)
 
+    def map(self, occupancy: np.ndarray, resolution: float, observations: Observations) -> GasMap:
+        return self.solve(occupancy, resolution, observations, self.params, self.variance, self.n_samples)
+
 
 class GGMRF(GMRFEstimator):
     """G-GMRF behind the Estimator protocol (registry name ``"ggmrf"``)."""
 
     name = "ggmrf"
     params_class = GGMRFParams
-
-    def map(self, occupancy: np.ndarray, resolution: float, observations: Observations) -> GasMap:
-        return ggmrf(occupancy, resolution, observations, self.params, self.variance, self.n_samples)
+    solve = staticmethod(ggmrf)

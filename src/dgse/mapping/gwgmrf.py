@@ -63,14 +63,13 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
 from dgse.errors import InputDataError
 from dgse.mapping import GasMap, positive
-from dgse.mapping.gmrf import FreeGraph, GMRFEstimator, SparseSPDFactor, gmrf_inputs
+from dgse.mapping.gmrf import FreeGraph, GMRFEstimator, SparseSPDFactor, gmrf_info, gmrf_inputs
 from dgse.sensing.sensors import Observations
 
 __all__ = ["GWGMRF", "GWGMRFParams", "gwgmrf"]
@@ -290,15 +289,13 @@ def gwgmrf(
     """GW-GMRF: gas mean/variance (ppm) and wind mean/variance (m/s) on the free cells.
 
     Args:
-        occupancy: ``(H, W)`` map, 1 solid, 0 free.
-        resolution: cell size in m (parameters are per cell, used as given).
-        observations: at least one reading (gas and wind), all on free cells.
+        occupancy, resolution, observations: the map and its readings, gas and wind
+            (:func:`dgse.mapping.check_inputs`; the parameters are per cell, used as given).
         params: :class:`GWGMRFParams` (gdm defaults when None).
-        variance: one of :data:`dgse.mapping.gmrf.VARIANCE_METHODS`.
-        n_samples: draws for ``variance="sampling"``.
+        variance, n_samples: the marginal variances' method, as in :func:`~dgse.mapping.gmrf.ggmrf`.
 
     Raises:
-        InputDataError: see :func:`dgse.mapping.check_inputs`, or a bad ``variance``.
+        InputDataError: as :func:`~dgse.mapping.gmrf.ggmrf`.
     """
     t0 = time.perf_counter()
     p = params or GWGMRFParams()
@@ -328,21 +325,15 @@ def gwgmrf(
     gas = np.maximum(x[:n], 0.0) * scale
     wind_mean = np.stack([graph.scatter(x[n : 2 * n]), graph.scatter(x[2 * n :])])
     wind_var = np.stack([graph.scatter(var[n : 2 * n]), graph.scatter(var[2 * n :])])
-    info: dict[str, Any] = {
-        "method": "gwgmrf",
-        "variance_kind": "marginal variance, gas block of the inverse Gauss-Newton Hessian",
-        "nll_comparable": True,
-        "obstacle_aware": True,
-        "gas_scale": scale,
-        "params": {k: getattr(p, k) for k in GWGMRFParams.__dataclass_fields__},
-        "iterations": len(steps),
-        "converged": converged,
-        "step_inf_norms": steps,
-        "n_free": n,
-        "solve_seconds": t_solve,
-        **vinfo,
-        "map_seconds": time.perf_counter() - t0,
-    }
+    info = gmrf_info(
+        "gwgmrf",
+        "marginal variance, gas block of the inverse Gauss-Newton Hessian",
+        scale,
+        {k: getattr(p, k) for k in GWGMRFParams.__dataclass_fields__},
+        {"iterations": len(steps), "converged": converged, "step_inf_norms": steps, "n_free": n},
+        (t0, t_solve),
+        vinfo,
+    )
     return GasMap(graph.scatter(gas), graph.scatter(var[:n] * scale**2), wind_mean, wind_var, info)
 
 
@@ -354,6 +345,4 @@ class GWGMRF(GMRFEstimator):
 
     name = "gwgmrf"
     params_class = GWGMRFParams
-
-    def map(self, occupancy: np.ndarray, resolution: float, observations: Observations) -> GasMap:
-        return gwgmrf(occupancy, resolution, observations, self.params, self.variance, self.n_samples)
+    solve = staticmethod(gwgmrf)

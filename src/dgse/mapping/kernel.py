@@ -175,9 +175,7 @@ def kdmv(
     """Kernel DM+V: gas mean and DM+V variance (ppm) with an isotropic kernel (wind readings unused).
 
     Args:
-        occupancy: ``(H, W)`` map, 1 solid, 0 free.
-        resolution: cell size in m.
-        observations: at least one reading, all on free cells.
+        occupancy, resolution, observations: the map and its readings (:func:`dgse.mapping.check_inputs`).
         params: :class:`KernelParams` (gdm defaults when None; ``gamma`` unused).
 
     Raises:

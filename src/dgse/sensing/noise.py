@@ -20,7 +20,7 @@ true values are never modified (readings are new arrays).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
 
@@ -54,7 +54,7 @@ class NoiseParams:
     sigma_a_deg: float
 
     def __post_init__(self) -> None:
-        for name in ("alpha_g", "sigma_env", "alpha_w", "sigma_a_deg"):
+        for name in (f.name for f in fields(self)):
             v = float(getattr(self, name))
             if not (math.isfinite(v) and v >= 0):
                 raise InputDataError(f"noise parameter {name} must be finite and >= 0, got {v}")
@@ -70,12 +70,7 @@ class NoiseParams:
         return math.radians(self.sigma_a_deg)
 
     def to_dict(self) -> dict[str, float]:
-        return {
-            "alpha_g": self.alpha_g,
-            "sigma_env": self.sigma_env,
-            "alpha_w": self.alpha_w,
-            "sigma_a_deg": self.sigma_a_deg,
-        }
+        return asdict(self)
 
 
 def _check_range(name: str, r: tuple[float, float]) -> tuple[float, float]:
