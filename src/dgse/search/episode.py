@@ -58,7 +58,7 @@ from dgse.belief.belief import Belief
 from dgse.belief.estimator import Estimator, StreamingEstimator
 from dgse.belief.knowledge import DEFAULT_LEVEL, Knowledge
 from dgse.errors import InputDataError
-from dgse.planning.paths import Cell, graph_for
+from dgse.planning.paths import Cell, FreeSpaceGraph, graph_for
 from dgse.planning.planners import (
     Planner,
     SearchHistory,
@@ -67,15 +67,18 @@ from dgse.planning.planners import (
 from dgse.presets import PROTOCOL
 from dgse.search.robot import Robot, random_start_cell
 from dgse.sensing.noise import NoiseModel, NoiseParams
+from dgse.sensing.sensors import Observations
 from dgse.world.case import Case
 
 __all__ = [
     "REASONS",
     "EpisodeResult",
     "StepCallback",
+    "StepDecision",
     "StepRecord",
     "episode_streams",
     "run_episode",
+    "search_step",
 ]
 
 #: Why an episode ended: the planner's termination test, its deadline (``deadline.margin_s``),
@@ -303,6 +306,83 @@ def _free_centroid(case: Case) -> tuple[float, float]:
     return (float((j + 0.5).mean() * res), float((i + 0.5).mean() * res))
 
 
+@dataclass(eq=False)
+class StepDecision:
+    """What one search step decided (:func:`search_step`).
+
+    Attributes:
+        belief: the belief given every reading so far.
+        stop: the planner's stop test passed (the search ends here).
+        goal: the next cell, or None (stopped, or the planner has no goal: the search ends).
+        held: the stop test passed but the stop waits (:attr:`StepRecord.held`).
+        reason: why the search ends at this step (:data:`REASONS`: ``"converged"``,
+            ``"deadline"``, ``"planner_stop"``), or None when it goes on to ``goal``.
+        preprocessing_s, inference_s, planning_s: the step's computation time split, s.
+    """
+
+    belief: Belief
+    stop: bool
+    goal: Cell | None
+    held: bool
+    reason: str | None
+    preprocessing_s: float
+    inference_s: float
+    planning_s: float
+
+
+def search_step(
+    stream: StreamingEstimator,
+    planner: Planner,
+    graph: FreeSpaceGraph,
+    history: SearchHistory,
+    reading: Observations,
+    robot_cell: Cell,
+    *,
+    excluded: Sequence[Cell] = (),
+) -> StepDecision:
+    """One step of the search loop after a reading: estimate, stop test, next goal.
+
+    The loop that owns the robot (:func:`run_episode`, the ROS node of :mod:`dgse.ros`) sets
+    ``history``'s trajectory, clock, distance and step count first; this adds ``reading``
+    to ``stream``, sets ``history.observations`` and asks ``planner``.
+
+    Args:
+        excluded: cells the goal may not be (e.g. goals a navigation stack refused): they
+            count as unreachable for the planner.
+    """
+    t0 = time.perf_counter()
+    stream.add(reading)
+    t1 = time.perf_counter()
+    belief = stream.belief
+    t2 = time.perf_counter()
+    pre, inf = t1 - t0, t2 - t1
+    timings = belief.info.get("timings")
+    if isinstance(timings, dict) and isinstance(timings.get("preprocessing"), int | float):
+        extra = min(max(float(timings["preprocessing"]), 0.0), inf)
+        pre, inf = pre + extra, inf - extra
+    history.observations = stream.observations
+
+    t3 = time.perf_counter()
+    stop = bool(planner.should_stop(belief, history))
+    goal: Cell | None = None
+    if not stop:
+        distances = graph.distances_from(robot_cell)
+        if len(excluded):
+            distances = distances.copy()
+            for i, j in excluded:
+                distances[i, j] = np.inf
+        raw = planner.next_goal(belief, robot_cell, distances, history)
+        goal = None if raw is None else graph.check_cell(raw, f"goal of planner {planner.name!r}")
+    held = planner.stop_held(history)
+    reason: str | None = None
+    if stop:
+        reason = "deadline" if planner.deadline_reached(history) else "converged"
+    elif goal is None:
+        reason = "planner_stop"
+    plan = time.perf_counter() - t3
+    return StepDecision(belief, stop, goal, held, reason, pre, inf, plan)
+
+
 def run_episode(
     case: Case,
     estimator: Estimator,
@@ -391,32 +471,12 @@ def run_episode(
 
     while robot.clock + robot.dwell <= time_limit:
         obs = robot.sense()
-        t0 = time.perf_counter()
-        stream.add(obs)
-        t1 = time.perf_counter()
-        belief = stream.belief
-        t2 = time.perf_counter()
-        pre, inf = t1 - t0, t2 - t1
-        timings = belief.info.get("timings")
-        if isinstance(timings, dict) and isinstance(timings.get("preprocessing"), int | float):
-            extra = min(max(float(timings["preprocessing"]), 0.0), inf)
-            pre, inf = pre + extra, inf - extra
-
-        history.observations = stream.observations
         history.trajectory = robot.trajectory_cells
         history.time_s = robot.clock
         history.distance_m = robot.distance_m
         history.step = len(steps) + 1
-
-        t3 = time.perf_counter()
-        stop = bool(planner.should_stop(belief, history))
-        goal: Cell | None = None
-        if not stop:
-            distances = graph.distances_from(robot.cell)
-            raw = planner.next_goal(belief, robot.cell, distances, history)
-            goal = None if raw is None else graph.check_cell(raw, f"goal of planner {planner.name!r}")
-        held = planner.stop_held(history)
-        plan = time.perf_counter() - t3
+        decision = search_step(stream, planner, graph, history, obs, robot.cell)
+        belief, goal = decision.belief, decision.goal
 
         est = belief.source_estimate()
         rec = StepRecord(
@@ -429,11 +489,11 @@ def run_episode(
             normalized_entropy=belief.normalized_entropy(),
             estimate_xy=est,
             error_m=math.hypot(est[0] - source_xy[0], est[1] - source_xy[1]),
-            preprocessing_s=pre,
-            inference_s=inf,
-            planning_s=plan,
+            preprocessing_s=decision.preprocessing_s,
+            inference_s=decision.inference_s,
+            planning_s=decision.planning_s,
             goal=goal,
-            held=held,
+            held=decision.held,
         )
         if record:
             rec.source_probs = _block_reduce(belief.source_probs, factor, "sum")
@@ -447,13 +507,10 @@ def run_episode(
 
         if include_compute_time:
             robot.wait(rec.compute_s, until=time_limit)
-        if stop:
-            reason = "deadline" if planner.deadline_reached(history) else "converged"
+        if decision.reason is not None:
+            reason = decision.reason
             break
-        if goal is None:
-            reason = "planner_stop"
-            break
-        if robot.clock >= time_limit:
+        if robot.clock >= time_limit or goal is None:
             break
         robot.move_to(goal, until=time_limit)
 
