@@ -45,6 +45,7 @@ COMMANDS = [
     "export-onnx",
     "train",
     "plume",
+    "ros",
 ]
 SOURCE = ("0.55", "0.55")  # free cell of the tiny layout
 WALL = ("1.45", "0.55")  # inside its wall

@@ -16,7 +16,8 @@ Commands (``dgse COMMAND --help`` for each):
 * ``plume``: time-varying filament readings of a case as ``frames`` (:mod:`dgse.cli.plume`);
 * ``train``: train DGSE-O/P/S on a dataset store (:mod:`dgse.cli.train`);
 * ``search``: active search episodes with any estimator and planner (:mod:`dgse.cli.search`);
-* ``bench``, ``report``: the paper's experiments as suites, and their HTML report (:mod:`dgse.cli.bench`).
+* ``bench``, ``report``: the paper's experiments as suites, and their HTML report (:mod:`dgse.cli.bench`);
+* ``ros run``, ``ros sim``, ``ros replay``: the search on a ROS 2 robot (:mod:`dgse.cli.ros`).
 
 Every error a user can cause (:class:`~dgse.errors.DGSEError`, a file that
 cannot be written, or a command line that does not parse) is printed as one
@@ -588,6 +589,7 @@ COMMAND_MODULES: dict[str, tuple[str, ...]] = {
     "dgse.cli.search": ("search",),
     "dgse.cli.train": ("train",),
     "dgse.cli.bench": ("bench", "report"),
+    "dgse.cli.ros": ("ros",),
 }
 #: The commands this module defines itself.
 OWN_COMMANDS = frozenset(c.name for c in app.registered_commands)

@@ -199,6 +199,23 @@ class MethodSetup:
         ss = trial_seed(seed, case_name, trial) if case_name else np.random.SeedSequence(seed)
         return cls(run, est, planner_seed=episode_streams(ss)[2], **kw)
 
+    @classmethod
+    def from_parameters(cls, p: Mapping[str, Any]) -> MethodSetup:
+        """The setup named by the node's parameters (:data:`dgse.ros.nodes.RUN_PARAMETERS`'s
+        ``method``, ``knowledge``, ``knowledge_file``, ``seed``, ``case_name``, ``trial``,
+        ``resolution``, ``dwell``, ``time_limit``; empty strings and 0 mean unset)."""
+        return cls.create(
+            p.get("method") or None,
+            p.get("knowledge") or DEFAULT_LEVEL,
+            seed=int(p.get("seed", 0)),
+            case_name=p.get("case_name") or None,
+            trial=int(p.get("trial", 0)),
+            knowledge_file=Path(p["knowledge_file"]) if p.get("knowledge_file") else None,
+            resolution=float(p.get("resolution") or 0.0) or None,
+            dwell=float(p.get("dwell", PROTOCOL.dwell)),
+            time_limit=float(p.get("time_limit", PROTOCOL.time_limit)),
+        )
+
     def knowledge(self, occupancy: np.ndarray, resolution: float) -> Knowledge:
         """What the estimator is told on this map at the method's level."""
         level = self.method.level
@@ -324,6 +341,7 @@ class SearchCore:
         self.xy: tuple[float, float] | None = None
         self.target: Cell | None = None
         self.arrived_at: float | None = None
+        self.entered_at: float | None = None
         self.t_start: float | None = None
         self.last_time: float | None = None
         self.distance_m = 0.0
@@ -440,6 +458,7 @@ class SearchCore:
         if cell != self.cell:
             self.trajectory.append(cell)
             self.cell = cell
+            self.entered_at = t
             if cell != self.target:
                 self.arrived_at = None
         if cell == self.target and self.arrived_at is None:
@@ -459,7 +478,7 @@ class SearchCore:
             self.log("warning", f"goal ({x:.2f}, {y:.2f}) m lies outside the map: ignored")
             return
         self.target = cell
-        self.arrived_at = self.last_time if cell == self.cell else None
+        self.arrived_at = self.entered_at if cell == self.cell else None
 
     def add_gas(self, ppm: float, t: float) -> Decision | None:
         """A gas reading ``ppm`` at time ``t`` s: the decision it made, if the search took it."""

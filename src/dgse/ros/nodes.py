@@ -36,7 +36,16 @@ from dgse.ros.core import Decision, MapGrid, MethodSetup, SearchCore
 from dgse.ros.messages import gas_reading, map_grid, pose_xy, scaled_grid, wind_reading
 from dgse.ros.sim import SimEvent, SimRobot
 
-__all__ = ["RUN_PARAMETERS", "SIM_PARAMETERS", "SearchNode", "SimNode", "olfaction_types", "spin_until"]
+__all__ = [
+    "RUN_PARAMETERS",
+    "SIM_PARAMETERS",
+    "SearchNode",
+    "SimNode",
+    "olfaction_types",
+    "run_search",
+    "run_sim",
+    "spin_until",
+]
 
 #: The map and the status: the last one kept for late subscribers.
 LATCHED = QoSProfile(
@@ -162,17 +171,7 @@ class SearchNode(Node):
     ):
         super().__init__(name, **kw)
         p = self.params = _declare(self, RUN_PARAMETERS, parameters or {})
-        self.setup = MethodSetup.create(
-            p["method"] or None,
-            p["knowledge"],
-            seed=int(p["seed"]),
-            case_name=p["case_name"] or None,
-            trial=int(p["trial"]),
-            knowledge_file=Path(p["knowledge_file"]) if p["knowledge_file"] else None,
-            resolution=float(p["resolution"]) or None,
-            dwell=float(p["dwell"]),
-            time_limit=float(p["time_limit"]),
-        )
+        self.setup = MethodSetup.from_parameters(p)
         self.messages: list[tuple[str, str]] = []
         self.core = SearchCore(
             self.setup,
@@ -565,3 +564,65 @@ def spin_until(executor: Any, done: Any, timeout_s: float) -> bool:
             return False
         executor.spin_once(timeout_sec=0.05)
     return True
+
+
+def _spin(nodes: list[Node], done: Any, timeout_s: float | None) -> bool:
+    from rclpy.executors import SingleThreadedExecutor
+
+    executor = SingleThreadedExecutor()
+    for n in nodes:
+        executor.add_node(n)
+    try:
+        return spin_until(executor, done, math.inf if timeout_s is None else timeout_s)
+    finally:
+        executor.shutdown()
+
+
+def run_search(
+    parameters: dict[str, Any],
+    *,
+    ros_args: list[str] | tuple[str, ...] = (),
+    sim_time: bool = False,
+    stats: str | Path | None = None,
+    exit_on_stop: bool = False,
+    timeout_s: float | None = None,
+) -> dict[str, Any]:
+    """``dgse ros run``: spin a :class:`SearchNode` (until the search stops with ``exit_on_stop``,
+    else until Ctrl-C or ``timeout_s``); returns its :meth:`~SearchNode.stats`."""
+    from rclpy.parameter import Parameter
+
+    rclpy.init(args=["dgse", *ros_args])
+    node = None
+    try:
+        overrides = [Parameter("use_sim_time", value=True)] if sim_time else []
+        node = SearchNode(parameters=parameters, stats=stats, parameter_overrides=overrides)
+        _spin([node], lambda: exit_on_stop and node.core.stopped, timeout_s)
+        return node.stats()
+    finally:
+        if node is not None:
+            node.write_stats()
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+def run_sim(
+    parameters: dict[str, Any],
+    *,
+    ros_args: list[str] | tuple[str, ...] = (),
+    exit_on_stop: bool = False,
+    timeout_s: float | None = None,
+) -> dict[str, Any]:
+    """``dgse ros sim``: spin a :class:`SimNode` (until the search says it stopped with
+    ``exit_on_stop``); returns what it did."""
+    rclpy.init(args=["dgse", *ros_args])
+    node = None
+    try:
+        node = SimNode(parameters=parameters)
+        _spin([node], lambda: exit_on_stop and node.done, timeout_s)
+        r = node.robot.robot
+        return {"goals": node.goals, "start": list(r.start), "clock_s": r.clock, "distance_m": r.distance_m,
+                "stopped": node.done}  # fmt: skip
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()

@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib.animation import PillowWriter
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
@@ -20,12 +22,13 @@ from matplotlib.lines import Line2D
 
 from dgse.belief.belief import Belief
 from dgse.errors import InputDataError
+from dgse.files import atomic_path
 from dgse.sensing.sensors import Observations
 from dgse.viz.case import SOURCE_STYLE as _CASE_SOURCE_STYLE
 from dgse.viz.case import _style_map_axes, field_image, log_ppm_ticks, wind_arrows
 from dgse.world.case import Case
 
-__all__ = ["plot_belief"]
+__all__ = ["animate_beliefs", "plot_belief"]
 
 ESTIMATE_STYLE: dict[str, Any] = {"marker": "X", "ms": 11, "mfc": "white", "mec": "black", "mew": 1.0}
 SOURCE_STYLE: dict[str, Any] = dict(_CASE_SOURCE_STYLE)
@@ -280,3 +283,65 @@ def plot_belief(belief: Belief, case: Case | None = None, observations: Observat
         parts.append(case.name)
     fig.suptitle(", ".join(parts), fontsize=11)
     return fig
+
+
+def animate_beliefs(
+    source_probs: np.ndarray,
+    occupancy: np.ndarray,
+    resolution: float,
+    cells: np.ndarray,
+    path: str | Path,
+    *,
+    fps: float = 2.0,
+    dpi: int = 80,
+) -> Path:
+    """A GIF of a sequence of source posteriors: frame ``k`` shows ``source_probs[k]`` with the
+    readings ``cells[:k + 1]`` (the newest ringed) and the belief's mean (white X).
+
+    Args:
+        source_probs: ``(n, H, W)`` one posterior per reading.
+        occupancy: ``(H, W)`` the map, 1 solid.
+        resolution: cell size, m.
+        cells: ``(n, 2)`` the cell of each reading.
+        path: the GIF to write (atomically, :func:`dgse.files.atomic_path`).
+
+    Raises:
+        InputDataError: shapes that do not agree, or no frame.
+    """
+    probs = np.asarray(source_probs, dtype=np.float64)
+    occ = np.asarray(occupancy)
+    cells = np.asarray(cells, dtype=np.int64).reshape(-1, 2)
+    if probs.ndim != 3 or probs.shape[1:] != occ.shape or len(probs) != len(cells) or not len(probs):
+        raise InputDataError(
+            f"posteriors {probs.shape}, map {occ.shape} and {len(cells)} readings do not make an animation"
+        )
+    H, W = occ.shape
+    extent = (0.0, W * resolution, 0.0, H * resolution)
+    solid = occ != 0
+    fig = Figure(figsize=(5.0, 5.0 * H / W + 0.6))
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    top = float(probs[:, ~solid].max()) if (~solid).any() else 1.0
+    im = field_image(ax, probs[0], solid, extent, "magma", 0.0, max(top, 1e-12))
+    fig.colorbar(im, ax=ax, shrink=0.85, pad=0.02).set_label("source probability", fontsize=8)
+    xy = (cells[:, ::-1] + 0.5) * resolution
+    (trail,) = ax.plot([], [], "o-", color="cyan", ms=3, lw=0.8)
+    (newest,) = ax.plot([], [], "o", mfc="none", mec="white", ms=9)
+    (mean,) = ax.plot([], [], "x", color="white", ms=9, mew=2)
+    _style_map_axes(ax, "", extent[1], extent[3])
+    ii, jj = np.mgrid[0:H, 0:W]
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    writer = PillowWriter(fps=fps)
+    with atomic_path(path) as tmp, writer.saving(fig, str(tmp), dpi):
+        for k in range(len(probs)):
+            p = probs[k]
+            im.set_data(np.ma.masked_where(solid, p))
+            trail.set_data(xy[: k + 1, 0], xy[: k + 1, 1])
+            newest.set_data(xy[k : k + 1, 0], xy[k : k + 1, 1])
+            total = p.sum() or 1.0
+            mean.set_data([float(((jj + 0.5) * p).sum() / total * resolution)],
+                          [float(((ii + 0.5) * p).sum() / total * resolution)])  # fmt: skip
+            ax.set_title(f"source posterior after reading {k + 1} of {len(probs)}", fontsize=9)
+            writer.grab_frame()
+    return path
