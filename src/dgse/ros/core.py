@@ -13,7 +13,8 @@ Python (the node of :mod:`dgse.ros.nodes` only converts messages and publishes):
 * **readings**: a gas reading (ppm) pairs with the latest wind reading (m/s, map frame);
   the pair's time is the older of the two. The search takes a reading once the robot has
   been at its goal for the dwell time (:attr:`SearchProtocol.dwell`): the first pair
-  whose time is at least the arrival plus the dwell. Readings at other times are not used;
+  whose time is at least the arrival plus the dwell (a gas reading that comes before
+  its wind waits for it). Readings at other times are not used;
 * **decision**: the reading goes through :func:`dgse.search.episode.search_step` (the
   same estimator, stop test and planner as ``dgse search``), which gives the next goal or
   the stop and its reason (:data:`dgse.search.episode.REASONS`); a goal the navigation
@@ -347,6 +348,7 @@ class SearchCore:
         self.distance_m = 0.0
         self.trajectory: list[Cell] = []
         self.wind: tuple[float, float, float] | None = None
+        self.pending: tuple[float, float] | None = None
         self.rejected: list[Cell] = []
         self.reason: str | None = None
         self.declared_xy: tuple[float, float] | None = None
@@ -459,17 +461,24 @@ class SearchCore:
             self.trajectory.append(cell)
             self.cell = cell
             self.entered_at = t
+            self.pending = None
             if cell != self.target:
                 self.arrived_at = None
         if cell == self.target and self.arrived_at is None:
             self.arrived_at = t
 
-    def set_wind(self, u: float, v: float, t: float) -> None:
-        """A wind reading ``(u, v)`` m/s in the map frame at time ``t`` s."""
+    def set_wind(self, u: float, v: float, t: float) -> Decision | None:
+        """A wind reading ``(u, v)`` m/s in the map frame at time ``t`` s: the decision it made
+        with a gas reading that waited for it, if any."""
         if not (math.isfinite(u) and math.isfinite(v)):
             self.log("warning", f"a non-finite wind reading ({u}, {v}) m/s: ignored")
-            return
+            return None
         self.wind = (float(u), float(v), float(t))
+        if self.pending is None:
+            return None
+        ppm, t_gas = self.pending
+        self.pending = None
+        return self.add_gas(ppm, t_gas)
 
     def set_goal(self, x: float, y: float) -> None:
         """The goal the robot was sent to (``follow_goals``: a recorded run's goal message)."""
@@ -490,18 +499,21 @@ class SearchCore:
             return None
         if self.stopped:
             return None
-        if self.wind is None:
-            self.log("warning", "gas reading before any wind reading: ignored")
-            return None
         if self.cell is None or self.t_start is None:
             self.log("warning", "gas reading before any pose: ignored")
             return None
-        u, v, t_wind = self.wind
-        t_read = min(float(t), t_wind)
         if self.target != self.cell or self.arrived_at is None:
             return None
-        if t_read + TIME_TOLERANCE_S < self.arrived_at + self.setup.dwell:
+        due = self.arrived_at + self.setup.dwell - TIME_TOLERANCE_S
+        if t < due:
             return None
+        if self.wind is None or self.wind[2] < due:  # its wind reading has not come yet
+            if self.wind is None:
+                self.log("warning", "gas reading before any wind reading: waiting for one")
+            self.pending = (float(ppm), float(t))
+            return None
+        u, v, t_wind = self.wind
+        t_read = min(float(t), t_wind)
         if self.last_time is not None and t_read <= self.last_time:
             return None
         return self._take(float(ppm), (u, v), t_read)

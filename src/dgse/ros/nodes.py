@@ -224,8 +224,11 @@ class SearchNode(Node):
         self.core.set_pose(x, y, self._now() if t is None else t)
 
     def _on_wind(self, msg: Any) -> None:
+        arrived = time.perf_counter()
         u, v, t = wind_reading(msg)
-        self.core.set_wind(u, v, self._now() if t is None else t)
+        decision = self._step(lambda: self.core.set_wind(u, v, self._now() if t is None else t))
+        if decision is not None:
+            self._publish(decision, arrived)
 
     def _on_gas(self, msg: Any) -> None:
         arrived = time.perf_counter()
@@ -234,13 +237,16 @@ class SearchNode(Node):
         except InputDataError as e:
             self._log("warning", f"gas reading refused: {e}")
             return
-        try:
-            decision = self.core.add_gas(ppm, self._now() if t is None else t)
-        except DGSEError as e:  # an estimator or planner refusing this input: logged, the node goes on
-            self._log("error", f"search step failed: {e}")
-            return
+        decision = self._step(lambda: self.core.add_gas(ppm, self._now() if t is None else t))
         if decision is not None:
             self._publish(decision, arrived)
+
+    def _step(self, step: Any) -> Decision | None:
+        try:
+            return step()
+        except DGSEError as e:  # an estimator or planner refusing this input: logged, the node goes on
+            self._log("error", f"search step failed: {e}")
+            return None
 
     def _tick(self) -> None:
         if self.core.check_time(self._now()):

@@ -141,7 +141,7 @@ def _write(core: SearchCore, out_dir: Path, figures: bool) -> dict[str, str]:
     out_dir.mkdir(parents=True, exist_ok=True)
     ds = core.decisions
     arrays: dict[str, np.ndarray] = {
-        "source_probs": np.stack([d.belief.source_probs for d in ds]).astype(np.float32),
+        "source_probs": np.stack([d.belief.source_probs for d in ds]),
         "cells": np.array([d.cell for d in ds], np.int64),
         "gas": np.array([d.gas for d in ds]),
         "wind": np.array([d.wind for d in ds]),
