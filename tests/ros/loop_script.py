@@ -42,7 +42,12 @@ def main(case: str, out: str, method: str, seed: int) -> None:
                     "min_start_distance": 1.0, "message_types": "standard"},
     )  # fmt: skip
     run = SearchNode(
-        parameters={"method": method, "seed": seed, "case_name": Path(case).stem, "message_types": "standard"},
+        parameters={
+            "method": method,
+            "seed": seed,
+            "case_name": Path(case).stem,
+            "message_types": "standard",
+        },
         stats=out_dir / "stats.json",
         parameter_overrides=sim_time,
     )
