@@ -153,3 +153,18 @@ def test_a_knowledge_file_must_fit_the_map(tmp_path):
     assert told.level == "wind" and told.wind.shape == (2, 20, 30)
     with pytest.raises(InputDataError, match="robot's map"):
         setup.knowledge(np.zeros((10, 10), np.uint8), case.resolution)
+
+
+def test_the_animation_has_a_frame_per_reading(tmp_path):
+    from PIL import Image
+
+    from dgse.viz.belief import animate_beliefs
+
+    occ = solved_two_rooms().occupancy
+    probs = np.stack([np.where(occ == 0, 1.0 + k * np.eye(20, 30), 0.0) for k in range(3)])
+    path = animate_beliefs(probs / probs.sum(axis=(1, 2), keepdims=True), occ, 0.1, [(5, 5), (6, 6), (7, 7)],
+                           tmp_path / "a.gif")  # fmt: skip
+    with Image.open(path) as im:
+        assert im.n_frames == 3 and im.size[0] > 100
+    with pytest.raises(InputDataError, match="do not make an animation"):
+        animate_beliefs(probs, occ, 0.1, [(5, 5)], tmp_path / "b.gif")

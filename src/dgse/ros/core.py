@@ -539,7 +539,7 @@ class SearchCore:
             belief = self.stream.belief
             return self._record(ppm, wind, clock, belief, None, None, time.perf_counter() - t0, False)
         step = search_step(self.stream, self.planner, self.graph, h, reading, self.cell)
-        compute = step.preprocessing_s + step.inference_s + step.planning_s
+        compute = step.compute_s
         return self._record(ppm, wind, clock, step.belief, step.goal, step.reason, compute, step.held)
 
     def _record(
@@ -601,7 +601,7 @@ class SearchCore:
             excluded=self.rejected,
         )  # fmt: skip
         reason = step.reason
-        compute = step.preprocessing_s + step.inference_s + step.planning_s
+        compute = step.compute_s
         self.decisions.pop()
         return self._record(
             last.gas, last.wind, last.time_s, step.belief, step.goal, reason, compute, step.held

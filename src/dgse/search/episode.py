@@ -329,6 +329,11 @@ class StepDecision:
     inference_s: float
     planning_s: float
 
+    @property
+    def compute_s(self) -> float:
+        """The step's computation time: preprocessing + inference + planning, s."""
+        return self.preprocessing_s + self.inference_s + self.planning_s
+
 
 def search_step(
     stream: StreamingEstimator,
