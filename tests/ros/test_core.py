@@ -168,3 +168,17 @@ def test_the_animation_has_a_frame_per_reading(tmp_path):
         assert im.n_frames == 3 and im.size[0] > 100
     with pytest.raises(InputDataError, match="do not make an animation"):
         animate_beliefs(probs, occ, 0.1, [(5, 5)], tmp_path / "b.gif")
+
+
+def test_the_time_limit_ends_the_search_on_the_messages_clock():
+    case = solved_two_rooms()
+    logged: list[tuple[str, str]] = []
+    core = SearchCore(_setup(time_limit=20.0), lambda level, m: logged.append((level, m)))
+    _started(core, case)
+    core.set_wind(0.5, 0.0, 13.0)
+    d = core.add_gas(3.0, 13.0)
+    assert d is not None and d.goal is not None
+    assert core.check_time(25.0) is None  # 15 s into the search: a reading still fits
+    assert core.check_time(1e9) is None and "sim-time" in logged[-1][1]  # wall time beside sim stamps
+    assert core.check_time(28.5) == "time_limit" and core.stopped and core.declared_xy is not None
+    assert core.add_gas(3.0, 40.0) is None

@@ -59,6 +59,10 @@ __all__ = [
 #: ``log(level, message)``: ``level`` is ``"info"``, ``"warning"`` or ``"error"``.
 Log = Callable[[str, str], None]
 
+#: A clock this far ahead of the latest pose's stamp is another clock (wall time beside a
+#: simulation's stamps), s.
+CLOCK_MISMATCH_S = 3600.0
+
 #: Readings this much older than the arrival plus the dwell still count (clock rounding), s.
 TIME_TOLERANCE_S = 1e-3
 
@@ -326,6 +330,7 @@ class SearchCore:
         self.follow_goals = bool(follow_goals)
         self.map: MapGrid | None = None
         self.restarts = 0
+        self._clock_warned = False
         self._rng = np.random.default_rng(setup.planner_seed)
         self._reset_search()
 
@@ -350,6 +355,7 @@ class SearchCore:
         self.wind: tuple[float, float, float] | None = None
         self.pending: tuple[float, float] | None = None
         self.rejected: list[Cell] = []
+        self.latest_time = -math.inf
         self.reason: str | None = None
         self.declared_xy: tuple[float, float] | None = None
 
@@ -451,6 +457,7 @@ class SearchCore:
         if self.occupancy[cell]:
             self.log("warning", f"pose ({x:.2f}, {y:.2f}) m lies in a wall of the map: ignored")
             return
+        self.latest_time = max(self.latest_time, t)
         if self.xy is not None:
             self.distance_m += math.hypot(x - self.xy[0], y - self.xy[1])
         self.xy = (x, y)
@@ -612,6 +619,15 @@ class SearchCore:
         if self.stopped or self.t_start is None:
             return None
         limit, dwell = self.setup.time_limit, self.setup.dwell
+        if now - self.latest_time > CLOCK_MISMATCH_S:
+            if not self._clock_warned:
+                self._clock_warned = True
+                self.log(
+                    "warning",
+                    "the clock is far ahead of the messages' stamps: with a simulation, use its clock "
+                    "(use_sim_time, dgse ros run --sim-time); no time limit until then",
+                )
+            return None
         if self.arrived_at is not None and self.arrived_at - self.t_start + dwell <= limit:
             return None  # a reading that fits is on its way
         if now - self.t_start + dwell <= limit:
