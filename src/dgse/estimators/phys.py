@@ -61,7 +61,7 @@ from __future__ import annotations
 import functools
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar
 
 import numpy as np
@@ -188,9 +188,14 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             and np.array_equal(obs.wind[:n0], self._proposed_from[1])
         ):
             return self._hypotheses  # the same readings and some more: keep the proposals
-        proposals = potential_flow_proposals(
-            k.occupancy, k.resolution, obs.cells, obs.wind, top=self.flows.map_proposals
-        )
+        self._family_note = None
+        try:
+            proposals = potential_flow_proposals(
+                k.occupancy, k.resolution, obs.cells, obs.wind, top=self.flows.map_proposals
+            )
+        except InputDataError as exc:  # a map whose edge has no room for openings (walled)
+            self._family_note = f"no opening hypotheses: {exc}"
+            proposals = []
         hyps = []
         for prop in proposals:
             layout = Layout(
@@ -411,6 +416,31 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         post, hw = mix_posteriors(log_ev, log_prior)
         return post, hw, log_ev, details
 
+    def _without_flows(self, occ: np.ndarray, res: float, obs: Observations, t0: float) -> Belief:
+        """DGSE-S's belief, where the knowledge allows no flow hypothesis: at ``map``, a map
+        whose edge has no two free windows for an inlet and an outlet (a walled edge, as an
+        imported GADEN slice has) — the air there crosses the slice at places the map does not
+        show, and a closed room without them has no steady plume."""
+        note = self._family_note or "no flow hypotheses"
+        try:
+            net = self._learned_belief(occ, res, obs)
+        except InputDataError as exc:
+            raise UnsupportedError(
+                f"dgse-phys at {self._level()!r}: {note}; and DGSE-S left out: {exc}"
+            ) from None
+        info = {
+            **net.info,
+            "method": self.name,
+            "knowledge": self._level(),
+            "n_observations": len(obs),
+            "hypotheses": [],
+            "best_hypothesis": None,
+            "learned_weight": 1.0,
+            "given_wind_note": note,
+            "seconds": time.perf_counter() - t0,
+        }
+        return replace(net, info=info)
+
     # -- estimate ---------------------------------------------------------------------------------
     @with_one_blas_thread
     def estimate(self, occupancy: np.ndarray, resolution: float, observations: Observations) -> Belief:
@@ -427,6 +457,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         assert self.knowledge is not None
         self.knowledge.check_map(occ, res, self.name)
         hyps = self.hypotheses(obs)
+        if not hyps:
+            return self._without_flows(occ, res, obs, t0)
         t_flow = time.perf_counter() - t0
         free_scale = self.knowledge.level == "map"  # proposals are solved at one speed
         cells, z = obs.cells, obs.gas
