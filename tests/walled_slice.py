@@ -13,17 +13,14 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
+from dgse.bench.scenarios import walled_case
 from dgse.world.case import Case
 
 
 def walled_fields(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(occupancy, wind, concentration)`` of ``case`` with every edge cell solid (0 wind and gas there)."""
-    occ = case.occupancy.copy()
-    occ[0, :] = occ[-1, :] = occ[:, 0] = occ[:, -1] = 1
-    solid = occ != 0
-    wind = np.where(solid[None], 0.0, case.wind)
-    conc = np.where(solid, 0.0, case.concentration)
-    return occ, wind, conc
+    walled = walled_case(case)
+    return walled.occupancy, walled.wind.astype(np.float64), walled.concentration
 
 
 def write_gaden_slice(case: Case, folder: Path) -> tuple[Path, Path]:
