@@ -1460,6 +1460,55 @@ def diagnostics(argv: list[str]) -> None:
     print(f"wrote {args.out}")
 
 
+# ---------------------------------------------------------------------------------- closed
+#: The reference cases ``closed`` walls in by default (one source of each of three layouts).
+CLOSED_CASES = ("s1_l000_src0", "s1_l001_src0", "s1_l002_src0")
+CLOSED_METHODS = (("dgse-phys", "wind"), ("dgse-s", "map"), ("dgse-phys", "map"))
+
+
+def closed(argv: list[str]) -> None:
+    """``closed``: closed slices (walls drawn at the map's edge, no openings: what an imported
+    GADEN scenario is) from random readings; ``OUT/<method>_<level>.json``, ``OUT/summary.md``."""
+    from dgse.bench.scenarios import walled_case
+
+    ap = _parser("closed", "closed slices from random readings")
+    ap.add_argument("-o", "--out", type=Path, default=RESULTS / "phys_closed")
+    ap.add_argument("--cases", nargs="+", default=list(CLOSED_CASES), help="reference case names")
+    ap.add_argument("--counts", nargs="+", type=int, default=[20, 50])
+    ap.add_argument("--trials", type=int, default=2)
+    ap.add_argument("--reference", type=Path, default=REFERENCE)
+    ap.add_argument("--methods", nargs="+", default=[f"{m}@{lv}" for m, lv in CLOSED_METHODS])
+    args = ap.parse_args(argv)
+    cases = args.out / "_cases"
+    cases.mkdir(parents=True, exist_ok=True)
+    for name in args.cases:
+        path = cases / f"{name}_walled.npz"
+        if not path.exists():
+            walled_case(Case.load(args.reference / f"{name}.npz")).save(path)
+    lines = ["| method@knowledge | " + " | ".join(f"{n} readings" for n in args.counts) + " | median s |"]
+    lines.append("|---|" + "---|" * (len(args.counts) + 1))
+    for row in args.methods:
+        method, level = row.split("@")
+        out = args.out / f"{method}_{level}.json"
+        res = evaluate(
+            cases, method, args.counts, trials=args.trials, seed=0, knowledge=level,
+            journal=journal_path(out), progress=True,
+        )  # fmt: skip
+        write_json(res, out)
+        agg = res["aggregate"]
+        cells = [
+            f"{agg[str(n)]['sl_error_m_mean']:.2f} / {agg[str(n)]['sl_error_m_median']:.2f}"
+            for n in args.counts
+        ]
+        secs = float(np.median([r["seconds"] for r in res["per_case"]]))
+        lines.append(f"| {row} | " + " | ".join(cells) + f" | {secs:.2f} |")
+    text = "\n".join(
+        [f"SL error mean / median (m), {len(args.cases)} closed cases x {args.trials} trials", "", *lines, ""]
+    )
+    write_text(args.out / "summary.md", text)
+    print(text)
+
+
 COMMANDS: dict[str, Callable[[list[str]], None]] = {
     "gsl": gsl,
     "robustness": robustness,
@@ -1470,6 +1519,7 @@ COMMANDS: dict[str, Callable[[list[str]], None]] = {
     "projection": projection,
     "turbulence": turbulence,
     "diagnostics": diagnostics,
+    "closed": closed,
 }
 
 

@@ -15,6 +15,7 @@ from dgse.physics.projection import (
     face_fluxes,
     project_fluxes,
     project_wind,
+    smoothed_exchange,
     transport_from_wind,
 )
 from dgse.physics.scenario import solve_cases
@@ -189,3 +190,32 @@ def test_a_solid_map_corner_needs_no_placeholder_opening():
     flow = project_wind(occ, 0.1, wind, closure="mixing-length")
     assert not flow.info["through_slice"] and flow.info["inlet_faces"] == 4 and flow.info["outlet_faces"] == 4
     assert np.abs(divergence(flow.F)).max() < 1e-12
+
+
+def test_a_smoothed_exchange_is_the_projected_divergence_and_keeps_its_sum(case):
+    occ, wind, _ = walled_fields(case)
+    raw = project_wind(occ, case.resolution, wind, closure="mixing-length")
+    smooth = project_wind(occ, case.resolution, wind, closure="mixing-length", slice_smoothing=0.3)
+    target = smoothed_exchange(smooth.mesh, raw.slice_flux, 0.3)
+    scale = np.abs(raw.F).max()
+    assert np.abs(divergence(smooth.F) - target).max() < 1e-10 * scale
+    assert np.array_equal(smooth.slice_flux, divergence(smooth.F))
+    assert abs(smooth.slice_flux.sum()) < 1e-12 * np.abs(raw.slice_flux).sum()  # mass conserved
+    assert (smooth.F[smooth.mesh.ft == WALL] == 0).all()  # the walls still hold
+    # alternating pairs cancel: less exchange in all, and none where the field has none
+    assert np.abs(smooth.slice_flux).sum() < 0.8 * np.abs(raw.slice_flux).sum()
+    assert np.array_equal(smoothed_exchange(smooth.mesh, raw.slice_flux, 0.0), raw.slice_flux)
+
+
+def test_closed_rooms_apart_are_each_made_mass_conserving():
+    """Two rooms with no door between them and no opening: each is its own closed part."""
+    occ = np.zeros((8, 12), np.uint8)
+    occ[:, 6] = 1
+    rng = np.random.default_rng(3)
+    wind = np.where(occ == 1, 0.0, rng.standard_normal((2, 8, 12)) * 0.2)
+    mesh = edge_mesh(occ, 0.1)
+    closed = replace(mesh, ft=np.where(mesh.ft == INLET, WALL, mesh.ft))
+    F, _ = project_fluxes(closed, face_fluxes(closed, wind))
+    assert np.abs(divergence(F)).max() < 1e-12
+    with pytest.raises(InputDataError, match="net source"):  # a closed part cannot gain air
+        project_fluxes(closed, face_fluxes(closed, wind), np.full(closed.n, 0.01))

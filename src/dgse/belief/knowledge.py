@@ -7,7 +7,8 @@ Three levels, each adding to the one before (``LEVELS``):
   vents and doors;
 * ``"wind"``: plus a mean wind field on the map, as from the user's own CFD
   (GADEN users have one), and the inlet speed when it is known.  The
-  openings may be unknown at this level (a 3-D CFD flow sliced to 2-D).
+  openings may be unknown at this level (a 3-D CFD flow sliced to 2-D; an
+  imported GADEN case states neither openings nor inlet speed).
 
 A :class:`Knowledge` holds exactly what its level allows and nothing of the
 scenario's truth besides (no concentration, no source).  Every estimator

@@ -18,7 +18,9 @@ compare directly).  Flow hypotheses per knowledge level
   posterior over the speed, not one best fit;
 * ``wind``: the given wind field made mass-conserving on the map, with
   k-epsilon on that frozen flow (:mod:`dgse.physics.projection`; the map's
-  edges are open where the field says so when the openings are unknown),
+  edges are open where the field says so when the openings are unknown; on a
+  map with no open face, a slice of a 3-D flow, the field's divergence is kept
+  as air entering and leaving through the slice, the leaving air a gas sink),
   beside the RANS flows of its openings (``flows.given_wind_prior``);
 * ``map``: opening hypotheses proposed from the wind readings
   (:func:`dgse.physics.openings.potential_flow_proposals`: the edge-window
@@ -28,6 +30,8 @@ compare directly).  Flow hypotheses per knowledge level
   the speed: concentrations scale as ``q / v_in``).  Proposed again each time
   the readings have doubled.  With few readings the proposals are guesses, so
   at ``map`` the source posterior is mixed with DGSE-S's (:class:`NetworkFusion`).
+  A map whose edge has no two free windows (walled) has no proposals: the
+  belief is DGSE-S's alone, and its ``info`` says why.
 
 The wind likelihood ``p(w | h)`` treats every wind reading as the flow's
 wind plus isotropic Gaussian noise of standard deviation ``sqrt((r |u|)^2 +

@@ -72,6 +72,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy import ndimage
+from scipy.sparse.csgraph import connected_components
 
 from dgse.errors import InputDataError
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
@@ -89,6 +90,7 @@ __all__ = [
     "mixing_length_nut",
     "project_fluxes",
     "project_wind",
+    "smoothed_exchange",
     "transport_from_wind",
 ]
 
@@ -169,40 +171,64 @@ def divergence(F: np.ndarray) -> np.ndarray:
     return np.asarray(F).sum(axis=1)
 
 
-def project_fluxes(mesh: Mesh, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(F', phi)``: the mass-conserving face fluxes nearest ``F`` and the potential of the correction.
+def _laplacian(mesh: Mesh, open_weight: float) -> sp.csr_matrix:
+    """The free cells' graph Laplacian: 1 per internal face, ``open_weight`` per open face."""
+    n, ft, nb = mesh.n, mesh.ft, mesh.nb
+    internal = ft == INTERNAL
+    open_face = (ft == INLET) | (ft == OUTLET)
+    rows = [np.arange(n)]
+    cols = [np.arange(n)]
+    vals = [internal.sum(axis=1) + open_weight * open_face.sum(axis=1).astype(np.float64)]
+    for d in range(4):
+        m = internal[:, d]
+        rows.append(np.nonzero(m)[0])
+        cols.append(nb[m, d])
+        vals.append(-np.ones(int(m.sum())))
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+
+
+def project_fluxes(
+    mesh: Mesh, F: np.ndarray, target: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(F', phi)``: the face fluxes nearest ``F`` whose divergence is ``target`` (default 0:
+    mass-conserving), and the potential of the correction.
 
     ``F'[P, d] = F[P, d] + c_d (phi_P - phi_N)`` with ``c = 1`` across internal
     faces and ``c = 2`` at open faces (``phi = 0`` outside); walls stay closed.
-    Without any open face (a closed room) ``phi`` is fixed at one cell.  Fluxes
-    whose largest cell imbalance is below :data:`BALANCED` times the largest
-    flux are already mass-conserving and come back unchanged.
+    In every connected part without an open face (a closed room) ``phi`` is fixed at one
+    cell, and ``target`` must sum there to ``F``'s divergence (a closed part's net source
+    is 0).  Fluxes whose largest cell imbalance is below :data:`BALANCED` times the largest
+    flux already have the divergence and come back unchanged.
     """
     F = np.asarray(F, dtype=np.float64)
     n = mesh.n
     ft, nb = mesh.ft, mesh.nb
     internal = ft == INTERNAL
     open_face = (ft == INLET) | (ft == OUTLET)
-    diag = internal.sum(axis=1) + 2.0 * open_face.sum(axis=1)
-    rows = [np.arange(n)]
-    cols = [np.arange(n)]
-    vals = [diag.astype(np.float64)]
-    for d in range(4):
-        m = internal[:, d]
-        rows.append(np.nonzero(m)[0])
-        cols.append(nb[m, d])
-        vals.append(-np.ones(int(m.sum())))
-    L = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
-    b = -divergence(F)
-    if not open_face.any():
-        L = L.tolil()
-        L[0, :] = 0.0
-        L[0, 0] = 1.0
-        L = L.tocsr()
-        b[0] = 0.0
+    L = _laplacian(mesh, 2.0).tocoo()
+    b = (np.zeros(n) if target is None else np.asarray(target, dtype=np.float64)) - divergence(F)
+    parts, label = connected_components(_laplacian(mesh, 0.0), directed=False)
+    opened = np.bincount(label, weights=open_face.any(axis=1), minlength=parts) > 0
     scale = float(np.abs(F).max()) if F.size else 0.0
+    closed = ~opened[label]
+    for k in np.unique(label[closed]):
+        net = float(b[label == k].sum())
+        if abs(net) > 1e-9 * max(scale, float(np.abs(b).max())) * max(1, int((label == k).sum())):
+            raise InputDataError(f"a closed part of the map would need a net source of {net:.3g} m^2/s")
+    pinned = np.zeros(n, dtype=bool)
+    if closed.any():
+        first = np.unique(label[closed], return_index=True)[1]
+        pinned[np.nonzero(closed)[0][first]] = True
+        keep = ~pinned[L.row]
+        idx = np.nonzero(pinned)[0]
+        L = sp.coo_matrix(
+            (np.concatenate([L.data[keep], np.ones(idx.size)]),
+             (np.concatenate([L.row[keep], idx]), np.concatenate([L.col[keep], idx]))),
+            shape=(n, n),
+        )  # fmt: skip
+        b[pinned] = 0.0
     if not np.any(b) or float(np.abs(b).max()) <= BALANCED * scale:
-        return F.copy(), np.zeros(n)  # already mass-conserving (to round-off): unchanged
+        return F.copy(), np.zeros(n)  # already of that divergence (to round-off): unchanged
     phi = spla.spsolve(L.tocsc(), b)
     Fp = F.copy()
     for d in range(4):
@@ -211,6 +237,17 @@ def project_fluxes(mesh: Mesh, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         o = open_face[:, d]
         Fp[o, d] += 2.0 * phi[o]
     return Fp, phi
+
+
+def smoothed_exchange(mesh: Mesh, q: np.ndarray, length: float) -> np.ndarray:
+    """``(I + (length / h)^2 L)^-1 q``: the exchange ``q`` (n,) smoothed over about ``length``
+    metres along the free cells (``L`` the internal faces' graph Laplacian, so each connected
+    part keeps its sum exactly); ``length = 0``: ``q`` itself."""
+    q = np.asarray(q, dtype=np.float64)
+    if length <= 0:
+        return q.copy()
+    M = sp.identity(mesh.n, format="csr") + (length / mesh.h) ** 2 * _laplacian(mesh, 0.0)
+    return spla.spsolve(M.tocsc(), q)
 
 
 def _cell_wind(mesh: Mesh, F: np.ndarray) -> np.ndarray:
@@ -299,6 +336,7 @@ def project_wind(
     physics: Physics = DEFAULT_PHYSICS,
     turbulence_tolerance: float = TURBULENCE_TOLERANCE,
     through_slice: bool | None = None,
+    slice_smoothing: float = 0.0,
 ) -> ProjectedFlow:
     """Make ``wind`` a mass-conserving flow on the map (module docstring).
 
@@ -316,6 +354,8 @@ def project_wind(
         through_slice: keep the field's divergence as an exchange through the slice (module
             docstring, point 2b) instead of projecting it away; None: where the map has no
             open face (its edge is walled everywhere).
+        slice_smoothing: with the exchange through the slice, smooth it over about this many
+            metres first (:func:`smoothed_exchange`; 0: the field's own divergence).
 
     Raises:
         InputDataError: a wind of the wrong shape, not finite, or with flow in solid cells;
@@ -346,8 +386,9 @@ def project_wind(
     open_face = (mesh.ft == INLET) | (mesh.ft == OUTLET)
     slice_mode = bool(not open_face.any() if through_slice is None else through_slice)
     F0 = face_fluxes(mesh, w)
-    if slice_mode:
-        F = F0.copy()  # the wall-consistent fluxes with their own divergence as the source (point 2b)
+    if slice_mode:  # the wall-consistent fluxes with their own divergence as the source (point 2b)
+        target = smoothed_exchange(mesh, divergence(F0), slice_smoothing)
+        F, _ = project_fluxes(mesh, F0, target)
         slice_flux = divergence(F)
     else:
         F, _ = project_fluxes(mesh, F0)
