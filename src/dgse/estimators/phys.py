@@ -78,7 +78,7 @@ from dgse.estimators.phys_settings import FlowHypotheses, GasEvidence, NetworkFu
 from dgse.options import options_from
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
 from dgse.physics.openings import potential_flow_proposals, propose_openings
-from dgse.physics.projection import project_wind, transport_from_wind
+from dgse.physics.projection import ProjectedFlow, project_wind, transport_from_wind
 from dgse.physics.rans import FlowSettings
 from dgse.posterior.adjoint import (
     AdjointResponseModel,
@@ -231,14 +231,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             return self._map_hypotheses(observations)
         if self._hypotheses is None:
             if k.level == "wind":
-                assert k.wind is not None
-                proj = project_wind(
-                    k.occupancy,
-                    k.resolution,
-                    k.wind,
-                    k.layout if k.has_openings else None,
-                    physics=self.physics,
-                )
+                proj = self._project_given(k)
                 fm = FlowModel(
                     proj.wind, transport_from_wind(proj, self.physics), math.nan, proj.info, self.physics
                 )
@@ -257,6 +250,13 @@ class PhysicsGuidedEstimator(KnowledgeUser):
                 self._speed_layout = k.layout
                 self._hypotheses = self._speed_family(k.layout, list(self.flows.speeds))
         return self._hypotheses
+
+    def _project_given(self, k: Knowledge) -> ProjectedFlow:
+        """The given wind of knowledge ``k`` made a flow the transport can use (on its openings
+        where known; through the slice where the map has no open face)."""
+        assert k.wind is not None
+        layout = k.layout if k.has_openings else None
+        return project_wind(k.occupancy, k.resolution, k.wind, layout, physics=self.physics)
 
     def _speed_family(self, layout: Layout, speeds: list[float]) -> list[FlowHypothesis]:
         """The built-in RANS flows of ``layout`` at ``speeds``, with the log-uniform prior over
