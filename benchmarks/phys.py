@@ -126,6 +126,15 @@ only these), 2000-2019 test scenarios (never tuned on); ``../shared/reference-ca
 
       python benchmarks/phys.py turbulence --seeds 900-911,2005 -o benchmarks/results/frozen_turbulence.json
 
+* ``closed``: closed slices, what an imported GADEN scenario is: OpenFOAM reference cases
+  with walls drawn at the map's edge and no openings (:func:`dgse.bench.scenarios.walled_case`),
+  from random readings, dgse-phys at ``wind`` and ``map`` against DGSE-S; ``--slice-smoothing``
+  smooths dgse-phys's exchange through the slice::
+
+      python benchmarks/phys.py closed -o benchmarks/results/phys_closed
+      python benchmarks/phys.py closed --methods dgse-phys@wind --trials 4 --slice-smoothing L \\
+          -o benchmarks/results/phys_closed_smoothingL   # L = 0 (no option), 0.2, 0.5
+
 * ``diagnostics``: three diagnoses of the physics posterior on one test scenario: how
   negative the raw adjoint rows are (``undershoot``), how far the estimate moves with the
   given inlet speed (``speed``), and warm- against cold-started speed flows
@@ -145,7 +154,7 @@ import sys
 import time
 from collections import defaultdict
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -156,6 +165,7 @@ from dgse.bench.commands import run_command
 from dgse.bench.scenarios import VARIANTS, parse_seeds, perturbed_wind, search_cases, variant_case
 from dgse.cli.common import parse_params
 from dgse.errors import InputDataError
+from dgse.estimators.phys import PhysicsGuidedEstimator
 from dgse.estimators.registry import get_estimator
 from dgse.evaluation.calibration import (
     calibration_error,
@@ -167,6 +177,7 @@ from dgse.evaluation.evaluate import draw_observations, evaluate, summarize, wri
 from dgse.evaluation.metrics import PROB_FLOOR, source_cross_entropy, source_localization_error
 from dgse.files import write_text
 from dgse.journal import journal_path
+from dgse.physics.projection import ProjectedFlow, project_wind
 from dgse.sensing.sensors import Observations
 from dgse.world.case import Case
 
@@ -1460,6 +1471,78 @@ def diagnostics(argv: list[str]) -> None:
     print(f"wrote {args.out}")
 
 
+# ---------------------------------------------------------------------------------- closed
+#: The reference cases ``closed`` walls in by default (one source of each of three layouts).
+CLOSED_CASES = ("s1_l000_src0", "s1_l001_src0", "s1_l002_src0")
+CLOSED_METHODS = (("dgse-phys", "wind"), ("dgse-s", "map"), ("dgse-phys", "map"))
+
+
+@dataclass(eq=False)
+class SmoothedSliceEstimator(PhysicsGuidedEstimator):
+    """dgse-phys with the given field's exchange through the slice smoothed over
+    ``slice_smoothing`` m (:func:`dgse.physics.projection.smoothed_exchange`)."""
+
+    slice_smoothing: float = 0.0
+
+    def _project_given(self, k: Knowledge) -> ProjectedFlow:
+        assert k.wind is not None
+        layout = k.layout if k.has_openings else None
+        return project_wind(
+            k.occupancy,
+            k.resolution,
+            k.wind,
+            layout,
+            physics=self.physics,
+            slice_smoothing=self.slice_smoothing,
+        )
+
+
+def closed(argv: list[str]) -> None:
+    """``closed``: closed slices (walls drawn at the map's edge, no openings: what an imported
+    GADEN scenario is) from random readings; ``OUT/<method>_<level>.json``, ``OUT/summary.md``."""
+    from dgse.bench.scenarios import walled_case
+
+    ap = _parser("closed", "closed slices from random readings")
+    ap.add_argument("-o", "--out", type=Path, default=RESULTS / "phys_closed")
+    ap.add_argument("--cases", nargs="+", default=list(CLOSED_CASES), help="reference case names")
+    ap.add_argument("--counts", nargs="+", type=int, default=[20, 50])
+    ap.add_argument("--trials", type=int, default=2)
+    ap.add_argument("--reference", type=Path, default=REFERENCE)
+    ap.add_argument("--methods", nargs="+", default=[f"{m}@{lv}" for m, lv in CLOSED_METHODS])
+    ap.add_argument("--slice-smoothing", type=float, default=0.0, help="dgse-phys's exchange smoothed, m")
+    args = ap.parse_args(argv)
+    cases = args.out / "_cases"
+    cases.mkdir(parents=True, exist_ok=True)
+    for name in args.cases:
+        path = cases / f"{name}_walled.npz"
+        if not path.exists():
+            walled_case(Case.load(args.reference / f"{name}.npz")).save(path)
+    lines = ["| method@knowledge | " + " | ".join(f"{n} readings" for n in args.counts) + " | median s |"]
+    lines.append("|---|" + "---|" * (len(args.counts) + 1))
+    for row in args.methods:
+        method, level = row.split("@")
+        out = args.out / f"{method}_{level}.json"
+        smoothed = method == "dgse-phys" and args.slice_smoothing > 0
+        chosen: Any = SmoothedSliceEstimator(slice_smoothing=args.slice_smoothing) if smoothed else method
+        res = evaluate(
+            cases, chosen, args.counts, trials=args.trials, seed=0, knowledge=level,
+            journal=journal_path(out), progress=True,
+        )  # fmt: skip
+        write_json(res, out)
+        agg = res["aggregate"]
+        cells = [
+            f"{agg[str(n)]['sl_error_m_mean']:.2f} / {agg[str(n)]['sl_error_m_median']:.2f}"
+            for n in args.counts
+        ]
+        secs = float(np.median([r["seconds"] for r in res["per_case"]]))
+        lines.append(f"| {row} | " + " | ".join(cells) + f" | {secs:.2f} |")
+    text = "\n".join(
+        [f"SL error mean / median (m), {len(args.cases)} closed cases x {args.trials} trials", "", *lines, ""]
+    )
+    write_text(args.out / "summary.md", text)
+    print(text)
+
+
 COMMANDS: dict[str, Callable[[list[str]], None]] = {
     "gsl": gsl,
     "robustness": robustness,
@@ -1470,6 +1553,7 @@ COMMANDS: dict[str, Callable[[list[str]], None]] = {
     "projection": projection,
     "turbulence": turbulence,
     "diagnostics": diagnostics,
+    "closed": closed,
 }
 
 

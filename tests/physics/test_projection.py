@@ -15,10 +15,12 @@ from dgse.physics.projection import (
     face_fluxes,
     project_fluxes,
     project_wind,
+    smoothed_exchange,
     transport_from_wind,
 )
 from dgse.physics.scenario import solve_cases
 from tests.conftest import two_rooms
+from tests.walled_slice import walled_fields
 
 
 @pytest.fixture(scope="module")
@@ -129,3 +131,91 @@ def test_bad_wind_is_a_clear_error(case):
         project_wind(case.occupancy, case.resolution, np.full(case.wind.shape, np.nan))
     with pytest.raises(InputDataError, match="unknown closure"):
         project_wind(case.occupancy, case.resolution, case.wind, closure="smagorinsky")
+
+
+def test_a_walled_slice_keeps_its_divergence_as_exchange_through_the_slice(case):
+    """Walls drawn over the inlet and outlet (a GADEN-like slice): the air that crossed them now
+    enters and leaves through the slice beside them; mass is conserved, and the gas leaves with
+    the leaving air."""
+    occ, wind, _ = walled_fields(case)
+    flow = project_wind(occ, case.resolution, wind, closure="mixing-length")
+    assert flow.info["through_slice"] and flow.info["correction"] == 0.0
+    assert not ((flow.mesh.ft == INLET) | (flow.mesh.ft == OUTLET)).any()
+    assert np.array_equal(flow.F, face_fluxes(flow.mesh, wind))  # no correction: walls already hold
+    q = flow.mesh.field(flow.slice_flux)
+    assert np.array_equal(flow.slice_flux, divergence(flow.F))
+    # net exchange of a closed slice: zero (to round-off); what enters is what leaves
+    assert abs(q.sum()) < 1e-12 * np.abs(q).sum()
+    assert flow.info["slice_inflow"] == pytest.approx(flow.info["slice_outflow"], rel=1e-12)
+    # the inflow enters beside the former inlet (west, 1.2-1.8 m): its volume flow, 1.0 m/s x 0.6 m
+    inlet_rows = slice(12, 18)
+    assert q[inlet_rows, 1].sum() == pytest.approx(1.0 * 0.6, rel=0.1)
+    assert (q[inlet_rows, 1] > 0).all() and (q[2:8, -2] < 0).all()  # out beside the former outlet
+    # every gram released leaves through the slice (the solver's tolerance)
+    ts = transport_from_wind(flow)
+    c = ts.solve_cells([case.source_cell], [0.8])[0]
+    assert ts.outflow(c) == (0.0, 0.0)
+    assert ts.slice_outflow(c) * ts.physics.slab_depth == pytest.approx(0.8, rel=1e-6)
+
+
+def _ring(U: float = 0.4) -> tuple[np.ndarray, np.ndarray]:
+    """A one-cell-wide corridor around a solid core, walled at the map's edge, with a constant
+    counter-clockwise wind: its face fluxes are exactly divergence-free."""
+    occ = np.ones((8, 8), np.uint8)
+    occ[1, 1:7] = occ[6, 1:7] = occ[1:7, 1] = occ[1:7, 6] = 0
+    w = np.zeros((2, 8, 8))
+    w[0, 1, 1:7], w[0, 6, 1:7] = U, -U  # along the bottom east, along the top west
+    w[1, 1:7, 6], w[1, 1:7, 1] = U, -U  # up the east side, down the west side
+    return occ, w
+
+
+@pytest.mark.parametrize("through_slice", [None, True, False])
+def test_a_divergence_free_field_on_a_walled_map_is_unchanged(through_slice):
+    occ, wind = _ring()
+    flow = project_wind(occ, 0.1, wind, through_slice=through_slice, closure="mixing-length")
+    assert np.array_equal(flow.F, face_fluxes(flow.mesh, wind))
+    assert np.abs(divergence(flow.F)).max() < 1e-15
+    assert np.allclose(flow.wind, wind, atol=1e-15)
+    assert (flow.slice_flux is None) == (through_slice is False)
+    if flow.slice_flux is not None:
+        assert np.abs(flow.slice_flux).max() < 1e-15
+    with pytest.raises(InputDataError, match="no way out"):  # a closed room: no steady plume
+        transport_from_wind(flow)
+
+
+def test_a_solid_map_corner_needs_no_placeholder_opening():
+    occ = np.zeros((6, 9), np.uint8)
+    occ[0, 0] = occ[-1, -1] = occ[0, -1] = occ[-1, 0] = 1
+    wind = np.where(occ == 1, 0.0, np.stack([np.full(occ.shape, 0.5), np.zeros(occ.shape)]))
+    flow = project_wind(occ, 0.1, wind, closure="mixing-length")
+    assert not flow.info["through_slice"] and flow.info["inlet_faces"] == 4 and flow.info["outlet_faces"] == 4
+    assert np.abs(divergence(flow.F)).max() < 1e-12
+
+
+def test_a_smoothed_exchange_is_the_projected_divergence_and_keeps_its_sum(case):
+    occ, wind, _ = walled_fields(case)
+    raw = project_wind(occ, case.resolution, wind, closure="mixing-length")
+    smooth = project_wind(occ, case.resolution, wind, closure="mixing-length", slice_smoothing=0.3)
+    target = smoothed_exchange(smooth.mesh, raw.slice_flux, 0.3)
+    scale = np.abs(raw.F).max()
+    assert np.abs(divergence(smooth.F) - target).max() < 1e-10 * scale
+    assert np.array_equal(smooth.slice_flux, divergence(smooth.F))
+    assert abs(smooth.slice_flux.sum()) < 1e-12 * np.abs(raw.slice_flux).sum()  # mass conserved
+    assert (smooth.F[smooth.mesh.ft == WALL] == 0).all()  # the walls still hold
+    # alternating pairs cancel: less exchange in all, and none where the field has none
+    assert np.abs(smooth.slice_flux).sum() < 0.8 * np.abs(raw.slice_flux).sum()
+    assert np.array_equal(smoothed_exchange(smooth.mesh, raw.slice_flux, 0.0), raw.slice_flux)
+
+
+def test_closed_rooms_apart_are_each_made_mass_conserving():
+    """Two rooms with no door between them and no opening: each is its own closed part."""
+    occ = np.zeros((8, 12), np.uint8)
+    occ[:, 6] = 1
+    rng = np.random.default_rng(3)
+    wind = np.where(occ == 1, 0.0, rng.standard_normal((2, 8, 12)) * 0.2)
+    mesh = edge_mesh(occ, 0.1)
+    closed = replace(mesh, ft=np.where(mesh.ft == INLET, WALL, mesh.ft))
+    F, _ = project_fluxes(closed, face_fluxes(closed, wind))
+    assert np.abs(divergence(F)).max() < 1e-12
+    with pytest.raises(InputDataError, match="net source"):  # a closed part cannot gain air
+        project_fluxes(closed, face_fluxes(closed, wind), np.full(closed.n, 0.01))

@@ -7,7 +7,8 @@ Three levels, each adding to the one before (``LEVELS``):
   vents and doors;
 * ``"wind"``: plus a mean wind field on the map, as from the user's own CFD
   (GADEN users have one), and the inlet speed when it is known.  The
-  openings may be unknown at this level (a 3-D CFD flow sliced to 2-D).
+  openings may be unknown at this level (a 3-D CFD flow sliced to 2-D; an
+  imported GADEN case states neither openings nor inlet speed).
 
 A :class:`Knowledge` holds exactly what its level allows and nothing of the
 scenario's truth besides (no concentration, no source).  Every estimator
@@ -219,17 +220,29 @@ class Knowledge:
         """What a robot is told about ``case`` at ``level``: never its concentration or source.
 
         ``"wind"`` takes the case's wind field (the stand-in for the user's CFD), its
-        openings and its inlet speed.
+        openings and its inlet speed where its ``meta`` states them (an imported GADEN
+        scenario states neither: a slice of a 3-D flow, :mod:`dgse.physics.projection`).
+
+        Raises:
+            UnsupportedError: ``"openings"`` of a case that states none.
         """
         lv = check_level(level)
         base: dict[str, Any] = {"occupancy": case.occupancy, "resolution": case.resolution, "name": case.name}
         if lv == "map":
             return cls("map", **base)
-        layout = case.layout
-        base.update(inlets=layout.inlets, outlets=layout.outlets)
+        meta = case.meta
+        if any(k in meta for k in ("inlet", "inlets")) or any(k in meta for k in ("outlet", "outlets")):
+            layout = case.layout
+            base.update(inlets=layout.inlets, outlets=layout.outlets)
+        elif lv == "openings":
+            raise UnsupportedError(
+                f"case {case.name!r} states no openings (no inlet or outlet in its meta, as an imported "
+                "GADEN scenario): give --knowledge map or wind"
+            )
         if lv == "openings":
             return cls("openings", **base)
-        return cls("wind", wind=case.wind, inlet_velocity=case.inlet_velocity, **base)
+        v = meta.get("inlet_velocity")
+        return cls("wind", wind=case.wind, inlet_velocity=None if v is None else float(v), **base)
 
     # -- queries -----------------------------------------------------------------------------
     @property

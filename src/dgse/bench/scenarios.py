@@ -5,6 +5,8 @@
   of the ``dgse-phys`` searches and diagnostics, as case files made once;
 * :func:`office_floor_cases`: generated office floors (20-30 m, building scale), as case files
   made once;
+* :func:`walled_case`: a scenario with walls drawn at the map's edge and its openings dropped,
+  a closed slice as an imported GADEN scenario is;
 * :data:`VARIANTS`, :func:`perturbed_wind`, :func:`variant_case` and :class:`ToldWind`: the
   physics made wrong in one way at a time (filament readings; a wind told at knowledge
   ``wind`` rotated, smoothed or too fast) for the robustness measurements.
@@ -38,6 +40,7 @@ __all__ = [
     "perturbed_wind",
     "search_cases",
     "variant_case",
+    "walled_case",
 ]
 
 #: The generated scenario sets of the searches, by seed: ``validation`` (the range the
@@ -130,6 +133,35 @@ def office_floor_cases(
         src = random_sources(layout, rng, n=1)
         solve_cases(layout, v, src, name=path.stem)[0].save(path)
     return d
+
+
+def walled_case(case: Case) -> Case:
+    """``case`` with every cell on the map's edge solid (wind and gas 0 there) and no openings
+    or inlet speed in its ``meta``: a closed slice, as an imported GADEN scenario is.  The air
+    that crossed the old openings now enters and leaves through the slice beside them (the
+    wind's divergence there, :mod:`dgse.physics.projection`); the gas is the case's own.
+
+    Raises:
+        InputDataError: a source on the map's edge.
+    """
+    occ = case.occupancy.copy()
+    occ[0, :] = occ[-1, :] = occ[:, 0] = occ[:, -1] = 1
+    solid = occ != 0
+    i, j = case.source_cell
+    if solid[i, j]:
+        raise InputDataError(f"the source of {case.name!r} lies on the map's edge: no walled case")
+    frames = None if case.frames is None else np.where(solid[None], 0.0, case.frames)
+    dropped = ("inlet", "inlets", "outlet", "outlets", "inlet_velocity", "walls", "layout")
+    meta = {k: v for k, v in case.meta.items() if k not in dropped}
+    meta["name"] = f"{case.name}_walled"
+    return replace(
+        case,
+        occupancy=occ,
+        wind=np.where(solid[None], 0.0, case.wind),
+        concentration=np.where(solid, 0.0, case.concentration),
+        frames=frames,
+        meta=meta,
+    )
 
 
 def perturbed_wind(case: Any, variant: str) -> np.ndarray:

@@ -18,7 +18,9 @@ compare directly).  Flow hypotheses per knowledge level
   posterior over the speed, not one best fit;
 * ``wind``: the given wind field made mass-conserving on the map, with
   k-epsilon on that frozen flow (:mod:`dgse.physics.projection`; the map's
-  edges are open where the field says so when the openings are unknown),
+  edges are open where the field says so when the openings are unknown; on a
+  map with no open face, a slice of a 3-D flow, the field's divergence is kept
+  as air entering and leaving through the slice, the leaving air a gas sink),
   beside the RANS flows of its openings (``flows.given_wind_prior``);
 * ``map``: opening hypotheses proposed from the wind readings
   (:func:`dgse.physics.openings.potential_flow_proposals`: the edge-window
@@ -28,6 +30,8 @@ compare directly).  Flow hypotheses per knowledge level
   the speed: concentrations scale as ``q / v_in``).  Proposed again each time
   the readings have doubled.  With few readings the proposals are guesses, so
   at ``map`` the source posterior is mixed with DGSE-S's (:class:`NetworkFusion`).
+  A map whose edge has no two free windows (walled) has no proposals: the
+  belief is DGSE-S's alone, and its ``info`` says why.
 
 The wind likelihood ``p(w | h)`` treats every wind reading as the flow's
 wind plus isotropic Gaussian noise of standard deviation ``sqrt((r |u|)^2 +
@@ -61,7 +65,7 @@ from __future__ import annotations
 import functools
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar
 
 import numpy as np
@@ -74,7 +78,7 @@ from dgse.estimators.phys_settings import FlowHypotheses, GasEvidence, NetworkFu
 from dgse.options import options_from
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
 from dgse.physics.openings import potential_flow_proposals, propose_openings
-from dgse.physics.projection import project_wind, transport_from_wind
+from dgse.physics.projection import ProjectedFlow, project_wind, transport_from_wind
 from dgse.physics.rans import FlowSettings
 from dgse.posterior.adjoint import (
     AdjointResponseModel,
@@ -188,9 +192,14 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             and np.array_equal(obs.wind[:n0], self._proposed_from[1])
         ):
             return self._hypotheses  # the same readings and some more: keep the proposals
-        proposals = potential_flow_proposals(
-            k.occupancy, k.resolution, obs.cells, obs.wind, top=self.flows.map_proposals
-        )
+        self._family_note = None
+        try:
+            proposals = potential_flow_proposals(
+                k.occupancy, k.resolution, obs.cells, obs.wind, top=self.flows.map_proposals
+            )
+        except InputDataError as exc:  # a map whose edge has no room for openings (walled)
+            self._family_note = f"no opening hypotheses: {exc}"
+            proposals = []
         hyps = []
         for prop in proposals:
             layout = Layout(
@@ -222,14 +231,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             return self._map_hypotheses(observations)
         if self._hypotheses is None:
             if k.level == "wind":
-                assert k.wind is not None
-                proj = project_wind(
-                    k.occupancy,
-                    k.resolution,
-                    k.wind,
-                    k.layout if k.has_openings else None,
-                    physics=self.physics,
-                )
+                proj = self._project_given(k)
                 fm = FlowModel(
                     proj.wind, transport_from_wind(proj, self.physics), math.nan, proj.info, self.physics
                 )
@@ -248,6 +250,13 @@ class PhysicsGuidedEstimator(KnowledgeUser):
                 self._speed_layout = k.layout
                 self._hypotheses = self._speed_family(k.layout, list(self.flows.speeds))
         return self._hypotheses
+
+    def _project_given(self, k: Knowledge) -> ProjectedFlow:
+        """The given wind of knowledge ``k`` made a flow the transport can use (on its openings
+        where known; through the slice where the map has no open face)."""
+        assert k.wind is not None
+        layout = k.layout if k.has_openings else None
+        return project_wind(k.occupancy, k.resolution, k.wind, layout, physics=self.physics)
 
     def _speed_family(self, layout: Layout, speeds: list[float]) -> list[FlowHypothesis]:
         """The built-in RANS flows of ``layout`` at ``speeds``, with the log-uniform prior over
@@ -411,6 +420,31 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         post, hw = mix_posteriors(log_ev, log_prior)
         return post, hw, log_ev, details
 
+    def _without_flows(self, occ: np.ndarray, res: float, obs: Observations, t0: float) -> Belief:
+        """DGSE-S's belief, where the knowledge allows no flow hypothesis: at ``map``, a map
+        whose edge has no two free windows for an inlet and an outlet (a walled edge, as an
+        imported GADEN slice has) — the air there crosses the slice at places the map does not
+        show, and a closed room without them has no steady plume."""
+        note = self._family_note or "no flow hypotheses"
+        try:
+            net = self._learned_belief(occ, res, obs)
+        except InputDataError as exc:
+            raise UnsupportedError(
+                f"dgse-phys at {self._level()!r}: {note}; and DGSE-S left out: {exc}"
+            ) from None
+        info = {
+            **net.info,
+            "method": self.name,
+            "knowledge": self._level(),
+            "n_observations": len(obs),
+            "hypotheses": [],
+            "best_hypothesis": None,
+            "learned_weight": 1.0,
+            "given_wind_note": note,
+            "seconds": time.perf_counter() - t0,
+        }
+        return replace(net, info=info)
+
     # -- estimate ---------------------------------------------------------------------------------
     @with_one_blas_thread
     def estimate(self, occupancy: np.ndarray, resolution: float, observations: Observations) -> Belief:
@@ -427,6 +461,8 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         assert self.knowledge is not None
         self.knowledge.check_map(occ, res, self.name)
         hyps = self.hypotheses(obs)
+        if not hyps:
+            return self._without_flows(occ, res, obs, t0)
         t_flow = time.perf_counter() - t0
         free_scale = self.knowledge.level == "map"  # proposals are solved at one speed
         cells, z = obs.cells, obs.gas

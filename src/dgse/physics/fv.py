@@ -78,7 +78,25 @@ class Mesh:
 
 def build_mesh(layout: Layout) -> Mesh:
     """Number the free cells of ``layout`` and classify their faces."""
-    free = layout.free
+    mesh = closed_mesh(layout.free, layout.resolution)
+    H, Wd = mesh.shape
+    ii, jj = mesh.cells[:, 0], mesh.cells[:, 1]
+    ft = mesh.ft.copy()
+    outside = (jj == Wd - 1, jj == 0, ii == H - 1, ii == 0)  # cells whose face E, W, N, S is the map's edge
+    for d, side in enumerate(("east", "west", "north", "south")):
+        for openings, code in ((layout.inlets, INLET), (layout.outlets, OUTLET)):
+            on_opening = np.zeros((H, Wd), dtype=bool)  # boundary cells whose face d is open
+            for o in openings:
+                if o.side == side:
+                    on_opening[o.cells(layout.grid)] = True
+            ft[outside[d] & on_opening[ii, jj], d] = code
+    return Mesh(mesh.h, mesh.free, mesh.index, mesh.cells, mesh.nb, ft)
+
+
+def closed_mesh(free: np.ndarray, h: float) -> Mesh:
+    """Number the ``free`` cells ``(H, W)`` of a map of cell size ``h`` (m); every face that is not
+    internal is a wall (a map without openings)."""
+    free = np.asarray(free, dtype=bool)
     H, Wd = free.shape
     index = np.full((H, Wd), -1, dtype=np.int64)
     ii, jj = np.nonzero(free)
@@ -94,14 +112,7 @@ def build_mesh(layout: Layout) -> Mesh:
         internal = nbr >= 0
         nb[internal, d] = nbr[internal]
         ft[internal, d] = INTERNAL
-        side = ("east", "west", "north", "south")[d]
-        for openings, code in ((layout.inlets, INLET), (layout.outlets, OUTLET)):
-            on_opening = np.zeros((H, Wd), dtype=bool)  # boundary cells whose face d is open
-            for o in openings:
-                if o.side == side:
-                    on_opening[o.cells(layout.grid)] = True
-            ft[~inside & on_opening[ii, jj], d] = code
-    return Mesh(layout.resolution, free, index, np.stack([ii, jj], axis=1), nb, ft)
+    return Mesh(float(h), free, index, np.stack([ii, jj], axis=1), nb, ft)
 
 
 def parts(mesh: Mesh) -> tuple[np.ndarray, int]:

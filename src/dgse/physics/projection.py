@@ -14,6 +14,19 @@ turbulence fields the transport needs.  This module turns it into
    free cells, ``c = 1`` across internal faces and ``c = 2`` at open boundary
    faces (``phi = 0`` half a cell outside).  A field that already conserves
    mass is left unchanged (``div F = 0`` gives ``phi = 0``);
+2b. **or a slice of a 3-D flow** (``through_slice``; by default where the map
+   has no open face at all, a walled map edge as a GADEN import has): the air
+   then enters and leaves through the slice, so the field's own divergence
+   is kept as a through-slice exchange instead of being projected away.  The
+   fluxes of point 1 already satisfy the wall (no-penetration) conditions, and
+   among the fluxes that do, with the divergence prescribed as a source, the
+   nearest is these fluxes themselves (the correction of point 2 with
+   ``L phi = 0``): ``F' = F``, ``q = div F'`` per cell (``q > 0``: air enters
+   through the slice, ``q < 0``: it leaves).  Mass is conserved exactly: the
+   net exchange ``sum q`` is the net outflow through the open faces (0 on a
+   closed map; internal faces cancel).  The gas transport takes the leaving
+   air as a sink ``max(-q, 0) c`` (the gas goes with the air, at the cell's
+   concentration) and the entering air as clean (:mod:`dgse.physics.transport`);
 3. **open boundaries**: with the openings known, only their faces are open;
    without them a free cell's face on the map's edge is open where the
    field's normal wind there is at least ``open_fraction`` (0.75) times the
@@ -59,10 +72,11 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy import ndimage
+from scipy.sparse.csgraph import connected_components
 
 from dgse.errors import InputDataError
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
-from dgse.physics.fv import AXIS, INLET, INTERNAL, OUTLET, SIGN, WALL, Mesh, build_mesh
+from dgse.physics.fv import AXIS, INLET, INTERNAL, OUTLET, SIGN, WALL, Mesh, build_mesh, closed_mesh
 from dgse.physics.rans import FlowSettings, solve_turbulence
 from dgse.physics.transport import TransportSolver
 from dgse.world.case import WALL_WIND_TOLERANCE, wind_problem
@@ -76,6 +90,7 @@ __all__ = [
     "mixing_length_nut",
     "project_fluxes",
     "project_wind",
+    "smoothed_exchange",
     "transport_from_wind",
 ]
 
@@ -114,8 +129,7 @@ def edge_mesh(
     """
     occ = np.asarray(occupancy)
     H, W = occ.shape
-    # a layout with placeholder openings gives the numbering and the internal/wall faces
-    mesh = build_mesh(_walled_layout(occ, resolution))
+    mesh = closed_mesh(occ == 0, resolution)
     ft = mesh.ft.copy()
     ii, jj = mesh.cells[:, 0], mesh.cells[:, 1]
     on_edge = (jj == W - 1, jj == 0, ii == H - 1, ii == 0)  # E, W, N, S
@@ -127,22 +141,7 @@ def edge_mesh(
         if wind is not None and open_fraction > 0:
             keep = np.abs(u[AXIS[d]]) >= threshold
         ft[on_edge[d] & keep, d] = OPEN
-        ft[on_edge[d] & ~keep, d] = WALL
     return replace(mesh, ft=ft)
-
-
-def _walled_layout(occupancy: np.ndarray, resolution: float) -> Layout:
-    from dgse.world.layout import Opening
-
-    h = float(resolution)
-    # zero-length openings are not allowed: use one cell of the west and east edges (replaced above)
-    return Layout(
-        (np.asarray(occupancy) != 0).astype(np.uint8),
-        (Opening("west", 0.0, h),),
-        (Opening("east", 0.0, h),),
-        resolution=h,
-        name="map",
-    )
 
 
 def face_fluxes(mesh: Mesh, wind: np.ndarray) -> np.ndarray:
@@ -172,40 +171,64 @@ def divergence(F: np.ndarray) -> np.ndarray:
     return np.asarray(F).sum(axis=1)
 
 
-def project_fluxes(mesh: Mesh, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(F', phi)``: the mass-conserving face fluxes nearest ``F`` and the potential of the correction.
+def _laplacian(mesh: Mesh, open_weight: float) -> sp.csr_matrix:
+    """The free cells' graph Laplacian: 1 per internal face, ``open_weight`` per open face."""
+    n, ft, nb = mesh.n, mesh.ft, mesh.nb
+    internal = ft == INTERNAL
+    open_face = (ft == INLET) | (ft == OUTLET)
+    rows = [np.arange(n)]
+    cols = [np.arange(n)]
+    vals = [internal.sum(axis=1) + open_weight * open_face.sum(axis=1).astype(np.float64)]
+    for d in range(4):
+        m = internal[:, d]
+        rows.append(np.nonzero(m)[0])
+        cols.append(nb[m, d])
+        vals.append(-np.ones(int(m.sum())))
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+
+
+def project_fluxes(
+    mesh: Mesh, F: np.ndarray, target: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(F', phi)``: the face fluxes nearest ``F`` whose divergence is ``target`` (default 0:
+    mass-conserving), and the potential of the correction.
 
     ``F'[P, d] = F[P, d] + c_d (phi_P - phi_N)`` with ``c = 1`` across internal
     faces and ``c = 2`` at open faces (``phi = 0`` outside); walls stay closed.
-    Without any open face (a closed room) ``phi`` is fixed at one cell.  Fluxes
-    whose largest cell imbalance is below :data:`BALANCED` times the largest
-    flux are already mass-conserving and come back unchanged.
+    In every connected part without an open face (a closed room) ``phi`` is fixed at one
+    cell, and ``target`` must sum there to ``F``'s divergence (a closed part's net source
+    is 0).  Fluxes whose largest cell imbalance is below :data:`BALANCED` times the largest
+    flux already have the divergence and come back unchanged.
     """
     F = np.asarray(F, dtype=np.float64)
     n = mesh.n
     ft, nb = mesh.ft, mesh.nb
     internal = ft == INTERNAL
     open_face = (ft == INLET) | (ft == OUTLET)
-    diag = internal.sum(axis=1) + 2.0 * open_face.sum(axis=1)
-    rows = [np.arange(n)]
-    cols = [np.arange(n)]
-    vals = [diag.astype(np.float64)]
-    for d in range(4):
-        m = internal[:, d]
-        rows.append(np.nonzero(m)[0])
-        cols.append(nb[m, d])
-        vals.append(-np.ones(int(m.sum())))
-    L = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
-    b = -divergence(F)
-    if not open_face.any():
-        L = L.tolil()
-        L[0, :] = 0.0
-        L[0, 0] = 1.0
-        L = L.tocsr()
-        b[0] = 0.0
+    L = _laplacian(mesh, 2.0).tocoo()
+    b = (np.zeros(n) if target is None else np.asarray(target, dtype=np.float64)) - divergence(F)
+    parts, label = connected_components(_laplacian(mesh, 0.0), directed=False)
+    opened = np.bincount(label, weights=open_face.any(axis=1), minlength=parts) > 0
     scale = float(np.abs(F).max()) if F.size else 0.0
+    closed = ~opened[label]
+    for k in np.unique(label[closed]):
+        net = float(b[label == k].sum())
+        if abs(net) > 1e-9 * max(scale, float(np.abs(b).max())) * max(1, int((label == k).sum())):
+            raise InputDataError(f"a closed part of the map would need a net source of {net:.3g} m^2/s")
+    pinned = np.zeros(n, dtype=bool)
+    if closed.any():
+        first = np.unique(label[closed], return_index=True)[1]
+        pinned[np.nonzero(closed)[0][first]] = True
+        keep = ~pinned[L.row]
+        idx = np.nonzero(pinned)[0]
+        L = sp.coo_matrix(
+            (np.concatenate([L.data[keep], np.ones(idx.size)]),
+             (np.concatenate([L.row[keep], idx]), np.concatenate([L.col[keep], idx]))),
+            shape=(n, n),
+        )  # fmt: skip
+        b[pinned] = 0.0
     if not np.any(b) or float(np.abs(b).max()) <= BALANCED * scale:
-        return F.copy(), np.zeros(n)  # already mass-conserving (to round-off): unchanged
+        return F.copy(), np.zeros(n)  # already of that divergence (to round-off): unchanged
     phi = spla.spsolve(L.tocsc(), b)
     Fp = F.copy()
     for d in range(4):
@@ -214,6 +237,17 @@ def project_fluxes(mesh: Mesh, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         o = open_face[:, d]
         Fp[o, d] += 2.0 * phi[o]
     return Fp, phi
+
+
+def smoothed_exchange(mesh: Mesh, q: np.ndarray, length: float) -> np.ndarray:
+    """``(I + (length / h)^2 L)^-1 q``: the exchange ``q`` (n,) smoothed over about ``length``
+    metres along the free cells (``L`` the internal faces' graph Laplacian, so each connected
+    part keeps its sum exactly); ``length = 0``: ``q`` itself."""
+    q = np.asarray(q, dtype=np.float64)
+    if length <= 0:
+        return q.copy()
+    M = sp.identity(mesh.n, format="csr") + (length / mesh.h) ** 2 * _laplacian(mesh, 0.0)
+    return spla.spsolve(M.tocsc(), q)
 
 
 def _cell_wind(mesh: Mesh, F: np.ndarray) -> np.ndarray:
@@ -268,7 +302,11 @@ class ProjectedFlow:
         wind: ``(2, H, W)`` cell-centred wind of ``F``.
         nut: ``(H, W)`` eddy viscosity, m^2/s.
         info: ``correction`` (relative L2 change of the face fluxes), ``max_divergence``
-            before and after (m^2/s), the open faces, the closure.
+            before and after (m^2/s), the open faces, the closure, the through-slice
+            exchange (``slice_inflow``/``slice_outflow``, m^2/s per m depth).
+        slice_flux: ``(n,)`` air entering the cell through the slice (m^2/s per m depth,
+            negative where it leaves; the fluxes' divergence), or None for a 2-D flow
+            (module docstring, point 2b).
     """
 
     mesh: Mesh
@@ -276,6 +314,12 @@ class ProjectedFlow:
     wind: np.ndarray
     nut: np.ndarray
     info: dict[str, Any] = field(default_factory=dict)
+    slice_flux: np.ndarray | None = None
+
+    @property
+    def slice_sink(self) -> np.ndarray | None:
+        """``(n,)`` air leaving each cell through the slice (``max(-slice_flux, 0)``), or None."""
+        return None if self.slice_flux is None else np.maximum(-self.slice_flux, 0.0)
 
 
 def project_wind(
@@ -291,6 +335,8 @@ def project_wind(
     open_fraction: float = DEFAULT_OPEN_FRACTION,
     physics: Physics = DEFAULT_PHYSICS,
     turbulence_tolerance: float = TURBULENCE_TOLERANCE,
+    through_slice: bool | None = None,
+    slice_smoothing: float = 0.0,
 ) -> ProjectedFlow:
     """Make ``wind`` a mass-conserving flow on the map (module docstring).
 
@@ -305,6 +351,11 @@ def project_wind(
         open_fraction: without a layout, an edge face is open where the normal wind is at
             least this fraction of the mean speed (:func:`edge_mesh`).
         turbulence_tolerance: the frozen k-epsilon's residual criterion (module docstring).
+        through_slice: keep the field's divergence as an exchange through the slice (module
+            docstring, point 2b) instead of projecting it away; None: where the map has no
+            open face (its edge is walled everywhere).
+        slice_smoothing: with the exchange through the slice, smooth it over about this many
+            metres first (:func:`smoothed_exchange`; 0: the field's own divergence).
 
     Raises:
         InputDataError: a wind of the wrong shape, not finite, or with flow in solid cells;
@@ -328,13 +379,21 @@ def project_wind(
     else:
         mesh = edge_mesh(occ, res, w, open_fraction)
         fraction = open_fraction
-        while not ((mesh.ft == OPEN).any()) and fraction > 1e-3:  # keep at least one open face
+        edge_free = bool(np.any(edge_mesh(occ, res).ft == OPEN))
+        while edge_free and not ((mesh.ft == OPEN).any()) and fraction > 1e-3:  # keep one open face
             fraction /= 2.0
             mesh = edge_mesh(occ, res, w, fraction)
-    F0 = face_fluxes(mesh, w)
-    F, _ = project_fluxes(mesh, F0)
-    # open faces: outflow is an outlet, inflow an inlet (clean air), as the projected flow says
     open_face = (mesh.ft == INLET) | (mesh.ft == OUTLET)
+    slice_mode = bool(not open_face.any() if through_slice is None else through_slice)
+    F0 = face_fluxes(mesh, w)
+    if slice_mode:  # the wall-consistent fluxes with their own divergence as the source (point 2b)
+        target = smoothed_exchange(mesh, divergence(F0), slice_smoothing)
+        F, _ = project_fluxes(mesh, F0, target)
+        slice_flux = divergence(F)
+    else:
+        F, _ = project_fluxes(mesh, F0)
+        slice_flux = None
+    # open faces: outflow is an outlet, inflow an inlet (clean air), as the projected flow says
     ft = mesh.ft.copy()
     ft[open_face & (F > 0)] = OUTLET
     ft[open_face & (F <= 0)] = INLET
@@ -360,16 +419,32 @@ def project_wind(
     info = {
         "correction": float(np.linalg.norm(F - F0)) / norm if norm > 0 else 0.0,
         "max_divergence_before": float(np.abs(divergence(F0)).max()) if mesh.n else 0.0,
-        "max_divergence_after": float(np.abs(divergence(F)).max()) if mesh.n else 0.0,
+        "max_divergence_after": float(np.abs(divergence(F)).max()) if mesh.n and not slice_mode else 0.0,
         "open_faces": "openings of the layout" if layout is not None else "every free face on the map's edge",
+        "through_slice": slice_mode,
+        "slice_inflow": float(np.maximum(slice_flux, 0.0).sum()) if slice_flux is not None else 0.0,
+        "slice_outflow": float(np.maximum(-slice_flux, 0.0).sum()) if slice_flux is not None else 0.0,
         "inlet_faces": int((ft == INLET).sum()),
         "outlet_faces": int((ft == OUTLET).sum()),
         "closure": "given nu_t" if nut is not None else closure,
         "turbulence": turb_info,
     }
-    return ProjectedFlow(mesh, F, cell_wind, nut_field, info)
+    return ProjectedFlow(mesh, F, cell_wind, nut_field, info, slice_flux)
 
 
 def transport_from_wind(flow: ProjectedFlow, physics: Physics = DEFAULT_PHYSICS) -> TransportSolver:
-    """The gas transport operator on a projected flow (``D_eff = D_m + nu_t / Sc_t``)."""
-    return TransportSolver.build(flow.mesh, flow.F, flow.mesh.values(flow.nut), physics)
+    """The gas transport operator on a projected flow (``D_eff = D_m + nu_t / Sc_t``; the air
+    leaving through the slice takes its gas with it, module docstring point 2b).
+
+    Raises:
+        InputDataError: a flow that gives the gas no way out (no open face and no air leaving
+            through the slice: a closed room has no steady plume).
+    """
+    sink = flow.slice_sink
+    open_face = (flow.mesh.ft == INLET) | (flow.mesh.ft == OUTLET)
+    if not open_face.any() and (sink is None or not (sink > 0).any()):
+        raise InputDataError(
+            "the wind gives the gas no way out: the map has no open face and no air leaves through "
+            "the slice (a closed room has no steady plume)"
+        )
+    return TransportSolver.build(flow.mesh, flow.F, flow.mesh.values(flow.nut), physics, sink=sink)

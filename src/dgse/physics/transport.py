@@ -1,8 +1,12 @@
 """Steady gas transport on a frozen flow, its factorization and its adjoint.
 
-``div(phi c) - div(D_eff grad c) = S`` with ``D_eff = D_m + nu_t / Sc_t``
+``div(phi c) - div(D_eff grad c) + sigma c = S`` with ``D_eff = D_m + nu_t / Sc_t``
 (spec section 4): inlet ``c = 0``, zero gradient at outlets and walls, the
-source cell receiving ``q / (dx dy h)``.  Convection is linear upwind (the
+source cell receiving ``q / (dx dy h)``.  ``sigma >= 0`` (``sink``, per cell) is
+the air leaving the 2-D slice of a 3-D flow through the cell (a given wind
+whose divergence is kept, :mod:`dgse.physics.projection`): the gas leaves with
+it at the cell's concentration; air entering through the slice is clean and
+adds no term; 0 for the built-in 2-D flows.  Convection is linear upwind (the
 face value extrapolated from the upwind cell with its Gauss gradient),
 assembled implicitly: the operator is linear, so one sparse LU factorization
 serves every source of a flow field, and its transpose gives the discrete
@@ -27,6 +31,7 @@ from dgse.physics.fv import (
     anchors,
     gradient,
     ho_source,
+    parts,
     unreached,
 )
 
@@ -34,7 +39,11 @@ SCHEMES = ("limitedLinearUpwind", "linearUpwind", "upwind")
 
 
 def transport_matrix(
-    mesh: Mesh, F: np.ndarray, diffusivity: np.ndarray, scheme: str = "linearUpwind"
+    mesh: Mesh,
+    F: np.ndarray,
+    diffusivity: np.ndarray,
+    scheme: str = "linearUpwind",
+    sink: np.ndarray | None = None,
 ) -> sp.csr_matrix:
     """The ``(n, n)`` steady transport operator on the free cells.
 
@@ -43,6 +52,8 @@ def transport_matrix(
         F: ``(n, 4)`` outward face fluxes (m^2/s per m depth).
         diffusivity: ``(n,)`` cell diffusivity ``D_eff`` (m^2/s).
         scheme: ``"linearUpwind"`` (implicit, unlimited, second order) or ``"upwind"``.
+        sink: ``(n,)`` volume outflow through the slice per cell (m^2/s per m depth, >= 0;
+            module docstring), or None.
     """
     if scheme not in ("linearUpwind", "upwind"):
         raise InputDataError(f"no linear operator for convection scheme {scheme!r}")
@@ -92,12 +103,14 @@ def transport_matrix(
             add(P, up, coef * w_c[up])
             add(P, i_p[up], coef * w_p[up])
             add(P, i_m[up], coef * w_m[up])
+    if sink is not None:
+        add(P, P, np.asarray(sink, dtype=np.float64))
     r, c, v = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
-    # a part of the free cells that no inlet reaches (a closed room, a walled-in cell) has no
-    # concentration level: without the inlet's c = 0 its operator is singular.  No gas reaches
-    # it (a source there is refused, :func:`check_release_cells`), so its steady concentration
-    # is 0: one cell of each such part reads c = 0, which makes the part's equations regular
-    pin = anchors(mesh, INLET)
+    # a part of the free cells that no inlet reaches and no through-slice sink drains (a closed
+    # room, a walled-in cell) has no concentration level: its operator is singular.  No gas
+    # reaches it (a source there is refused, :func:`check_release_cells`), so its steady
+    # concentration is 0: one cell of each such part reads c = 0, which makes it regular
+    pin = anchors(mesh, INLET) & ~_drained(mesh, sink)
     if pin.any():
         keep = ~pin[r]
         fixed = np.flatnonzero(pin)
@@ -107,14 +120,24 @@ def transport_matrix(
     return A
 
 
-def check_release_cells(mesh: Mesh, cells) -> None:
+def _drained(mesh: Mesh, sink: np.ndarray | None) -> np.ndarray:
+    """``bool (n,)``: the free cells whose part (:func:`~dgse.physics.fv.parts`) loses air
+    through the slice (some ``sink > 0``), which gives its gas a way out without an inlet."""
+    if sink is None or not (np.asarray(sink) > 0).any():
+        return np.zeros(mesh.n, dtype=bool)
+    labels, _ = parts(mesh)
+    return np.isin(labels, np.unique(labels[np.asarray(sink) > 0]))
+
+
+def check_release_cells(mesh: Mesh, cells, sink: np.ndarray | None = None) -> None:
     """Raise :class:`InputDataError` unless every ``(i, j)`` of ``cells`` is a free cell of ``mesh``
-    that an inlet reaches: gas released where none can leave has no steady state."""
+    that an inlet reaches or a through-slice ``sink`` drains: gas released where none can leave
+    has no steady state."""
     closed = None
     for i, j in cells:
         if not (0 <= i < mesh.shape[0] and 0 <= j < mesh.shape[1]) or not mesh.free[i, j]:
             raise InputDataError(f"source cell ({i}, {j}) is not a free cell of the map")
-        closed = unreached(mesh, INLET) if closed is None else closed
+        closed = unreached(mesh, INLET) & ~_drained(mesh, sink) if closed is None else closed
         if closed[mesh.index[i, j]]:
             raise InputDataError(
                 f"source cell ({i}, {j}) lies in a closed region that no inlet reaches: "
@@ -147,9 +170,14 @@ class TransportSolver:
     adjoint_scheme: str = "linearUpwind"
     tolerance: float = 1e-7
     max_outer: int = 300
+    sink: np.ndarray | None = None
     info: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        if self.sink is not None:
+            self.sink = np.asarray(self.sink, dtype=np.float64)
+            if self.sink.shape != (self.mesh.n,) or not (self.sink >= 0).all():
+                raise InputDataError(f"sink must be (n,) and non-negative, got shape {self.sink.shape}")
         for s in (self.scheme, self.adjoint_scheme):
             if s not in SCHEMES:
                 raise InputDataError(f"unknown convection scheme {s!r}; use one of {SCHEMES}")
@@ -171,7 +199,7 @@ class TransportSolver:
 
     def matrix(self, scheme: str) -> sp.csr_matrix:
         """The linear operator of ``scheme`` (``"upwind"`` or ``"linearUpwind"``)."""
-        return transport_matrix(self.mesh, self.F, self.diffusivity, scheme)
+        return transport_matrix(self.mesh, self.F, self.diffusivity, scheme, self.sink)
 
     def factor(self, scheme: str):
         if scheme not in self._lu:
@@ -186,7 +214,7 @@ class TransportSolver:
 
     def _rhs(self, cells, rates) -> np.ndarray:
         m = self.mesh
-        check_release_cells(m, cells)
+        check_release_cells(m, cells, self.sink)
         B = np.zeros((m.n, len(cells)))
         for n, ((i, j), q) in enumerate(zip(cells, rates, strict=True)):
             B[m.index[i, j], n] = q / self.physics.slab_depth  # g/s per m of depth
@@ -249,6 +277,16 @@ class TransportSolver:
         out = float((self.F * (m.ft == OUTLET) * c[:, None]).sum())
         inl = float((2.0 * (self.diffusivity * c)[:, None] * (m.ft == INLET)).sum())
         return out, inl
+
+    def slice_outflow(self, conc: np.ndarray) -> float:
+        """Scalar flux out through the slice (``sum sink c``), g/s per m depth; 0 without a sink.
+
+        Args:
+            conc: ``(H, W)`` concentration in g/m^3.
+        """
+        if self.sink is None:
+            return 0.0
+        return float(self.sink @ self.mesh.values(conc))
 
     def adjoint(self, sensor_cells) -> np.ndarray:
         """Sensor responses ``(n_sensors, H, W)`` in (g/m^3) / (g/s).
