@@ -28,6 +28,7 @@ from dgse.posterior.predictive import HypothesisPredictive
 from dgse.presets import PROTOCOL
 from dgse.search.metrics import SUCCESS_RADIUS_M
 from dgse.sensing.noise import NoiseParams, gas_reading
+from dgse.sensing.sensors import Observations
 from tests.conftest import two_rooms
 
 
@@ -308,3 +309,22 @@ def test_short_search_with_dgse_phys():
     assert np.isfinite(result.error_m)
     cells = result.measurement_cells
     assert len({tuple(c) for c in cells}) == len(cells)  # never the same cell twice
+
+
+def test_candidates_are_the_nearest_cells_and_a_random_rest():
+    occ = np.zeros((20, 20), np.uint8)
+    graph = graph_for(occ, 0.1)
+    robot = (10, 10)
+    d = graph.distances_from(robot)
+    belief = Belief(occ, 0.1, uniform_probs(occ))
+    readings = Observations(np.array([[10, 11]]), np.zeros(1), np.zeros((1, 2)))
+    history = SearchHistory(graph, observations=readings, rng=np.random.default_rng(0))
+    planner = InformationPlanner(info=InformationTerm(max_candidates=50, nearest=20))
+    cells = planner.candidates(belief, robot, d, history)
+    got = {tuple(c) for c in cells}
+    assert len(cells) == 50 and len(got) == 50
+    assert robot not in got and (10, 11) not in got  # neither the robot's cell nor a measured one
+    dist = d[cells[:, 0], cells[:, 1]]
+    nearest = np.sort(d[occ == 0])[2:22]  # the robot's and the measured cell left out
+    assert np.sort(dist)[:20] == pytest.approx(nearest)
+    assert dist.max() > 2 * nearest.max()  # the rest reach beyond the nearest ring

@@ -22,8 +22,8 @@ information per second of the move and the reading (``d_x`` the path length over
 free-space graph, :mod:`dgse.planning.paths`; speed and dwell the search protocol's,
 :data:`dgse.presets.PROTOCOL`).  Candidates: the reachable free cells except the robot's
 and those already measured (measured ones again when nothing else is left), at most
-``info.max_candidates`` of them drawn with the episode's generator; ties go to the nearest
-cell.
+``info.max_candidates`` of them (the ``info.nearest`` nearest, the rest drawn with the
+episode's generator); ties go to the nearest cell.
 
 Stop (:class:`InformationStop`): once ``stop.min_observations`` readings are in, the search
 stops when the posterior mass within ``stop.radius_m`` (the success radius of
@@ -124,14 +124,17 @@ class InformationTerm(Settings):
         dwell_s: the time of one reading, s (the protocol's).
         n_bins: reading bins above the clipped zero (:func:`reading_information`).
         spread: the bins reach up to the largest ``mean + spread * sigma`` of the cell's components.
-        max_candidates: at most this many candidate cells per decision (drawn at random).
+        max_candidates: at most this many candidate cells per decision: the ``nearest`` ones
+            by path length, the others drawn at random.
+        nearest: how many of the candidates are the cells nearest the robot.
     """
 
     speed_m_s: float = 0.5
     dwell_s: float = 3.0
-    n_bins: int = 24
+    n_bins: int = 16
     spread: float = 3.0
-    max_candidates: int = 600
+    max_candidates: int = 300
+    nearest: int = 100
 
     def __post_init__(self) -> None:
         self._set("speed_m_s", _positive("info.speed_m_s", self.speed_m_s))
@@ -142,6 +145,7 @@ class InformationTerm(Settings):
         self._set("n_bins", _whole("info.n_bins", self.n_bins, 1))
         self._set("spread", _positive("info.spread", self.spread))
         self._set("max_candidates", _whole("info.max_candidates", self.max_candidates, 1))
+        self._set("nearest", _whole("info.nearest", self.nearest, 0))
 
 
 @dataclass(frozen=True)
@@ -238,7 +242,8 @@ class InformationPlanner(PlannerBase):
         self, belief: Belief, robot_cell: Cell, distances: np.ndarray, history: SearchHistory | None
     ) -> np.ndarray:
         """``(C, 2)`` the cells scored: reachable, free, not the robot's, unmeasured where any is
-        left, at most ``info.max_candidates`` drawn with the episode's generator."""
+        left, at most ``info.max_candidates`` (the ``info.nearest`` nearest, the rest drawn with
+        the episode's generator), in row-major order."""
         d = np.asarray(distances, dtype=np.float64)
         if d.shape != belief.shape:
             raise InputDataError(f"distances have shape {d.shape}, the belief {belief.shape}")
@@ -251,8 +256,12 @@ class InformationPlanner(PlannerBase):
         cells = np.argwhere(ok).astype(np.int64)
         n = self.info.max_candidates
         if len(cells) > n:
+            # the cells nearest the robot first (the cheapest readings), the rest drawn at random
+            near = np.argsort(d[cells[:, 0], cells[:, 1]], kind="stable")
+            k = min(self.info.nearest, n)
             rng = history.rng if history is not None else np.random.default_rng(0)
-            cells = cells[np.sort(rng.choice(len(cells), size=n, replace=False))]
+            rest = near[k:][rng.choice(len(cells) - k, size=n - k, replace=False)]
+            cells = cells[np.sort(np.concatenate([near[:k], rest]))]
         return cells
 
     def next_goal(
