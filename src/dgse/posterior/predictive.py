@@ -10,7 +10,9 @@ computed once per source, for every cell at once), and its noise is the likeliho
 ``sigma = sigma_floor (1 + kappa mu / cbar)``
 (:meth:`~dgse.posterior.adjoint.AdjointResponseModel.reading_sigma`), the reading clipped
 at 0 as the censored likelihood reads zeros.  The rate's own spread within a cell is left
-out, as in the belief's predicted concentration.
+out, as in the belief's predicted concentration; so is DGSE-S's share of ``dgse-phys``'s
+source posterior (``fusion``), which predicts no reading of a source.  The components and
+the noise are those of the first noise-weight mode (what the predicted fields use).
 """
 
 from __future__ import annotations
