@@ -6,7 +6,9 @@
   readings (``map`` < ``openings`` < ``wind``), and :class:`KnowledgeUser`;
 * :mod:`~dgse.belief.estimator`: the :class:`Estimator` protocol and
   :class:`StreamingEstimator` for a growing set of readings;
-* :mod:`~dgse.belief.inputs`: the input checks every estimator shares.
+* :mod:`~dgse.belief.inputs`: the input checks every estimator shares;
+* :mod:`~dgse.belief.predictive`: the predictive distribution of a gas reading a belief
+  answers (:class:`~dgse.belief.predictive.ReadingMixture`).
 """
 
 from dgse.belief.belief import Belief, normalize_source_probs

@@ -52,6 +52,7 @@ from typing import Any
 
 import numpy as np
 
+from dgse.belief.predictive import ReadingMixture, ReadingPredictive, lognormal_predictive
 from dgse.errors import InputDataError
 from dgse.world.grid import Grid
 
@@ -124,6 +125,9 @@ class Belief:
             that more readings do not shrink; None: all of it.  Planners that go where
             a reading teaches most use this part; scores and plots use the whole.
         info: bookkeeping, at least ``method`` (name) and ``seconds`` (time to estimate).
+        predictive: the estimator's own predictive of a gas reading at any cell, whose
+            components name their source cells (:mod:`dgse.belief.predictive`), or None;
+            :meth:`reading_predictive` answers without it from the concentration's moments.
     """
 
     occupancy: np.ndarray
@@ -136,6 +140,7 @@ class Belief:
     info: dict[str, Any] = field(default_factory=dict)
     wind_var_reducible: np.ndarray | None = None
     log_conc_var_reducible: np.ndarray | None = None
+    predictive: ReadingPredictive | None = None
 
     def __post_init__(self) -> None:
         occ = np.asarray(self.occupancy)
@@ -184,6 +189,8 @@ class Belief:
         if space is not None and space not in CONC_SPACES:
             raise InputDataError(f"info['conc_space'] must be one of {CONC_SPACES}, got {space!r}")
         object.__setattr__(self, "info", info)
+        if self.predictive is not None and not isinstance(self.predictive, ReadingPredictive):
+            raise InputDataError(f"predictive must be a ReadingPredictive, got {self.predictive!r}")
 
     # -- geometry ------------------------------------------------------------------------
     @property
@@ -271,6 +278,23 @@ class Belief:
             return None
         m, v = self.log_conc_mean, self.log_conc_var
         return np.expm1(v) * np.exp(2.0 * m + v)
+
+    # -- readings ----------------------------------------------------------------------
+    def reading_predictive(self, cells: np.ndarray) -> ReadingMixture | None:
+        """The predictive of a gas reading at each of ``cells`` (``(C, 2)``): the estimator's
+        own (:attr:`predictive`), else the lognormal of :attr:`log_conc_mean` and
+        :attr:`log_conc_var` with the belief's stated noise floor (``info["noise_floor_ppm"]``,
+        else Table I's mean, :func:`~dgse.belief.predictive.lognormal_predictive`); None for a
+        belief with neither."""
+        c = np.asarray(cells, dtype=np.int64).reshape(-1, 2)
+        if self.predictive is not None:
+            return self.predictive.at(c)
+        if self.log_conc_mean is None:
+            return None
+        var = np.zeros(self.shape) if self.log_conc_var is None else self.log_conc_var
+        floor = self.info.get("noise_floor_ppm")
+        floor = float(floor) if isinstance(floor, int | float) and math.isfinite(floor) else None
+        return lognormal_predictive(self.log_conc_mean, var, c, noise_floor_ppm=floor, free=self.free)
 
     # -- source ------------------------------------------------------------------------
     def source_estimate(self) -> tuple[float, float]:

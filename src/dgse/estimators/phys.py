@@ -105,6 +105,7 @@ from dgse.posterior.mixture import (
     wind_log_likelihood,
     with_given,
 )
+from dgse.posterior.predictive import HypothesisPredictive
 from dgse.sensing.sensors import Observations
 from dgse.threads import map_threads, side_by_side, with_one_blas_thread
 from dgse.world.grid import Grid
@@ -533,19 +534,22 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         second = np.zeros(mesh.n)
         qmax = np.inf if self.evidence.q_max is None else self.evidence.q_max
 
-        def predictive(k: int) -> tuple[np.ndarray, np.ndarray]:
-            """Hypothesis ``k``'s predictive mean and second moment (its flow's own cache)."""
+        def predictive(k: int) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
+            """Hypothesis ``k``'s predictive mean and second moment (its flow's own cache), and
+            its sources, their weights, rates and fields (the readings' predictive)."""
             logl, det = log_ev[k], details[k][1]
             ph = np.exp(logl - logl.max())
             top, wts = predictive_sources(ph / ph.sum(), self.fields.conc_components)
             qmap = np.clip(det["qhat"], 0.0, qmax)
             fields = hyps[k].flow.forward(mesh.cells[top], qmap[top])
-            return wts @ fields, wts @ fields**2
+            return wts @ fields, wts @ fields**2, (top, wts, qmap[top], fields)
 
         weighty = [k for k, w in enumerate(hw) if w >= self.fields.min_weight]
-        for k, (m1, m2) in zip(weighty, map_threads(predictive, weighty), strict=True):
+        parts = []
+        for k, (m1, m2, part) in zip(weighty, map_threads(predictive, weighty), strict=True):
             mean += hw[k] * m1
             second += hw[k] * m2
+            parts.append(part)
         total = float(hw[hw >= self.fields.min_weight].sum())
         mean /= total
         second /= total
@@ -564,6 +568,10 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             hyps[best_h].flow, qmap_b, sig, float(det_b["kappa"]), float(det_b.get("cbar", 1.0))
         )
         misfit = gas_misfit(A_b[:, best] * qmap_b[best], z, model)
+        src, src_w, rates, fields_k = zip(*parts, strict=True)
+        reading = HypothesisPredictive.from_posteriors(
+            [hyps[k].flow for k in weighty], hw[weighty], src, src_w, rates, model, fields_k
+        )
         info: dict[str, Any] = {
             "method": self.name,
             "knowledge": self.knowledge.level,
@@ -596,6 +604,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             info=info,
             wind_var_reducible=wind_var,
             log_conc_var_reducible=s2,
+            predictive=reading,
         )
 
 

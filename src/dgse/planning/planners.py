@@ -381,6 +381,25 @@ class Deadline(Settings):
             self._set("margin_s", m)
         self._set("estimate_radius_m", _radius_or_none("deadline.estimate_radius_m", self.estimate_radius_m))
 
+    def reached(self, history: SearchHistory | None) -> bool:
+        """True when ``margin_s`` is set and less than it is left of ``history``'s time limit.
+
+        The margin is at most a tenth of the limit, so that a short search is not ended
+        at its first permitted reading.
+        """
+        if self.margin_s is None or history is None or not math.isfinite(history.time_limit_s):
+            return False
+        margin = min(self.margin_s, 0.1 * history.time_limit_s)
+        return history.time_s + margin >= history.time_limit_s
+
+    def declare(self, belief: Belief, deadline: bool) -> tuple[float, float]:
+        """The posterior mean, except at a deadline stop with ``estimate_radius_m``: there the
+        centre of the free cell whose disk of that radius holds the most posterior mass
+        (:func:`disk_estimate`)."""
+        if self.estimate_radius_m is None or not deadline:
+            return belief.source_estimate()
+        return disk_estimate(belief, self.estimate_radius_m)
+
 
 @dataclass
 class UtilityPlanner(PlannerBase):
@@ -441,13 +460,9 @@ class UtilityPlanner(PlannerBase):
         """True when ``deadline.margin_s`` is set and less than it is left of the time limit.
 
         The margin is at most a tenth of the limit, so that a short search is not ended
-        at its first permitted reading.
+        at its first permitted reading (:meth:`Deadline.reached`).
         """
-        margin_s = self.deadline.margin_s
-        if margin_s is None or history is None or not math.isfinite(history.time_limit_s):
-            return False
-        margin = min(margin_s, 0.1 * history.time_limit_s)
-        return history.time_s + margin >= history.time_limit_s
+        return self.deadline.reached(history)
 
     def _entropy_passes(self, belief: Belief) -> bool:
         """The stop test without its minimum and confirmation: entropy, or mass near the mode."""
@@ -481,11 +496,8 @@ class UtilityPlanner(PlannerBase):
     def declare(self, belief: Belief, deadline: bool) -> tuple[float, float]:
         """The posterior mean, except at a deadline stop with ``deadline.estimate_radius_m``:
         there the centre of the free cell whose disk of that radius holds the most posterior
-        mass (:func:`disk_estimate`)."""
-        radius = self.deadline.estimate_radius_m
-        if radius is None or not deadline:
-            return belief.source_estimate()
-        return disk_estimate(belief, radius)
+        mass (:func:`disk_estimate`, :meth:`Deadline.declare`)."""
+        return self.deadline.declare(belief, deadline)
 
     def utility(
         self, belief: Belief, distances: np.ndarray, history: SearchHistory | None = None
@@ -633,6 +645,7 @@ PLANNERS: Registry[Planner] = Registry(
     "planner",
     [
         Entry("utility", UtilityPlanner),
+        Entry("info", "dgse.planning.information:InformationPlanner"),
         Entry("infotaxis", "dgse.localization.infotaxis:make_infotaxis"),
         Entry("entrotaxis", "dgse.localization.infotaxis:make_entrotaxis"),
         Entry("dualmode", "dgse.localization.particle_filter:DualModePlanner"),
