@@ -16,6 +16,9 @@ the file, so no update is lost.
 A temporary file outlives its write only when the process dies without running
 its cleanup (``SIGKILL``, power loss); :func:`is_temporary` lets directory
 scans skip such leftovers, which keep the target's suffix.
+
+:func:`expand_paths` is the other direction: the input files that a list of files and
+directories names, as every command that takes "files or a directory of them" reads it.
 """
 
 from __future__ import annotations
@@ -25,15 +28,18 @@ import json
 import math
 import os
 import re
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
 
+from dgse.errors import InputDataError
+
 __all__ = [
     "atomic_open",
     "atomic_path",
+    "expand_paths",
     "is_temporary",
     "json_safe",
     "lock_path",
@@ -48,6 +54,33 @@ __all__ = [
 _TEMP_RE = re.compile(r"^\..+\.tmp-[0-9a-f]{8}(\.[^.]+)?$")
 #: Longest target name (bytes) kept whole in a temporary name: file systems allow 255.
 _MAX_NAME_BYTES = 200
+
+
+def expand_paths(
+    paths: str | os.PathLike[str] | Iterable[str | os.PathLike[str]],
+    keep: Callable[[Path], bool],
+    what: str,
+) -> list[Path]:
+    """The files that ``paths`` name, in the given order: a file as itself, a directory as
+    its files that ``keep`` accepts, sorted by name (a leftover temporary file never).
+
+    Raises:
+        InputDataError: a path that is neither a file nor a directory
+            (``"P: no such WHAT file or directory"``), or no file at all (``"no WHAT files given"``).
+    """
+    items = [paths] if isinstance(paths, str | os.PathLike) else list(paths)
+    out: list[Path] = []
+    for item in items:
+        p = Path(item)
+        if p.is_dir():
+            out.extend(sorted(q for q in p.iterdir() if q.is_file() and not is_temporary(q) and keep(q)))
+        elif p.is_file():
+            out.append(p)
+        else:
+            raise InputDataError(f"{p}: no such {what} file or directory")
+    if not out:
+        raise InputDataError(f"no {what} files given")
+    return out
 
 
 def temporary_name(path: str | os.PathLike[str]) -> Path:

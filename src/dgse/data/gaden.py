@@ -50,8 +50,9 @@ from typing import Any
 import numpy as np
 
 from dgse.errors import InputDataError
+from dgse.files import expand_paths
 from dgse.world.case import Case
-from dgse.world.grid import DEFAULT_RESOLUTION
+from dgse.world.grid import DEFAULT_RESOLUTION, cell_index
 from dgse.world.layout import Opening
 
 __all__ = ["GadenFrame", "load_gaden", "read_gaden_frame"]
@@ -247,23 +248,10 @@ def _frame_sort_key(p: Path) -> tuple:
 
 
 def _result_files(files: str | Path | Sequence[str | Path]) -> list[Path]:
-    items = [files] if isinstance(files, str | Path) else list(files)
-    out: list[Path] = []
-    for f in items:
-        p = Path(f)
-        if p.is_dir():
-            out.extend(
-                q
-                for q in p.iterdir()
-                if q.is_file() and not q.name.startswith(".") and q.suffix.lower() not in _IMAGE_SUFFIXES
-            )
-        elif p.is_file():
-            out.append(p)
-        else:
-            raise InputDataError(f"{p}: no such GADEN result file or directory")
-    if not out:
-        raise InputDataError("no GADEN result files given")
-    return sorted(out, key=_frame_sort_key)
+    def is_result(q: Path) -> bool:
+        return not q.name.startswith(".") and q.suffix.lower() not in _IMAGE_SUFFIXES
+
+    return sorted(expand_paths(files, is_result, "GADEN result"), key=_frame_sort_key)
 
 
 def _axis_operator(n_out: int, out_size: float, n_in: int, in_size: float) -> np.ndarray:
@@ -407,7 +395,7 @@ def load_gaden(
     sx, sy = f0.source[0] - f0.env_min[0], f0.source[1] - f0.env_min[1]
     src = np.array([sx, sy], dtype=np.float32)
     sx, sy = float(src[0]), float(src[1])  # the position the case will hold
-    i, j = math.floor(sy / resolution), math.floor(sx / resolution)
+    i, j = cell_index(sy, resolution), cell_index(sx, resolution)
     if not (0 <= i < H and 0 <= j < W):
         raise InputDataError(
             f"GADEN source ({f0.source[0]:g}, {f0.source[1]:g}) m lies outside the environment"

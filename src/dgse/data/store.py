@@ -77,7 +77,7 @@ import h5py
 import numpy as np
 
 from dgse.errors import DGSEError, InputDataError
-from dgse.files import atomic_path, is_temporary, write_json
+from dgse.files import atomic_path, expand_paths, is_temporary, write_json
 from dgse.world.case import Case
 
 __all__ = [
@@ -1036,17 +1036,7 @@ class DatasetStore:
         """
         self._require_writable()
         _check_split(split)
-        files: list[Path] = []
-        for p in paths:
-            p = Path(p)
-            if p.is_dir():
-                files.extend(sorted(q for q in p.glob("*.npz") if not is_temporary(q)))
-            elif p.exists():
-                files.append(p)
-            else:
-                raise InputDataError(f"{p}: no such case file or directory")
-        if not files:
-            raise InputDataError("no case files to import")
+        files = expand_paths(paths, lambda q: q.suffix == ".npz", "case")
         groups: dict[tuple, list[Case]] = {}
         for f in files:
             case = Case.load(f)
