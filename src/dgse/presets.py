@@ -23,6 +23,8 @@ from dgse.sensing.sensors import MIN_SENSORS
 
 __all__ = [
     "DEFAULT_METHOD",
+    "NETWORK_METHOD",
+    "PHYSICS_METHOD",
     "PRESETS",
     "PROTOCOL",
     "Preset",
@@ -164,19 +166,26 @@ PHYS_SEARCH_PLANNER: dict[str, Any] = {
 #: first quadtree leaf.
 PMFS_SEARCH: dict[str, int] = {"n_record": 50, "max_warmup": 100, "leaf_cells": 20}
 
+#: The plain network, DGSE-S: the method the benchmark report compares every other
+#: method with (its wins, losses and ratios are against this one).
+NETWORK_METHOD = "dgse-s"
+#: The physics method, DGSE-Phys: the default (:data:`DEFAULT_METHOD`), which the report
+#: sets against the network and the other searches.
+PHYSICS_METHOD = "dgse-phys"
+
 #: The named methods.  The DGSE networks run the shipped weights with bf16 autocast where
 #: the CPU computes bf16 natively (float32 elsewhere) and channels-last convolutions.
 PRESETS: dict[str, Preset] = {
     p.name: p
     for p in (
         Preset(
-            "dgse-s",
+            NETWORK_METHOD,
             "dgse-s",
             search_estimator_options={"model": "default", "dtype": "auto", "channels_last": True},
             planner_options={"stop.eta": DGSE_S_ETA, "stop.min_observations": MIN_SENSORS},
         ),
         Preset(
-            "dgse-phys",
+            PHYSICS_METHOD,
             "dgse-phys",
             search_estimator_options={"fusion.floor": 0.0},
             planner_options=PHYS_SEARCH_PLANNER,
@@ -204,7 +213,7 @@ PRESETS: dict[str, Preset] = {
 }
 
 #: The method a command runs when none is named: the one that finds sources at every level.
-DEFAULT_METHOD: dict[str, str] = dict.fromkeys(LEVELS, "dgse-phys")
+DEFAULT_METHOD: dict[str, str] = dict.fromkeys(LEVELS, PHYSICS_METHOD)
 
 
 def preset(name: str) -> Preset:

@@ -38,6 +38,7 @@ import numpy as np
 
 from dgse.bench.core import BenchContext
 from dgse.bench.plots import plt, seconds_bars, style_of
+from dgse.presets import NETWORK_METHOD
 
 __all__ = [
     "METHODS",
@@ -50,9 +51,9 @@ __all__ = [
 ]
 
 #: Methods of the comparison, in plotting order.
-METHODS = ("dgse-s", "kdmvw", "ggmrf", "gwgmrf", "gabp")
+METHODS = (NETWORK_METHOD, "kdmvw", "ggmrf", "gwgmrf", "gabp")
 #: Methods whose concentration variance is a predictive one (the paper's NLL comparison).
-NLL_METHODS = ("dgse-s", "ggmrf", "gwgmrf")
+NLL_METHODS = (NETWORK_METHOD, "ggmrf", "gwgmrf")
 #: Why a method is left out of the NLL comparison (paper Sec. V-B).
 NLL_EXCLUDED = {
     "kdmvw": "its variance is a confidence-weighted spread, not a predictive variance",
@@ -279,10 +280,10 @@ def _wins_text(results: dict[str, dict[str, Any]], cases: list[str]) -> str:
                 total += 1
                 best = min(vals, key=lambda m: vals[m])
                 wins[best] += 1
-                if "dgse-s" in vals and key == "cf_rmse_ppm":
-                    others = [v for m, v in vals.items() if m != "dgse-s"]
+                if NETWORK_METHOD in vals and key == "cf_rmse_ppm":
+                    others = [v for m, v in vals.items() if m != NETWORK_METHOD]
                     if others and min(others) > 0:
-                        ratios.append(vals["dgse-s"] / min(others))
+                        ratios.append(vals[NETWORK_METHOD] / min(others))
         parts = ", ".join(f"{style_of(m)['label']} {k}" for m, k in wins.items() if k)
         line = f"Lowest mean {what}: {parts} (of {total} scenario x count cells)."
         if ratios:
@@ -318,7 +319,7 @@ def _maps(ctx: BenchContext, files: list[Path], n_obs: int) -> tuple[dict[str, A
             est.seed = estimator_seed(ctx.seed, cid, n_obs, 0)
             beliefs[m] = est.estimate(case.occupancy, case.resolution, obs)
         out[cid] = {"case": case, "obs": obs, "beliefs": beliefs}
-        b = beliefs["dgse-s"]
+        b = beliefs[NETWORK_METHOD]
         free = case.free
         c = np.maximum(case.concentration[free].astype(np.float64), 0.0)
         lv = b.log_conc_var[free]
@@ -382,7 +383,7 @@ def _fig7(entry: dict[str, Any], label: str) -> Any:
     ys = (np.arange(H) + 0.5) * res
     xs = (np.arange(W) + 0.5) * res
     for row, (title, wind) in enumerate(
-        (("GT wind", case.wind.astype(np.float64)), ("DGSE-S wind mean", beliefs["dgse-s"].wind_mean)),
+        (("GT wind", case.wind.astype(np.float64)), ("DGSE-S wind mean", beliefs[NETWORK_METHOD].wind_mean)),
         start=1,
     ):
         ax = axes[row, 0]

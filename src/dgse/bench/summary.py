@@ -30,6 +30,7 @@ from typing import Any
 
 from dgse.bench.core import load_manifests
 from dgse.files import write_text
+from dgse.presets import NETWORK_METHOD, PHYSICS_METHOD
 
 __all__ = ["SUMMARY_NAME", "Cited", "Source", "build_summary", "write_summary"]
 
@@ -369,12 +370,12 @@ def _gdm_uncertainty(w: _Writer) -> str:
     cells: dict[tuple[Any, Any], dict[str, _Row]] = {}
     for row in per:
         cells.setdefault((row["scenario"], row["n_obs"]), {})[row["method"]] = row
-    comparable = [c for c in cells.values() if "dgse-s" in c]
+    comparable = [c for c in cells.values() if NETWORK_METHOD in c]
     wins = sum(
         1
         for c in comparable
         if min((m for m in c if c[m].get("nll_comparable")), key=lambda m: w.num(c[m], "cf_nll_ppm_mean"))
-        == "dgse-s"
+        == NETWORK_METHOD
     )
     nll_cells = [(c[m], "cf_nll_ppm_mean") for c in comparable for m in c if c[m].get("nll_comparable")]
     n = w.value(len(comparable), _int, nll_cells, "cells")
@@ -383,9 +384,11 @@ def _gdm_uncertainty(w: _Writer) -> str:
     ppm = r.rows("gdm", "gdm_overall_ppm", ("method", "n_obs"))
     counts = sorted({row["n_obs"] for row in ppm})
     lo, hi = counts[0], counts[-1]
-    s_lo = r.row("gdm", "gdm_overall_ppm", ("method", "n_obs"), method="dgse-s", n_obs=lo)
-    s_hi = r.row("gdm", "gdm_overall_ppm", ("method", "n_obs"), method="dgse-s", n_obs=hi)
-    others = sorted({row["method"] for row in ppm if row["method"] != "dgse-s" and row.get("nll_comparable")})
+    s_lo = r.row("gdm", "gdm_overall_ppm", ("method", "n_obs"), method=NETWORK_METHOD, n_obs=lo)
+    s_hi = r.row("gdm", "gdm_overall_ppm", ("method", "n_obs"), method=NETWORK_METHOD, n_obs=hi)
+    others = sorted(
+        {row["method"] for row in ppm if row["method"] != NETWORK_METHOD and row.get("nll_comparable")}
+    )
     other_cells = [(row, "cf_nll_ppm_mean") for row in ppm if row["method"] in others]
     text = (
         f"**Concentration uncertainty** (`gdm`): against the mapping baselines DGSE-S has the lowest "
@@ -395,14 +398,17 @@ def _gdm_uncertainty(w: _Writer) -> str:
         f"{w.span(other_cells, _sig2)} for {_seq([w.label(m) for m in others])}."
     )
     log = r.rows("gdm", "gdm_overall_log", ("method", "n_obs"))
-    l_lo = r.row("gdm", "gdm_overall_log", ("method", "n_obs"), method="dgse-s", n_obs=lo)
-    l_hi = r.row("gdm", "gdm_overall_log", ("method", "n_obs"), method="dgse-s", n_obs=hi)
+    l_lo = r.row("gdm", "gdm_overall_log", ("method", "n_obs"), method=NETWORK_METHOD, n_obs=lo)
+    l_hi = r.row("gdm", "gdm_overall_log", ("method", "n_obs"), method=NETWORK_METHOD, n_obs=hi)
     lowest = all(
-        w.num(r.row("gdm", "gdm_overall_log", ("method", "n_obs"), method="dgse-s", n_obs=c), "cf_rmse_mean")
+        w.num(
+            r.row("gdm", "gdm_overall_log", ("method", "n_obs"), method=NETWORK_METHOD, n_obs=c),
+            "cf_rmse_mean",
+        )
         <= min(w.num(x, "cf_rmse_mean") for x in log if x["n_obs"] == c)
         for c in counts
     )
-    rest = [(row, "cf_rmse_mean") for row in log if row["method"] != "dgse-s"]
+    rest = [(row, "cf_rmse_mean") for row in log if row["method"] != NETWORK_METHOD]
     text += (
         f" In `log(1 + ppm)` space its RMSE is "
         f"{'also the lowest at every count' if lowest else 'not always the lowest'} "
@@ -416,14 +422,16 @@ def _gdm_ppm_rmse(w: _Writer) -> str:
     cells: dict[tuple[Any, Any], dict[str, _Row]] = {}
     for row in per:
         cells.setdefault((row["scenario"], row["n_obs"]), {})[row["method"]] = row
-    cells = {k: c for k, c in cells.items() if "dgse-s" in c and len(c) > 1}
+    cells = {k: c for k, c in cells.items() if NETWORK_METHOD in c and len(c) > 1}
     all_cells = [(c[m], "cf_rmse_ppm_mean") for c in cells.values() for m in c]
-    wins = sum(1 for c in cells.values() if min(c, key=lambda m: w.num(c[m], "cf_rmse_ppm_mean")) == "dgse-s")
+    wins = sum(
+        1 for c in cells.values() if min(c, key=lambda m: w.num(c[m], "cf_rmse_ppm_mean")) == NETWORK_METHOD
+    )
     ratios, best = [], set()
     for c in cells.values():
-        m_best = min((m for m in c if m != "dgse-s"), key=lambda m: w.num(c[m], "cf_rmse_ppm_mean"))
+        m_best = min((m for m in c if m != NETWORK_METHOD), key=lambda m: w.num(c[m], "cf_rmse_ppm_mean"))
         best.add(m_best)
-        ratios.append(w.num(c["dgse-s"], "cf_rmse_ppm_mean") / w.num(c[m_best], "cf_rmse_ppm_mean"))
+        ratios.append(w.num(c[NETWORK_METHOD], "cf_rmse_ppm_mean") / w.num(c[m_best], "cf_rmse_ppm_mean"))
     n = w.value(len(cells), _int, all_cells, "cells")
     lead = (
         "DGSE-S never has the lowest"
@@ -470,11 +478,11 @@ def _gsl(w: _Writer) -> str:
     r = w.results
     rows = _gsl_rows(w, "map")
     scen = sorted({x["scenario"] for x in r.rows("gsl", "gsl_only", GSL_KEY) if x["scenario"] != "all"})
-    ev = r.json("gsl", "eval_dgse-s.json")
+    ev = r.json("gsl", f"eval_{NETWORK_METHOD}.json")
     n_obs = ev["observation_counts"]
     if len(n_obs) != 1:
         raise _Missing("one count")
-    count = w.value(n_obs[0], _int, files=["gsl/eval_dgse-s.json"], how="observation_counts")
+    count = w.value(n_obs[0], _int, files=[f"gsl/eval_{NETWORK_METHOD}.json"], how="observation_counts")
     n_scen = w.value(len(scen), _int, files=["gsl/gsl_only.csv"], how="scenarios")
     methods = sorted(rows, key=lambda m: w.num(rows[m], "sl_error_m_mean"))
     best = methods[0]
@@ -482,14 +490,15 @@ def _gsl(w: _Writer) -> str:
     parts = []
     for m in rest:
         t = ""
-        if m != "dgse-s":
+        if m != NETWORK_METHOD:
             trials = _gsl_trials(w, "gsl", m)
-            if trials != _gsl_trials(w, "gsl", "dgse-s"):
+            if trials != _gsl_trials(w, "gsl", NETWORK_METHOD):
                 t = f" ({trials} trials per scenario)"
         parts.append(f"{w.cell(rows[m], 'sl_error_m_mean')} m for {w.label(m)}{t}")
     text = (
         f"**Source localization from {count} random readings** (`gsl`, {n_scen} test layouts x "
-        f"{_gsl_trials(w, 'gsl', 'dgse-s')} trials): at `map` {w.label(best)} has the lowest mean error, "
+        f"{_gsl_trials(w, 'gsl', NETWORK_METHOD)} trials): at `map` {w.label(best)} has the lowest "
+        f"mean error, "
         f"{w.cell(rows[best], 'sl_error_m_mean')} m, against " + _seq(parts) + "."
     )
     by_ce = min(rows, key=lambda m: w.num(rows[m], "ce_mean"))
@@ -503,10 +512,10 @@ def _gsl(w: _Writer) -> str:
             + ", ".join(w.cell(rows[m], "sl_error_m_median") for m in others)
             + " m, in the order above)."
         )
-    if "dgse-s" in rows and "dgse-phys" in rows:
+    if NETWORK_METHOD in rows and PHYSICS_METHOD in rows:
         text += (
-            f" DGSE-S takes {w.cell(rows['dgse-s'], 'seconds_median', _seconds)} s an estimate against "
-            f"{w.label('dgse-phys')}'s {w.cell(rows['dgse-phys'], 'seconds_median', _seconds)} s "
+            f" DGSE-S takes {w.cell(rows[NETWORK_METHOD], 'seconds_median', _seconds)} s an estimate against "
+            f"{w.label(PHYSICS_METHOD)}'s {w.cell(rows[PHYSICS_METHOD], 'seconds_median', _seconds)} s "
             f"(median, {_threads(w, 'gsl')})."
         )
     for level in LEVELS[1:]:
@@ -520,16 +529,18 @@ def _gsl(w: _Writer) -> str:
 def _gsl_level(w: _Writer, level: str) -> str:
     rows = _gsl_rows(w, level)
     suite = _suite_at("gsl", level)
-    phys = rows["dgse-phys"]
+    phys = rows[PHYSICS_METHOD]
     oracle = [m for m, x in rows.items() if x.get("oracle")]
     named = {"openings": "With the openings known", "wind": "With the case's wind given"}[level]
-    others = [m for m in ("adjoint", "dgse-s") if m in rows and not rows[m].get("oracle")]
+    others = [m for m in ("adjoint", NETWORK_METHOD) if m in rows and not rows[m].get("oracle")]
     if level == "wind":
         others = oracle or others
     lead_err = all(
-        w.num(phys, "sl_error_m_mean") < w.num(rows[m], "sl_error_m_mean") for m in rows if m != "dgse-phys"
+        w.num(phys, "sl_error_m_mean") < w.num(rows[m], "sl_error_m_mean")
+        for m in rows
+        if m != PHYSICS_METHOD
     )
-    lead_ce = all(w.num(phys, "ce_mean") < w.num(rows[m], "ce_mean") for m in rows if m != "dgse-phys")
+    lead_ce = all(w.num(phys, "ce_mean") < w.num(rows[m], "ce_mean") for m in rows if m != PHYSICS_METHOD)
     lead = (
         "leads in error and CE"
         if lead_err and lead_ce
@@ -544,7 +555,7 @@ def _gsl_level(w: _Writer, level: str) -> str:
         for m in others
     ]
     text = (
-        f"**{named}** (`{suite}`) {w.label('dgse-phys')} {lead}: {w.cell(phys, 'sl_error_m_mean')} m / "
+        f"**{named}** (`{suite}`) {w.label(PHYSICS_METHOD)} {lead}: {w.cell(phys, 'sl_error_m_mean')} m / "
         f"{w.cell(phys, 'ce_mean', _sig3)} nats against " + _seq(pairs) + "."
     )
     if oracle:
@@ -553,7 +564,9 @@ def _gsl_level(w: _Writer, level: str) -> str:
             phys, "ce_mean"
         ) < w.num(o, "ce_mean")
         if below:
-            text += f" On these layouts {w.label('dgse-phys')} is below the oracle (the true flow) in both."
+            text += (
+                f" On these layouts {w.label(PHYSICS_METHOD)} is below the oracle (the true flow) in both."
+            )
     return text
 
 
@@ -566,7 +579,7 @@ def _cal(w: _Writer, level: str) -> list[_Row]:
 
 def _calibration_win(w: _Writer) -> str:
     rows = _cal(w, "map")
-    s = [x for x in rows if x["method"] == "dgse-s"]
+    s = [x for x in rows if x["method"] == NETWORK_METHOD]
     text = (
         f"**Honest uncertainty** (`calibration`): DGSE-S's source credible sets are calibrated (calibration "
         f"error {w.span([(x, 'source_cal_error') for x in s])}, median credible level of the truth "
@@ -579,13 +592,13 @@ def _calibration_win(w: _Writer) -> str:
     try:
         levels, errs, count = [], [], None
         for lv in LEVELS:
-            p = [x for x in _cal(w, lv) if x["method"] == "dgse-phys"]
+            p = [x for x in _cal(w, lv) if x["method"] == PHYSICS_METHOD]
             first = min(p, key=lambda x: x["n_obs"])
             count = count or first
             levels.append(f"`{lv}`")
             errs.append(w.cell(first, "source_cal_error", _f3))
         text += (
-            f" {w.label('dgse-phys')}'s source posterior is calibrated from few readings (error "
+            f" {w.label(PHYSICS_METHOD)}'s source posterior is calibrated from few readings (error "
             + " / ".join(errs)
             + f" at {w.cell(count, 'n_obs', _int)} readings at "
             + " / ".join(levels)
@@ -597,7 +610,7 @@ def _calibration_win(w: _Writer) -> str:
 
 
 def _calibration_conc(w: _Writer) -> str:
-    s = [x for x in _cal(w, "map") if x["method"] == "dgse-s"]
+    s = [x for x in _cal(w, "map") if x["method"] == NETWORK_METHOD]
     cov = [w.num(x, "conc_cov_2sigma") for x in s]
     verb = "overconfident" if max(cov) < _nominal(2) else "not always overconfident"
     return (
@@ -608,7 +621,7 @@ def _calibration_conc(w: _Writer) -> str:
 
 
 def _calibration_phys(w: _Writer) -> str:
-    per = {lv: [x for x in _cal(w, lv) if x["method"] == "dgse-phys"] for lv in LEVELS}
+    per = {lv: [x for x in _cal(w, lv) if x["method"] == PHYSICS_METHOD] for lv in LEVELS}
     per = {lv: v for lv, v in per.items() if v}
     if not per:
         raise _Missing("dgse-phys calibration")
@@ -617,9 +630,9 @@ def _calibration_phys(w: _Writer) -> str:
     w2 = [w.span([(x, "wind_cov_2sigma") for x in v], _pct, " %") for v in per.values()]
     c2 = [w.span([(x, "conc_cov_2sigma") for x in v], _pct, " %") for v in per.values()]
     allp = [x for v in per.values() for x in v]
-    s = [x for x in _cal(w, "map") if x["method"] == "dgse-s"]
+    s = [x for x in _cal(w, "map") if x["method"] == NETWORK_METHOD]
     text = (
-        f"**{w.label('dgse-phys')}'s field uncertainty is too wide** ({', '.join(suites)}): its wind and "
+        f"**{w.label(PHYSICS_METHOD)}'s field uncertainty is too wide** ({', '.join(suites)}): its wind and "
         "concentration variances add a model error chosen by likelihood on validation scenarios to the "
         "spread between its flow hypotheses. On these test scenarios the one-sigma wind intervals cover "
         + _seq(w1)
@@ -658,14 +671,14 @@ def _variants(w: _Writer) -> dict[str, dict[int, _Row]]:
     out: dict[str, dict[int, _Row]] = {}
     for row in w.results.rows("variants", "variants", VAR_KEY):
         out.setdefault(row["method"], {})[row["n_obs"]] = row
-    if not {"dgse-s", "dgse-p"} <= set(out):
+    if not {NETWORK_METHOD, "dgse-p"} <= set(out):
         raise _Missing("variants")
     return out
 
 
 def _variants_fields(w: _Writer) -> str:
     v = _variants(w)
-    s, p = v["dgse-s"], v["dgse-p"]
+    s, p = v[NETWORK_METHOD], v["dgse-p"]
     counts = sorted(set(s) & set(p))
     mid = min(counts, key=lambda c: abs(c - 50))
     wind = [c for c in counts if w.num(s[c], "wf_rmse_mean") < w.num(p[c], "wf_rmse_mean")]
@@ -693,7 +706,7 @@ def _variants_order(w: _Writer) -> str:
     v = _variants(w)
     if "dgse-o" not in v:
         raise _Missing("dgse-o")
-    s, p, o = v["dgse-s"], v["dgse-p"], v["dgse-o"]
+    s, p, o = v[NETWORK_METHOD], v["dgse-p"], v["dgse-o"]
     counts = sorted(set(s) & set(p) & set(o))
     file = "variants/variants.csv"
     beats_p = [c for c in counts if w.num(s[c], "sl_error_m_mean") < w.num(p[c], "sl_error_m_mean")]
@@ -834,7 +847,7 @@ def _plan(w: _Writer) -> tuple[str, str]:
 
 def _search_phys(w: _Writer) -> str:
     steady, fil = _search_all(w, "search_steady"), _search_all(w, "search_filament")
-    phys = w.label("dgse-phys")
+    phys = w.label(PHYSICS_METHOD)
     ps, pf = steady[phys], fil[phys]
     n_scen, trials = _plan(w)
     ks, ns = _found(w, ps)
@@ -899,7 +912,7 @@ def _search_stops(w: _Writer) -> str:
     episodes, margin, margin_key = [], None, ""
     files = []
     for kind in ("test", "filament"):
-        name = f"run_dgse-phys_{kind}.json"
+        name = f"run_{PHYSICS_METHOD}_{kind}.json"
         d = w.results.json("search", name)
         files.append(f"search/{name}")
         found = _deadline_margin(d.get("settings") or {})
@@ -957,7 +970,7 @@ def _search_dgse_s(w: _Writer) -> str:
             f"{w.cell(fl, 'scenarios', _int)} with filament readings ({w.cell(fl, 'error [m]', _sig2)} m)"
         )
     base = [
-        x for m, x in list(steady.items()) + list(fil.items()) if m not in ("DGSE-S", w.label("dgse-phys"))
+        x for m, x in list(steady.items()) + list(fil.items()) if m not in ("DGSE-S", w.label(PHYSICS_METHOD))
     ]
     mine = max(w.num(steady["DGSE-S"], "SR [%]"), w.num(fil["DGSE-S"], "SR [%]"))
     better = "do no better" if max(w.num(x, "SR [%]") for x in base) <= mine else "do better"
