@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -10,7 +11,16 @@ import pytest
 from dgse.belief.knowledge import PerLevel
 from dgse.errors import InputDataError, UnsupportedError
 from dgse.estimators.registry import estimator_names, get_estimator
-from dgse.options import Settings, accepts, check_options, options_from
+from dgse.options import (
+    Settings,
+    accepts,
+    check_number,
+    check_options,
+    check_positive_numbers,
+    check_switch,
+    check_whole,
+    options_from,
+)
 from dgse.planning.planners import get_planner, planner_names
 
 
@@ -163,3 +173,25 @@ def test_devices_this_installation_lacks_are_clear_errors():
         with pytest.raises(UnsupportedError, match="use --device cpu"):
             get_estimator("dgse-s", device="cuda")
     assert str(get_estimator("dgse-s", device="cpu", K=2).device) == "cpu"
+
+
+def test_field_checks_pass_good_values_and_name_the_key_of_bad_ones():
+    assert check_switch("a.on", False) is False
+    assert check_whole("a.n", 3.0, 1) == 3 and isinstance(check_whole("a.n", 3.0, 1), int)
+    assert check_number("a.x", 1, low=0.0, high=1.0) == 1.0
+    assert check_positive_numbers("a.v", [1, 2.5]) == (1.0, 2.5)
+    bad = [
+        (check_switch, ("a.on", "false"), "a.on must be true or false"),
+        (check_whole, ("a.n", True, 0), "a.n must be an integer >= 0"),
+        (check_whole, ("a.n", 2.5, 0), "a.n must be an integer >= 0"),
+        (check_whole, ("a.n", 0, 1), "a.n must be an integer >= 1"),
+        (check_number, ("a.x", 0.0), "a.x must lie in (0, 1]"),
+        (check_number, ("a.x", float("nan")), "a.x must lie in (0, 1]"),
+        (check_positive_numbers, ("a.v", [1.0, 0.0], " m/s"), "a.v must be positive numbers m/s"),
+        (check_positive_numbers, ("a.v", ["x"]), "a.v must be positive numbers"),
+        (check_positive_numbers, ("a.v", []), "a.v must be positive numbers"),
+    ]
+    for check, args, message in bad:
+        kwargs = {"low": 0.0, "high": 1.0, "open_low": True} if check is check_number else {}
+        with pytest.raises(InputDataError, match=re.escape(message)):
+            check(*args, **kwargs)

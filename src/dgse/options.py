@@ -24,6 +24,10 @@ wrong types are errors as above, and the message lists the valid keys.  A
 :class:`Settings` class with a ``from_value`` classmethod also takes a plain value
 (:class:`dgse.belief.knowledge.PerLevel`: one value for every knowledge level).
 
+The checks a ``__post_init__`` runs on one field are here too, so that a rule such as
+"a switch is a bool, never a text" reads the same in every component:
+:func:`check_switch`, :func:`check_whole`, :func:`check_number`, :func:`check_positive_numbers`.
+
 Example::
 
     @options_from(AdjointEstimator, drop=("wind",))
@@ -48,11 +52,61 @@ from typing import Any
 
 from dgse.errors import InputDataError
 
-__all__ = ["Settings", "accepts", "check_options", "options_from"]
+__all__ = [
+    "Settings",
+    "accepts",
+    "check_number",
+    "check_options",
+    "check_positive_numbers",
+    "check_switch",
+    "check_whole",
+    "options_from",
+]
 
 #: attribute set by :func:`options_from`
 _ATTR = "__dgse_options__"
 _NOT_CHECKED = object()
+
+
+def check_positive_numbers(key: str, values: Iterable[float], unit: str = "") -> tuple[float, ...]:
+    """``values`` as a tuple of floats, all positive and finite; else an
+    :class:`~dgse.errors.InputDataError` naming ``key`` (``unit`` follows "numbers" in it)."""
+    try:
+        out = tuple(float(v) for v in values)
+    except (TypeError, ValueError):
+        out = ()
+    if not out or any(not (v > 0 and math.isfinite(v)) for v in out):
+        raise InputDataError(f"{key} must be positive numbers{unit}, got {values!r}")
+    return out
+
+
+def check_number(
+    key: str, value: float, *, low: float, high: float = math.inf, open_low: bool = False
+) -> float:
+    """``value`` as a float in ``[low, high]`` (``(low, high]`` with ``open_low``); else an
+    :class:`~dgse.errors.InputDataError` naming ``key``."""
+    v = float(value)
+    ok = (v > low if open_low else v >= low) and v <= high
+    if not ok or math.isnan(v):
+        side = "(" if open_low else "["
+        raise InputDataError(f"{key} must lie in {side}{low:g}, {high:g}], got {value!r}")
+    return v
+
+
+def check_whole(key: str, value: int, least: int) -> int:
+    """``value`` (an int or a whole float, never a bool) as an int ``>= least``; else an
+    :class:`~dgse.errors.InputDataError` naming ``key``."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or int(value) != value or value < least:
+        raise InputDataError(f"{key} must be an integer >= {least}, got {value!r}")
+    return int(value)
+
+
+def check_switch(key: str, value: object) -> bool:
+    """A true-or-false setting: a text such as ``"false"`` would read as true, so only a bool
+    passes; else an :class:`~dgse.errors.InputDataError` naming ``key``."""
+    if not isinstance(value, bool):
+        raise InputDataError(f"{key} must be true or false, got {value!r}")
+    return value
 
 
 @dataclasses.dataclass(frozen=True)

@@ -19,50 +19,14 @@ value given there holds at every level.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
 from dataclasses import dataclass
 
 from dgse.belief.knowledge import PerLevel, per_level
 from dgse.errors import InputDataError
-from dgse.options import Settings
+from dgse.options import Settings, check_number, check_positive_numbers, check_switch, check_whole
 from dgse.posterior.adjoint import DEFAULT_KAPPAS
 
 __all__ = ["FlowHypotheses", "GasEvidence", "NetworkFusion", "PredictedFields"]
-
-
-def _positive_numbers(key: str, values: Iterable[float], unit: str = "") -> tuple[float, ...]:
-    """``values`` as a tuple of floats, all positive and finite; else a clear error."""
-    try:
-        out = tuple(float(v) for v in values)
-    except (TypeError, ValueError):
-        out = ()
-    if not out or any(not (v > 0 and math.isfinite(v)) for v in out):
-        raise InputDataError(f"{key} must be positive numbers{unit}, got {values!r}")
-    return out
-
-
-def _number(key: str, value: float, *, low: float, high: float = math.inf, open_low: bool = False) -> float:
-    """``value`` as a float in ``[low, high]`` (``(low, high]`` with ``open_low``); else a clear error."""
-    v = float(value)
-    ok = (v > low if open_low else v >= low) and v <= high
-    if not ok or math.isnan(v):
-        side = "(" if open_low else "["
-        raise InputDataError(f"{key} must lie in {side}{low:g}, {high:g}], got {value!r}")
-    return v
-
-
-def _whole(key: str, value: int, least: int) -> int:
-    """``value`` as an int ``>= least``; else a clear error."""
-    if isinstance(value, bool) or not isinstance(value, int | float) or int(value) != value or value < least:
-        raise InputDataError(f"{key} must be an integer >= {least}, got {value!r}")
-    return int(value)
-
-
-def _switch(key: str, value: object) -> bool:
-    """A true-or-false setting: a text such as ``"false"`` would read as true, so it is refused."""
-    if not isinstance(value, bool):
-        raise InputDataError(f"{key} must be true or false, got {value!r}")
-    return value
 
 
 @dataclass(frozen=True)
@@ -102,22 +66,24 @@ class FlowHypotheses(Settings):
     wind_noise_floor: float = 0.05
 
     def __post_init__(self) -> None:
-        self._set("speeds", _positive_numbers("flows.speeds", self.speeds, " of m/s"))
-        self._set("refine_speeds", _whole("flows.refine_speeds", self.refine_speeds, 0))
-        self._set("refine_readings", _whole("flows.refine_readings", self.refine_readings, 0))
+        self._set("speeds", check_positive_numbers("flows.speeds", self.speeds, " of m/s"))
+        self._set("refine_speeds", check_whole("flows.refine_speeds", self.refine_speeds, 0))
+        self._set("refine_readings", check_whole("flows.refine_readings", self.refine_readings, 0))
         if not (float(self.refine_ratio) > 1.0 and math.isfinite(self.refine_ratio)):
             raise InputDataError(f"flows.refine_ratio must be a number > 1, got {self.refine_ratio!r}")
-        self._set("warm_start", _switch("flows.warm_start", self.warm_start))
-        self._set("map_proposals", _whole("flows.map_proposals", self.map_proposals, 1))
-        self._set("map_speed", _positive_numbers("flows.map_speed", (self.map_speed,), " of m/s")[0])
+        self._set("warm_start", check_switch("flows.warm_start", self.warm_start))
+        self._set("map_proposals", check_whole("flows.map_proposals", self.map_proposals, 1))
+        self._set("map_speed", check_positive_numbers("flows.map_speed", (self.map_speed,), " of m/s")[0])
         self._set(
             "given_wind_prior",
-            _number("flows.given_wind_prior", self.given_wind_prior, low=0.0, high=1.0, open_low=True),
+            check_number("flows.given_wind_prior", self.given_wind_prior, low=0.0, high=1.0, open_low=True),
         )
-        self._set("wind_noise_levels", _positive_numbers("flows.wind_noise_levels", self.wind_noise_levels))
+        self._set(
+            "wind_noise_levels", check_positive_numbers("flows.wind_noise_levels", self.wind_noise_levels)
+        )
         self._set(
             "wind_noise_floor",
-            _positive_numbers("flows.wind_noise_floor", (self.wind_noise_floor,), " of m/s")[0],
+            check_positive_numbers("flows.wind_noise_floor", (self.wind_noise_floor,), " of m/s")[0],
         )
 
 
@@ -153,22 +119,24 @@ class GasEvidence(Settings):
 
     def __post_init__(self) -> None:
         if self.q_max is not None:
-            self._set("q_max", _positive_numbers("evidence.q_max", (self.q_max,), " of g/s (or None)")[0])
+            self._set(
+                "q_max", check_positive_numbers("evidence.q_max", (self.q_max,), " of g/s (or None)")[0]
+            )
         kappas = tuple(float(k) for k in self.kappas)
         if not kappas or any(not (k >= 0 and math.isfinite(k)) for k in kappas):
             raise InputDataError(f"evidence.kappas must be finite numbers >= 0, got {self.kappas!r}")
         self._set("kappas", kappas)
-        self._set("alpha0", _number("evidence.alpha0", self.alpha0, low=0.0, open_low=True))
+        self._set("alpha0", check_number("evidence.alpha0", self.alpha0, low=0.0, open_low=True))
         self._set(
             "sigma0_fraction",
-            _number("evidence.sigma0_fraction", self.sigma0_fraction, low=0.0, open_low=True),
+            check_number("evidence.sigma0_fraction", self.sigma0_fraction, low=0.0, open_low=True),
         )
         self._set(
             "censored_tilt",
-            per_level(self.censored_tilt).apply(lambda v: _switch("evidence.censored_tilt", v)),
+            per_level(self.censored_tilt).apply(lambda v: check_switch("evidence.censored_tilt", v)),
         )
         readings = per_level(self.effective_readings).apply(
-            lambda v: _number("evidence.effective_readings", v, low=0.0, open_low=True)
+            lambda v: check_number("evidence.effective_readings", v, low=0.0, open_low=True)
         )
         self._set("effective_readings", readings)
         growth = per_level(self.effective_growth)
@@ -197,11 +165,12 @@ class NetworkFusion(Settings):
 
     def __post_init__(self) -> None:
         self._set(
-            "weight", per_level(self.weight).apply(lambda v: _number("fusion.weight", v, low=0.0, high=1.0))
+            "weight",
+            per_level(self.weight).apply(lambda v: check_number("fusion.weight", v, low=0.0, high=1.0)),
         )
-        self._set("readings", _positive_numbers("fusion.readings", (self.readings,))[0])
+        self._set("readings", check_positive_numbers("fusion.readings", (self.readings,))[0])
         self._set(
-            "floor", per_level(self.floor).apply(lambda v: _number("fusion.floor", v, low=0.0, high=1.0))
+            "floor", per_level(self.floor).apply(lambda v: check_number("fusion.floor", v, low=0.0, high=1.0))
         )
 
 
@@ -238,5 +207,5 @@ class PredictedFields(Settings):
             return fe  # type: ignore[return-value]
 
         self._set("model_error", per_level(self.model_error).apply(four))
-        self._set("conc_components", _whole("fields.conc_components", self.conc_components, 1))
-        self._set("min_weight", _number("fields.min_weight", self.min_weight, low=0.0, high=1.0))
+        self._set("conc_components", check_whole("fields.conc_components", self.conc_components, 1))
+        self._set("min_weight", check_number("fields.min_weight", self.min_weight, low=0.0, high=1.0))

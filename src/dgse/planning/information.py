@@ -43,7 +43,7 @@ import numpy as np
 from dgse.belief.belief import Belief
 from dgse.belief.predictive import ReadingMixture
 from dgse.errors import InputDataError
-from dgse.options import Settings
+from dgse.options import Settings, check_whole
 from dgse.planning.paths import Cell
 from dgse.planning.planners import Deadline, PlannerBase, SearchHistory, mass_within
 
@@ -109,12 +109,6 @@ def _positive(name: str, value: float) -> float:
     return v
 
 
-def _whole(name: str, value: int, least: int) -> int:
-    if isinstance(value, bool) or int(value) != value or value < least:
-        raise InputDataError(f"{name} must be an integer >= {least}, got {value!r}")
-    return int(value)
-
-
 @dataclass(frozen=True)
 class InformationTerm(Settings):
     """How a candidate's information per second is scored.
@@ -142,10 +136,10 @@ class InformationTerm(Settings):
         if not (math.isfinite(dwell) and dwell >= 0):
             raise InputDataError(f"info.dwell_s must be a number of s >= 0, got {self.dwell_s!r}")
         self._set("dwell_s", dwell)
-        self._set("n_bins", _whole("info.n_bins", self.n_bins, 1))
+        self._set("n_bins", check_whole("info.n_bins", self.n_bins, 1))
         self._set("spread", _positive("info.spread", self.spread))
-        self._set("max_candidates", _whole("info.max_candidates", self.max_candidates, 1))
-        self._set("nearest", _whole("info.nearest", self.nearest, 0))
+        self._set("max_candidates", check_whole("info.max_candidates", self.max_candidates, 1))
+        self._set("nearest", check_whole("info.nearest", self.nearest, 0))
 
 
 @dataclass(frozen=True)
@@ -167,7 +161,7 @@ class InformationStop(Settings):
         if not (0.0 < float(self.level) <= 1.0):
             raise InputDataError(f"stop.level must lie in (0, 1], got {self.level!r}")
         self._set("level", float(self.level))
-        self._set("min_observations", _whole("stop.min_observations", self.min_observations, 0))
+        self._set("min_observations", check_whole("stop.min_observations", self.min_observations, 0))
 
 
 @dataclass

@@ -36,6 +36,7 @@ import yaml
 from dgse.errors import InputDataError
 from dgse.files import write_text
 from dgse.models.config import PRESETS, VARIANTS, LossWeights, ModelConfig, preset_config
+from dgse.options import check_switch
 
 __all__ = [
     "PRECISIONS",
@@ -121,12 +122,6 @@ def _check_int(key: str, v: Any, lo: int) -> int:
     if not _is_int(v) or v < lo:
         raise InputDataError(f"{key} must be an integer >= {lo}, got {v!r}")
     return int(v)
-
-
-def _check_bool(key: str, v: Any) -> bool:
-    if not isinstance(v, bool):
-        raise InputDataError(f"{key} must be true or false, got {v!r}")
-    return v
 
 
 def _check_str(key: str, v: Any, optional: bool = False) -> str | None:
@@ -294,7 +289,7 @@ class TrainConfig:
         elif not isinstance(self.loss_weights, LossWeights):
             raise InputDataError(f"loss_weights must be a mapping, got {self.loss_weights!r}")
         for key in ("augment", "progress_bar", "lightning_messages", "fast_dev_run"):
-            _check_bool(key, getattr(self, key))
+            check_switch(key, getattr(self, key))
         parse_duration(self.max_time)
         if self.precision not in PRECISIONS:
             # YAML reads `precision: 32` as an int
