@@ -36,9 +36,9 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, TypeVar
 
 import numpy as np
 from scipy import ndimage, sparse
@@ -47,6 +47,8 @@ from dgse.errors import InputDataError
 from dgse.files import write_bytes
 from dgse.world.grid import DEFAULT_RESOLUTION, Grid
 from dgse.world.layout import Layout, Opening
+
+_T = TypeVar("_T")
 
 __all__ = [
     "FloorPlan",
@@ -147,37 +149,50 @@ def resample_occupancy(
 
 
 # -- image reading -----------------------------------------------------------------------------
-def _read_image(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
-    """Grey level ``(h, w)`` in ``[0, 255]`` (mean of colour channels) and alpha or None."""
-    try:
-        from PIL import Image
-    except ImportError as e:  # pragma: no cover - pillow is a dependency
-        raise InputDataError("reading floor plan images needs Pillow (pip install pillow)") from e
+def _read_file(
+    path: Path, what: str, load: Callable[[Path], _T], errors: tuple[type[Exception], ...], verb: str = "read"
+) -> _T:
+    """``load(path)``: a missing file, or one that ``load`` fails on with one of ``errors``
+    ("cannot VERB WHAT PATH: ..."), is an :class:`~dgse.errors.InputDataError`."""
     if not path.is_file():
-        raise InputDataError(f"floor plan image {path} does not exist")
+        raise InputDataError(f"{what} {path} does not exist")
     try:
-        with Image.open(path) as im:
-            im.load()
-            mode = im.mode
-            if mode in ("I;16", "I;16B", "I;16L", "I"):
-                a = np.asarray(im, dtype=np.float64)
-                top = 65535.0 if a.max(initial=0) > 255 else 255.0
-                return a * (255.0 / top), None
-            if mode == "P":
-                im = im.convert("RGBA")
-                mode = "RGBA"
-            if mode in ("1", "L", "LA", "RGB", "RGBA"):
-                a = np.asarray(im.convert("LA" if mode in ("1", "L", "LA") else "RGBA"))
-            else:
-                a = np.asarray(im.convert("RGBA"))
+        return load(path)
     except InputDataError:
         raise
-    except Exception as e:  # PIL raises many kinds (UnidentifiedImageError, OSError, ...)
-        raise InputDataError(f"cannot read floor plan image {path}: {e}") from e
-    a = a.astype(np.float64)
+    except errors as e:
+        raise InputDataError(f"cannot {verb} {what} {path}: {e}") from e
+
+
+def _image_array(path: Path) -> np.ndarray:
+    """The pixels of an image file: 8-bit grey+alpha or RGBA ``(h, w, c)``, or a 16/32-bit
+    grey ``(h, w)`` scaled to ``[0, 255]``."""
+    from PIL import Image
+
+    with Image.open(path) as im:
+        im.load()
+        mode = im.mode
+        if mode in ("I;16", "I;16B", "I;16L", "I"):
+            a = np.asarray(im, dtype=np.float64)
+            top = 65535.0 if a.max(initial=0) > 255 else 255.0
+            return a * (255.0 / top)
+        if mode == "P":
+            im = im.convert("RGBA")
+            mode = "RGBA"
+        if mode in ("1", "L", "LA", "RGB", "RGBA"):
+            return np.asarray(im.convert("LA" if mode in ("1", "L", "LA") else "RGBA"))
+        return np.asarray(im.convert("RGBA"))
+
+
+def _read_image(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    """Grey level ``(h, w)`` in ``[0, 255]`` (mean of colour channels) and alpha or None."""
+    # PIL raises many kinds (UnidentifiedImageError, OSError, ...)
+    a = _read_file(path, "floor plan image", _image_array, (Exception,)).astype(np.float64)
+    if a.ndim == 2:
+        return a, None
     grey = a[..., :-1].mean(axis=-1)
     alpha = a[..., -1]
-    if a.ndim != 3 or grey.size == 0:
+    if grey.size == 0:
         raise InputDataError(f"floor plan image {path} is empty")
     return grey, (alpha if (alpha < 255).any() else None)
 
@@ -212,16 +227,10 @@ def _float_key(
 
 
 def _read_ros_yaml(yaml_path: Path) -> dict[str, Any]:
-    try:
-        import yaml
-    except ImportError as e:  # pragma: no cover - pyyaml is a dependency
-        raise InputDataError("reading ROS maps needs PyYAML (pip install pyyaml)") from e
-    if not yaml_path.is_file():
-        raise InputDataError(f"map YAML {yaml_path} does not exist")
-    try:
-        meta = yaml.safe_load(yaml_path.read_text())
-    except (yaml.YAMLError, UnicodeDecodeError) as e:
-        raise InputDataError(f"cannot parse map YAML {yaml_path}: {e}") from e
+    import yaml
+
+    errors = (yaml.YAMLError, UnicodeDecodeError)
+    meta = _read_file(yaml_path, "map YAML", lambda p: yaml.safe_load(p.read_text()), errors, verb="parse")
     if not isinstance(meta, dict):
         raise InputDataError(
             f"map YAML {yaml_path} must be a mapping with image, resolution, origin, ...; "
