@@ -32,7 +32,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -42,6 +42,7 @@ from dgse.belief.belief import Belief
 from dgse.belief.estimator import StreamingEstimator
 from dgse.belief.knowledge import DEFAULT_LEVEL, Knowledge, check_level
 from dgse.errors import InputDataError
+from dgse.files import json_safe
 from dgse.planning.paths import Cell, FreeSpaceGraph, graph_for
 from dgse.planning.planners import Planner, SearchHistory, get_planner
 from dgse.presets import PROTOCOL, ResolvedMethod, resolve
@@ -286,21 +287,10 @@ class Decision:
     held: bool = False
 
     def to_dict(self) -> dict[str, Any]:
-        """The scalar fields, JSON-able."""
-        return {
-            "step": self.step,
-            "cell": list(self.cell),
-            "time_s": self.time_s,
-            "gas": self.gas,
-            "wind": list(self.wind),
-            "goal": None if self.goal is None else list(self.goal),
-            "goal_xy": None if self.goal_xy is None else list(self.goal_xy),
-            "reason": self.reason,
-            "declared_xy": list(self.declared_xy),
-            "entropy": self.belief.normalized_entropy(),
-            "compute_s": self.compute_s,
-            "held": self.held,
-        }
+        """The fields but the belief, and the belief's normalized entropy, JSON-able."""
+        out = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "belief"}
+        out["entropy"] = self.belief.normalized_entropy()
+        return json_safe(out)
 
 
 class SearchCore:
