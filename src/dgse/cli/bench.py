@@ -18,6 +18,7 @@ from rich.markup import escape
 
 from dgse.cli.common import (
     KnowledgeOption,
+    ProgressOption,
     ThreadsOption,
     check_output_dir,
     check_output_file,
@@ -61,7 +62,7 @@ def bench_cmd(
     report: Annotated[
         bool, typer.Option("--report/--no-report", help="Also write DIR/summary.md and DIR/report.html.")
     ] = True,
-    progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Progress bars.")] = True,
+    progress: ProgressOption = True,
     knowledge: KnowledgeOption = "map",
 ) -> None:
     """Run benchmark suites that reproduce the paper's experiments (JSON, CSV, PNG per suite).

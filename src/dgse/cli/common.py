@@ -368,6 +368,23 @@ THREADS_HELP = "PyTorch CPU threads (1 is often fastest on busy, shared cores)."
 ThreadsOption = Annotated[int | None, typer.Option("--threads", help=THREADS_HELP)]
 #: ``--progress/--no-progress``: a progress bar while the command works.
 ProgressOption = Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")]
+#: The search protocol's options (:data:`dgse.presets.PROTOCOL` gives the defaults): the
+#: simulated robot of ``dgse search``, ``dgse demo`` and ``dgse ros sim`` and the node of
+#: ``dgse ros run`` read them alike.
+SpeedOption = Annotated[float, typer.Option("--speed", help="Robot speed, m/s.")]
+DwellOption = Annotated[float, typer.Option("--dwell", help="Time at a goal for one reading, s.")]
+TimeLimitOption = Annotated[float, typer.Option("--time-limit", help="Time limit of a search, s.")]
+MinStartDistanceOption = Annotated[
+    float,
+    typer.Option(
+        "--min-start-distance",
+        help="Least path length from a drawn start to the source, m (a start inside the "
+        "2 m success radius would make a trial trivial).",
+    ),
+]
+FramesOption = Annotated[
+    bool, typer.Option("--frames/--steady", help="Read a case's time-varying frames when it has them.")
+]
 
 
 def option_bundle(name: str, bundle: Callable[..., Any]) -> Callable[[F], F]:

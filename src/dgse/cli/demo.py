@@ -28,6 +28,7 @@ from dgse.belief.knowledge import DEFAULT_LEVEL, check_level, require_level
 from dgse.cli.common import (
     NOTHING_KEPT,
     KnowledgeOption,
+    TimeLimitOption,
     check_output_dir,
     console,
     interruptible,
@@ -71,9 +72,7 @@ def demo_cmd(
     model: Annotated[
         str, typer.Option("--model", help="DGSE-S weights: default (shipped) or a .safetensors path.")
     ] = "default",
-    time_limit: Annotated[
-        float, typer.Option("--time-limit", help="Search time limit, s.")
-    ] = PROTOCOL.time_limit,
+    time_limit: TimeLimitOption = PROTOCOL.time_limit,
     eta: Annotated[
         float | None,
         typer.Option(

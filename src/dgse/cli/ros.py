@@ -19,7 +19,12 @@ import typer
 
 from dgse.belief.knowledge import DEFAULT_LEVEL
 from dgse.cli.common import (
+    DwellOption,
+    FramesOption,
     KnowledgeOption,
+    MinStartDistanceOption,
+    SpeedOption,
+    TimeLimitOption,
     check_output_dir,
     check_output_file,
     console,
@@ -55,8 +60,6 @@ KnowledgeFileOption = Annotated[
         help="Case or layout file with the openings (and a case's wind field) of the robot's map.",
     ),
 ]
-DwellOption = Annotated[float, typer.Option("--dwell", help="Time at a goal before a reading, s.")]
-TimeLimitOption = Annotated[float, typer.Option("--time-limit", help="Time limit of the search, s.")]
 TimeoutOption = Annotated[
     float | None, typer.Option("--timeout", help="Stop after this many seconds of wall time.")
 ]
@@ -173,15 +176,11 @@ def sim_cmd(
     origin: Annotated[
         tuple[float, float], typer.Option("--origin", metavar="X Y", help="The map's origin, m.")
     ] = (0.0, 0.0),
-    speed: Annotated[float, typer.Option("--speed", help="Robot speed, m/s.")] = PROTOCOL.speed,
+    speed: SpeedOption = PROTOCOL.speed,
     dwell: DwellOption = PROTOCOL.dwell,
     time_limit: TimeLimitOption = PROTOCOL.time_limit,
-    min_start_distance: Annotated[
-        float, typer.Option("--min-start-distance", help="Least path from a drawn start to the source, m.")
-    ] = PROTOCOL.min_start_distance,
-    frames: Annotated[
-        bool, typer.Option("--frames/--steady", help="Read the case's filament frames when it has them.")
-    ] = True,
+    min_start_distance: MinStartDistanceOption = PROTOCOL.min_start_distance,
+    frames: FramesOption = True,
     message_types: TypesOption = "auto",
     exit_on_stop: Annotated[
         bool, typer.Option("--exit-on-stop/--keep-running", help="Exit when the search says it stopped.")

@@ -65,9 +65,14 @@ from rich.table import Table
 
 from dgse.belief.knowledge import DEFAULT_LEVEL, check_level
 from dgse.cli.common import (
+    DwellOption,
+    FramesOption,
     KnowledgeOption,
+    MinStartDistanceOption,
     ParamOption,
+    SpeedOption,
     ThreadsOption,
+    TimeLimitOption,
     check_output_dir,
     check_output_file,
     console,
@@ -184,23 +189,11 @@ def search_cmd(
         float | None,
         typer.Option("--eta", help="Entropy termination threshold of the utility planner (-P stop.eta=...)."),
     ] = None,
-    time_limit: Annotated[
-        float, typer.Option("--time-limit", help="Time limit per episode, s.")
-    ] = PROTOCOL.time_limit,
-    frames: Annotated[
-        bool,
-        typer.Option("--frames/--steady", help="Read time-varying frames when a case has them."),
-    ] = True,
-    speed: Annotated[float, typer.Option("--speed", help="Robot speed, m/s.")] = PROTOCOL.speed,
-    dwell: Annotated[float, typer.Option("--dwell", help="Time per measurement, s.")] = PROTOCOL.dwell,
-    min_start_distance: Annotated[
-        float,
-        typer.Option(
-            "--min-start-distance",
-            help="Least path length from a random start to the source, m (a start inside the "
-            "2 m success radius would make a trial trivial).",
-        ),
-    ] = PROTOCOL.min_start_distance,
+    time_limit: TimeLimitOption = PROTOCOL.time_limit,
+    frames: FramesOption = True,
+    speed: SpeedOption = PROTOCOL.speed,
+    dwell: DwellOption = PROTOCOL.dwell,
+    min_start_distance: MinStartDistanceOption = PROTOCOL.min_start_distance,
     start: Annotated[
         tuple[float, float] | None,
         typer.Option(
