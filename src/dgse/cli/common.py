@@ -368,6 +368,17 @@ THREADS_HELP = "PyTorch CPU threads (1 is often fastest on busy, shared cores)."
 ThreadsOption = Annotated[int | None, typer.Option("--threads", help=THREADS_HELP)]
 #: ``--progress/--no-progress``: a progress bar while the command works.
 ProgressOption = Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")]
+#: ``--method/-m``: a named method (:mod:`dgse.presets`) or a registered estimator (None: the
+#: default method of the knowledge level).
+MethodOption = Annotated[
+    str | None,
+    typer.Option(
+        "--method",
+        "-m",
+        help="Method (default: dgse-phys): a named method runs its estimator and planner with "
+        "the options it was measured with; any registered estimator runs with its defaults.",
+    ),
+]
 #: The search protocol's options (:data:`dgse.presets.PROTOCOL` gives the defaults): the
 #: simulated robot of ``dgse search``, ``dgse demo`` and ``dgse ros sim`` and the node of
 #: ``dgse ros run`` read them alike.

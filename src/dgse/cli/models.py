@@ -42,6 +42,7 @@ from rich.table import Table
 from dgse.belief.knowledge import DEFAULT_LEVEL, Knowledge, check_level
 from dgse.cli.common import (
     KnowledgeOption,
+    MethodOption,
     ParamOption,
     ProgressOption,
     ThreadsOption,
@@ -77,12 +78,6 @@ class Dtype(StrEnum):
 _DTYPE_HELP = "DGSE precision: float32, bf16, or auto (bf16 where the CPU computes it natively)."
 DtypeOption = Annotated[Dtype | None, typer.Option("--dtype", help=_DTYPE_HELP, show_default=False)]
 # the options estimate and evaluate share
-MethodOption = Annotated[
-    str | None,
-    typer.Option(
-        "--method", "-m", help="Method or registered estimator (default: dgse-phys, the named method)."
-    ),
-]
 SeedOption = Annotated[int, typer.Option("--seed", "-s", help="Seed of the observations (>= 0).")]
 _MODEL_HELP = "DGSE weights: 'default' (shipped with dgse) or a .safetensors checkpoint."
 ModelOption = Annotated[str | None, typer.Option("--model", help=_MODEL_HELP)]

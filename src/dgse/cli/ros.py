@@ -22,6 +22,7 @@ from dgse.cli.common import (
     DwellOption,
     FramesOption,
     KnowledgeOption,
+    MethodOption,
     MinStartDistanceOption,
     SpeedOption,
     TimeLimitOption,
@@ -40,10 +41,6 @@ __all__ = ["register"]
 #: Extra words after ``--`` go to ROS.
 ROS_ARGS = {"allow_extra_args": True, "ignore_unknown_options": False}
 
-MethodOption = Annotated[
-    str | None,
-    typer.Option("--method", "-m", help="Method (default: dgse-phys), as in dgse search."),
-]
 SeedOption = Annotated[int, typer.Option("--seed", "-s", help="Seed, as dgse search --seed.")]
 CaseNameOption = Annotated[
     str | None,

@@ -68,6 +68,7 @@ from dgse.cli.common import (
     DwellOption,
     FramesOption,
     KnowledgeOption,
+    MethodOption,
     MinStartDistanceOption,
     ParamOption,
     SpeedOption,
@@ -166,15 +167,7 @@ def search_cmd(
         Path,
         typer.Argument(metavar="CASES_DIR_OR_CASE", help="A case file or a directory of case files."),
     ],
-    method: Annotated[
-        str | None,
-        typer.Option(
-            "--method",
-            "-m",
-            help="Method (default: dgse-phys): a named method runs its estimator and planner with "
-            "the options it was measured with; any registered estimator runs with its defaults.",
-        ),
-    ] = None,
+    method: MethodOption = None,
     model: Annotated[
         str | None,
         typer.Option("--model", help="Network checkpoint, or 'default' (DGSE methods' default)."),
