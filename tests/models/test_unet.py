@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from dgse.errors import InputDataError
-from dgse.models.unet import UNet, UNetDecoder, UNetEncoder, crop_to, make_norm, pad_to_multiple
+from dgse.models.unet import UNet, UNetArch, UNetDecoder, UNetEncoder, crop_to, make_norm, pad_to_multiple
 
 
 def test_pad_to_multiple_per_channel_fill_and_crop():
@@ -24,14 +24,15 @@ def test_pad_to_multiple_per_channel_fill_and_crop():
 
 @pytest.mark.parametrize("shape", [(32, 32), (40, 40), (50, 30), (17, 9), (1, 1)])
 def test_unet_any_size(shape):
-    net = UNet(5, 3, base_width=4, depth=3)
+    net = UNet(5, 3, UNetArch(base_width=4, depth=3))
     y = net(torch.randn(2, 5, *shape))
     assert y.shape == (2, 3, *shape)
     assert torch.isfinite(y).all()
 
 
 def test_encoder_decoder_shapes():
-    enc, dec = UNetEncoder(5, 4, 3), UNetDecoder(2, 4, 3)
+    arch = UNetArch(4, 3)
+    enc, dec = UNetEncoder(5, arch), UNetDecoder(2, arch)
     h, skips = enc(torch.randn(1, 5, 32, 24))
     assert h.shape == (1, 32, 4, 3)
     assert [tuple(s.shape[1:]) for s in skips] == [(4, 32, 24), (8, 16, 12), (16, 8, 6)]
@@ -41,7 +42,7 @@ def test_encoder_decoder_shapes():
 @pytest.mark.parametrize("norm", ["group", "batch", "none"])
 @pytest.mark.parametrize("act", ["relu", "silu", "gelu", "leaky_relu"])
 def test_norm_and_activation_options(norm, act):
-    net = UNet(2, 1, base_width=3, depth=1, norm=norm, activation=act)
+    net = UNet(2, 1, UNetArch(base_width=3, depth=1, norm=norm, activation=act))
     assert net(torch.randn(2, 2, 6, 6)).shape == (2, 1, 6, 6)
 
 

@@ -22,6 +22,7 @@ __all__ = [
     "LossWeights",
     "ModelConfig",
     "Norm",
+    "UNetArch",
     "Variant",
     "preset_config",
 ]
@@ -39,27 +40,47 @@ PRESETS: dict[str, dict[str, int]] = {
 
 
 @dataclass(frozen=True)
-class ModelConfig:
-    """Architecture of one DGSE network.
+class UNetArch:
+    """Architecture of one U-Net or of one of its halves (:mod:`dgse.models.unet`).
+
+    Attributes:
+        base_width: channels of the first level; level ``l`` has ``base_width * 2**l``.
+        depth: number of 2x down-samplings (the bottleneck is at ``H / 2**depth``).
+        norm: ``"group"``, ``"batch"`` or ``"none"``.
+        activation: ``"relu"``, ``"silu"``, ``"gelu"`` or ``"leaky_relu"``.
+        norm_groups: maximum number of GroupNorm groups.
+    """
+
+    base_width: int = 16
+    depth: int = 4
+    norm: Norm = "group"
+    activation: Activation = "relu"
+    norm_groups: int = 8
+
+    def __post_init__(self) -> None:
+        if self.base_width < 1:
+            raise InputDataError(f"U-Net base width must be >= 1, got {self.base_width}")
+        if self.depth < 1:
+            raise InputDataError(f"U-Net depth must be >= 1, got {self.depth}")
+
+
+@dataclass(frozen=True)
+class ModelConfig(UNetArch):
+    """Architecture of one DGSE network: the :class:`UNetArch` of every U-Net in it, and more.
 
     Attributes:
         variant: ``"dgse-o"``, ``"dgse-p"`` or ``"dgse-s"``.
         base_width: channels of the first U-Net level (each sub-network of DGSE-S
             has this width).
         depth: number of 2x down-samplings of every U-Net.
-        norm: ``"group"`` (default), ``"batch"`` or ``"none"``.
-        norm_groups: maximum number of GroupNorm groups.
-        activation: ``"relu"``, ``"silu"``, ``"gelu"`` or ``"leaky_relu"``.
+        norm, activation, norm_groups: as :class:`UNetArch`.
         logvar_min, logvar_max: range of the predicted log-variances (soft clamp).
         preset: name of the preset this config came from (bookkeeping only).
     """
 
-    variant: Variant = "dgse-s"
     base_width: int = 17
     depth: int = 3
-    norm: Norm = "group"
-    norm_groups: int = 8
-    activation: Activation = "relu"
+    variant: Variant = "dgse-s"
     logvar_min: float = -12.0
     logvar_max: float = 6.0
     preset: str | None = None

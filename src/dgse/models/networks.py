@@ -183,8 +183,7 @@ class DGSEModel(nn.Module):
         return self.config.stride
 
     def _unet(self, in_ch: int, out_ch: int, pad_value: tuple[float, ...]) -> UNet:
-        c = self.config
-        return UNet(in_ch, out_ch, c.base_width, c.depth, c.norm, c.activation, c.norm_groups, pad_value)
+        return UNet(in_ch, out_ch, self.config, pad_value)
 
     def _logvar(self, raw: torch.Tensor) -> torch.Tensor:
         return soft_clamp(raw, self.config.logvar_min, self.config.logvar_max)
@@ -217,11 +216,10 @@ class DGSE_P(DGSEModel):
     def __init__(self, config: ModelConfig | None = None) -> None:
         super().__init__(config or preset_config("paper", "dgse-p"))
         c = self.config
-        args = (c.base_width, c.depth, c.norm, c.activation, c.norm_groups)
-        self.encoder = UNetEncoder(5, *args)
-        self.wind_decoder = UNetDecoder(4, *args)
-        self.conc_decoder = UNetDecoder(2, *args)
-        self.source_decoder = UNetDecoder(1, *args)
+        self.encoder = UNetEncoder(5, c)
+        self.wind_decoder = UNetDecoder(4, c)
+        self.conc_decoder = UNetDecoder(2, c)
+        self.source_decoder = UNetDecoder(1, c)
 
     def forward(self, x: torch.Tensor, generator: torch.Generator | None = None) -> DGSEOutput:
         """``x``: ``(B, 5, H, W)``; ``generator`` is unused (deterministic network)."""

@@ -35,13 +35,14 @@ import torch.nn.functional as F
 from torch import nn
 
 from dgse.errors import InputDataError
-from dgse.models.config import Activation, Norm
+from dgse.models.config import Activation, Norm, UNetArch
 
 __all__ = [
     "Activation",
     "DoubleConv",
     "Norm",
     "UNet",
+    "UNetArch",
     "UNetDecoder",
     "UNetEncoder",
     "crop_to",
@@ -49,6 +50,10 @@ __all__ = [
     "make_norm",
     "pad_to_multiple",
 ]
+
+
+#: The defaults of :class:`UNetArch`, the architecture of a U-Net given none.
+_DEFAULT_ARCH = UNetArch()
 
 
 def make_norm(kind: Norm, channels: int, groups: int = 8) -> nn.Module:
@@ -97,27 +102,17 @@ class _UNetHalf(nn.Module):
     """What both halves of a U-Net share: the checked architecture and the channels per level.
 
     ``channels`` are the encoder's input or the decoder's output channels; level ``l``
-    has ``base_width * 2**l`` channels (``l = 0..depth``); ``_build`` adds the layers.
+    has ``arch.base_width * 2**l`` channels (``l = 0..depth``); ``_build`` adds the layers.
     """
 
-    def __init__(
-        self,
-        channels: int,
-        base_width: int = 16,
-        depth: int = 4,
-        norm: Norm = "group",
-        activation: Activation = "relu",
-        norm_groups: int = 8,
-    ) -> None:
+    def __init__(self, channels: int, arch: UNetArch = _DEFAULT_ARCH) -> None:
         super().__init__()
-        if base_width < 1:
-            raise InputDataError(f"U-Net base width must be >= 1, got {base_width}")
-        if depth < 1:
-            raise InputDataError(f"U-Net depth must be >= 1, got {depth}")
-        self.base_width = base_width
-        self.depth = depth
-        widths = [base_width * 2**level for level in range(depth + 1)]
-        self._build(channels, widths, lambda a, b: DoubleConv(a, b, norm, activation, norm_groups))
+        self.arch = arch
+        self.base_width = arch.base_width
+        self.depth = arch.depth
+        widths = [arch.base_width * 2**level for level in range(arch.depth + 1)]
+        norm, act, groups = arch.norm, arch.activation, arch.norm_groups
+        self._build(channels, widths, lambda a, b: DoubleConv(a, b, norm, act, groups))
 
     def _build(self, channels: int, widths: list[int], conv: Callable[[int, int], DoubleConv]) -> None:
         raise NotImplementedError
@@ -129,7 +124,7 @@ class UNetEncoder(_UNetHalf):
     ``H`` and ``W`` must be multiples of ``2**depth`` (see :func:`pad_to_multiple`).
     ``skips[l]`` has ``base_width * 2**l`` channels at resolution ``H / 2**l``
     (``l = 0..depth-1``); the bottleneck has ``base_width * 2**depth`` channels
-    at ``H / 2**depth``.  Arguments: ``channels`` (``in_ch``), then as :class:`UNet`.
+    at ``H / 2**depth``.  Arguments: ``channels`` (``in_ch``) and ``arch``, as :class:`UNet`.
     """
 
     def _build(self, channels: int, widths: list[int], conv: Callable[[int, int], DoubleConv]) -> None:
@@ -155,7 +150,7 @@ class UNetDecoder(_UNetHalf):
     """The expanding half: ``(bottleneck, skips) -> (B, out_ch, H, W)``.
 
     Matches a :class:`UNetEncoder` of the same ``base_width`` and ``depth``.  Arguments:
-    ``channels`` (``out_ch``), then as :class:`UNet`.
+    ``channels`` (``out_ch``) and ``arch``, as :class:`UNet`.
     """
 
     def _build(self, channels: int, widths: list[int], conv: Callable[[int, int], DoubleConv]) -> None:
@@ -212,11 +207,8 @@ class UNet(nn.Module):
     Args:
         in_ch: input channels.
         out_ch: output channels (the 1x1 head, no activation).
-        base_width: channels of the first level; level ``l`` has ``base_width * 2**l``.
-        depth: number of 2x down-samplings (the bottleneck is at ``H / 2**depth``).
-        norm: ``"group"``, ``"batch"`` or ``"none"``.
-        activation: ``"relu"``, ``"silu"``, ``"gelu"`` or ``"leaky_relu"``.
-        norm_groups: maximum number of GroupNorm groups.
+        arch: widths, depth, normalization and activation (a
+            :class:`~dgse.models.config.ModelConfig` is one too).
         pad_value: value(s) of the internal padding, one float or one per input channel.
     """
 
@@ -224,22 +216,18 @@ class UNet(nn.Module):
         self,
         in_ch: int,
         out_ch: int,
-        base_width: int = 16,
-        depth: int = 4,
-        norm: Norm = "group",
-        activation: Activation = "relu",
-        norm_groups: int = 8,
+        arch: UNetArch = _DEFAULT_ARCH,
         pad_value: float | Sequence[float] = 0.0,
     ) -> None:
         super().__init__()
-        self.encoder = UNetEncoder(in_ch, base_width, depth, norm, activation, norm_groups)
-        self.decoder = UNetDecoder(out_ch, base_width, depth, norm, activation, norm_groups)
+        self.encoder = UNetEncoder(in_ch, arch)
+        self.decoder = UNetDecoder(out_ch, arch)
         if not isinstance(pad_value, (int, float)) and len(pad_value) != in_ch:
             raise InputDataError(f"{len(pad_value)} pad values for {in_ch} input channels")
         self.pad_value: float | tuple[float, ...] = (
             float(pad_value) if isinstance(pad_value, (int, float)) else tuple(float(v) for v in pad_value)
         )
-        self.in_ch, self.out_ch, self.depth = in_ch, out_ch, depth
+        self.in_ch, self.out_ch, self.depth = in_ch, out_ch, arch.depth
 
     @property
     def stride(self) -> int:
