@@ -30,6 +30,7 @@ from dgse.cli.common import (
     check_output_file,
     console,
     new_app,
+    option_bundle,
     path_text,
     user_errors,
 )
@@ -57,6 +58,9 @@ KnowledgeFileOption = Annotated[
         help="Case or layout file with the openings (and a case's wind field) of the robot's map.",
     ),
 ]
+ExitOnStopOption = Annotated[
+    bool, typer.Option("--exit-on-stop/--keep-running", help="Exit when the search stops.")
+]
 TimeoutOption = Annotated[
     float | None, typer.Option("--timeout", help="Stop after this many seconds of wall time.")
 ]
@@ -70,29 +74,37 @@ TypesOption = Annotated[
 ]
 
 
-def _ros_args(ctx: typer.Context) -> list[str]:
-    extra = list(ctx.args)
-    if extra and extra[0] != "--ros-args":
-        words = " ".join(extra)
-        raise InputDataError(f"unexpected arguments {words!r}: ROS arguments go after '-- --ros-args'")
-    return extra
-
-
-def _require_rclpy() -> None:
-    from dgse.ros import require_rclpy
-
-    require_rclpy()
-
-
-@user_errors
-def run_cmd(
-    ctx: typer.Context,
+def _method_params(
     method: MethodOption = None,
     knowledge: KnowledgeOption = DEFAULT_LEVEL,
     knowledge_file: KnowledgeFileOption = None,
     seed: SeedOption = 0,
     case_name: CaseNameOption = None,
     trial: TrialOption = 0,
+) -> dict[str, Any]:
+    """The node parameters of the method and its seeding, which ``ros run`` and ``ros replay``
+    share (:func:`~dgse.cli.common.option_bundle`)."""
+    return {"method": method or "", "knowledge": knowledge, "knowledge_file": str(knowledge_file or ""),
+            "seed": seed, "case_name": case_name or "", "trial": trial}  # fmt: skip
+
+
+def _ros_args(ctx: typer.Context) -> list[str]:
+    """The ROS arguments after ``--`` of a node command, once ``rclpy`` is known to import."""
+    extra = list(ctx.args)
+    if extra and extra[0] != "--ros-args":
+        words = " ".join(extra)
+        raise InputDataError(f"unexpected arguments {words!r}: ROS arguments go after '-- --ros-args'")
+    from dgse.ros import require_rclpy
+
+    require_rclpy()
+    return extra
+
+
+@user_errors
+@option_bundle("setup", _method_params)
+def run_cmd(
+    ctx: typer.Context,
+    setup: dict[str, Any],
     resolution: Annotated[
         float | None,
         typer.Option("--resolution", help="The method's cell size, m (default: the map's)."),
@@ -111,9 +123,7 @@ def run_cmd(
         Path | None,
         typer.Option("--stats", help="Write the decisions and the latency (reading to goal) as JSON."),
     ] = None,
-    exit_on_stop: Annotated[
-        bool, typer.Option("--exit-on-stop/--keep-running", help="Exit when the search stops.")
-    ] = False,
+    exit_on_stop: ExitOnStopOption = False,
     timeout: TimeoutOption = None,
 ) -> None:
     """Run the search node: subscribe the map, pose, gas and wind; publish goals and beliefs.
@@ -122,16 +132,10 @@ def run_cmd(
     """
     check_output_file(stats, "stats file")
     args = _ros_args(ctx)
-    _require_rclpy()
     from dgse.ros.nodes import run_search
 
     params: dict[str, Any] = {
-        "method": method or "",
-        "knowledge": knowledge,
-        "knowledge_file": str(knowledge_file or ""),
-        "seed": seed,
-        "case_name": case_name or "",
-        "trial": trial,
+        **setup,
         "resolution": resolution or 0.0,
         "dwell": dwell,
         "time_limit": time_limit,
@@ -179,9 +183,7 @@ def sim_cmd(
     min_start_distance: MinStartDistanceOption = PROTOCOL.min_start_distance,
     frames: FramesOption = True,
     message_types: TypesOption = "auto",
-    exit_on_stop: Annotated[
-        bool, typer.Option("--exit-on-stop/--keep-running", help="Exit when the search says it stopped.")
-    ] = False,
+    exit_on_stop: ExitOnStopOption = False,
     timeout: TimeoutOption = None,
 ) -> None:
     """Simulate a robot on the search's topics: the case's map, the pose and noisy readings.
@@ -191,7 +193,6 @@ def sim_cmd(
     if not case.is_file():
         raise InputDataError(f"{case}: no such case file")
     args = _ros_args(ctx)
-    _require_rclpy()
     from dgse.ros.nodes import run_sim
 
     params: dict[str, Any] = {
@@ -218,17 +219,13 @@ def sim_cmd(
 
 
 @user_errors
+@option_bundle("setup", _method_params)
 def replay_cmd(
     bag: Annotated[Path, typer.Argument(metavar="BAG", help="A rosbag2 folder of a search's topics.")],
     out: Annotated[
         Path, typer.Option("--out", "-o", help="Folder for beliefs.npz, belief.png, beliefs.gif.")
     ],
-    method: MethodOption = None,
-    knowledge: KnowledgeOption = DEFAULT_LEVEL,
-    knowledge_file: KnowledgeFileOption = None,
-    seed: SeedOption = 0,
-    case_name: CaseNameOption = None,
-    trial: TrialOption = 0,
+    setup: dict[str, Any],
     dwell: DwellOption = PROTOCOL.dwell,
     topic: Annotated[
         list[str] | None,
@@ -248,8 +245,7 @@ def replay_cmd(
             raise InputDataError(f"--topic takes KIND=TOPIC with KIND one of {', '.join(DEFAULT_TOPICS)}")
         topics[kind] = name
     check_output_dir(out, "output folder")
-    params = {"method": method or "", "knowledge": knowledge, "knowledge_file": str(knowledge_file or ""),
-              "seed": seed, "case_name": case_name or "", "trial": trial, "dwell": dwell}  # fmt: skip
+    params = {**setup, "dwell": dwell}
     result = replay_bag(bag, out, params, topics=topics, figures=figures)
     x, y = result["final"]["estimate_xy"]
     n = result["readings"]
