@@ -368,6 +368,8 @@ THREADS_HELP = "PyTorch CPU threads (1 is often fastest on busy, shared cores)."
 ThreadsOption = Annotated[int | None, typer.Option("--threads", help=THREADS_HELP)]
 #: ``--progress/--no-progress``: a progress bar while the command works.
 ProgressOption = Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")]
+#: ``--engine/-e``: the physics engine that solves flow and gas (a registered name).
+EngineOption = Annotated[str, typer.Option("--engine", "-e", help="Physics engine (see `dgse engines`).")]
 #: ``--method/-m``: a named method (:mod:`dgse.presets`) or a registered estimator (None: the
 #: default method of the knowledge level).
 MethodOption = Annotated[

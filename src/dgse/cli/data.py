@@ -19,6 +19,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from dgse.cli.common import (
+    EngineOption,
     ProgressOption,
     check_output_dir,
     check_output_file,
@@ -52,9 +53,7 @@ def generate_cmd(
     out: Annotated[
         Path, typer.Option("--out", "-o", help="Dataset store (.h5 or .hdf5) to create or resume.")
     ],
-    engine: Annotated[
-        str, typer.Option("--engine", "-e", help="Physics engine: builtin or openfoam.")
-    ] = "builtin",
+    engine: EngineOption = "builtin",
     workers: Annotated[
         int | None,
         typer.Option("--workers", "-w", help="Local worker processes (default: number of CPUs)."),

@@ -51,6 +51,7 @@ from dgse.cli.common import (
     NOTHING_KEPT,
     OPENING_ARGS,
     ClickException,
+    EngineOption,
     NoArgsIsHelpError,
     UsageError,
     check_output_dir,
@@ -79,6 +80,10 @@ app = new_app(
 
 
 _SEED_HELP = "Random seed (default: a fresh one, printed)."
+#: ``--plot`` of the commands that write a layout file.
+LayoutPlotOption = Annotated[
+    Path | None, typer.Option("--plot", help="Also save a figure of the layout (png, pdf, ...).")
+]
 
 
 # -- helpers -----------------------------------------------------------------------------
@@ -235,10 +240,7 @@ def layout_cmd(
         Path | None,
         typer.Option("--out", "-o", help="Layout file to write (default: ./<name>.npz)."),
     ] = None,
-    plot: Annotated[
-        Path | None,
-        typer.Option("--plot", help="Also save a figure of the layout (png, pdf, ...)."),
-    ] = None,
+    plot: LayoutPlotOption = None,
 ) -> None:
     """Make a random multi-room layout and save it as a layout file (.npz)."""
     from dgse.world.building import random_office_floor
@@ -308,7 +310,7 @@ def import_floorplan_cmd(
     name: Annotated[
         str | None, typer.Option("--name", help="Layout name (default: the map's file name).")
     ] = None,
-    plot: Annotated[Path | None, typer.Option("--plot", help="Also save a figure of the layout.")] = None,
+    plot: LayoutPlotOption = None,
 ) -> None:
     """Make a layout from a floor plan (ROS map_server YAML, or PNG/PGM: dark is solid)."""
     from dgse.world.floorplan import layout_from_floorplan, load_png_map, load_ros_map
@@ -351,9 +353,7 @@ def solve_cmd(
         Path, typer.Argument(metavar="CASE_OR_LAYOUT", help="A case file or a layout file (.npz).")
     ],
     out: Annotated[Path, typer.Option("--out", "-o", help="Case file to write.")],
-    engine: Annotated[
-        str, typer.Option("--engine", "-e", help="Physics engine (see `dgse engines`).")
-    ] = "builtin",
+    engine: EngineOption = "builtin",
     inlet_velocity: Annotated[
         float | None,
         typer.Option("--inlet-velocity", "-v", help="Inlet speed in m/s (layout files)."),
@@ -475,9 +475,7 @@ def scenario_cmd(
     out: Annotated[
         Path, typer.Option("--out", "-o", help="Directory for the case files and figures.")
     ] = Path("dgse-out"),
-    engine: Annotated[
-        str, typer.Option("--engine", "-e", help="Physics engine (see `dgse engines`).")
-    ] = "builtin",
+    engine: EngineOption = "builtin",
     sources: Annotated[int, typer.Option("--sources", "-n", help="Number of sources.")] = 4,
     size: Annotated[
         tuple[float, float],
