@@ -594,7 +594,20 @@ def random_layout(
         >>> 50 <= lay.occupancy.shape[0] <= 100 and len(lay.inlets) == 1
         True
     """
-    layout, _ = _random_training(**locals())  # the arguments as given: nothing else is bound yet
+    layout, _ = _random_training(
+        rng_or_seed,
+        width_range=width_range,
+        height_range=height_range,
+        resolution=resolution,
+        n_rooms=n_rooms,
+        min_room_m=min_room_m,
+        wall_thickness_range=wall_thickness_range,
+        door_width_range=door_width_range,
+        opening_length_range=opening_length_range,
+        min_opening_gap_m=min_opening_gap_m,
+        max_attempts=max_attempts,
+        name=name,
+    )
     return layout
 
 
