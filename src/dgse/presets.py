@@ -199,6 +199,14 @@ PRESETS: dict[str, Preset] = {
                 }
             },
         ),
+        Preset(
+            "dgse-phys-info",
+            "dgse-phys",
+            "info",
+            search_estimator_options={"fusion.floor": 0.0},
+            label="DGSE-Phys (information)",
+            color="#9edae5",
+        ),
         Preset("dualmode", "dualmode", "dualmode", label="Dual-mode"),
         Preset("grgsl", "grgsl", "infotaxis"),
         Preset(
