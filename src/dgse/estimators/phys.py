@@ -65,6 +65,7 @@ from __future__ import annotations
 import functools
 import math
 import time
+from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar
 
@@ -107,7 +108,7 @@ from dgse.posterior.mixture import (
 )
 from dgse.posterior.predictive import HypothesisPredictive
 from dgse.sensing.sensors import Observations
-from dgse.threads import map_threads, side_by_side, with_one_blas_thread
+from dgse.threads import in_background, map_threads, side_by_side, with_one_blas_thread
 from dgse.world.grid import Grid
 from dgse.world.layout import Layout
 
@@ -201,14 +202,21 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         except InputDataError as exc:  # a map whose edge has no room for openings (walled)
             self._family_note = f"no opening hypotheses: {exc}"
             proposals = []
-        hyps = []
-        for prop in proposals:
+
+        def solve(prop: Any) -> FlowModel:
             layout = Layout(
                 k.occupancy, prop.inlets, prop.outlets, resolution=k.resolution, name=k.name or "map"
             )
             # the flow's shape is what matters: one speed, the wind fit scales it (see estimate)
-            fm = flow_model(layout, self.flows.map_speed, self.physics, self.flow_settings)
-            hyps.append(FlowHypothesis(prop.label(), fm, 1.0 / len(proposals)))
+            return flow_model(layout, self.flows.map_speed, self.physics, self.flow_settings)
+
+        # the proposals' solves are independent (cold starts): one per thread, as many at once
+        # as the machine has cores (the solver's kernels release the GIL)
+        flows = map_threads(solve, proposals)
+        hyps = [
+            FlowHypothesis(prop.label(), fm, 1.0 / len(proposals))
+            for prop, fm in zip(proposals, flows, strict=True)
+        ]
         self._hypotheses = hyps
         self._proposed_at = len(obs)
         self._proposed_from = (obs.cells.copy(), obs.wind.copy())
@@ -354,11 +362,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         """DGSE-S's belief from the same readings (the shipped network, built on first use and
         shared by every estimate)."""
         if "default" not in self._networks:
-            from dgse.estimators.registry import get_estimator
-
-            self._networks["default"] = get_estimator(
-                "dgse-s", model="default", seed=0, dtype="auto", channels_last=True
-            )
+            self._networks["default"] = _shipped_network()
         return self._networks["default"].estimate(occupancy, resolution, obs)
 
     def _gas_evidence(
@@ -421,14 +425,17 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         post, hw = mix_posteriors(log_ev, log_prior)
         return post, hw, log_ev, details
 
-    def _without_flows(self, occ: np.ndarray, res: float, obs: Observations, t0: float) -> Belief:
+    def _without_flows(
+        self, occ: np.ndarray, res: float, obs: Observations, t0: float, job: Future[Belief] | None
+    ) -> Belief:
         """DGSE-S's belief, where the knowledge allows no flow hypothesis: at ``map``, a map
         whose edge has no two free windows for an inlet and an outlet (a walled edge, as an
         imported GADEN slice has) — the air there crosses the slice at places the map does not
-        show, and a closed room without them has no steady plume."""
+        show, and a closed room without them has no steady plume.  ``job``: that belief
+        started already (:meth:`estimate`), or None."""
         note = self._family_note or "no flow hypotheses"
         try:
-            net = self._learned_belief(occ, res, obs)
+            net = job.result() if job is not None else self._learned_belief(occ, res, obs)
         except InputDataError as exc:
             raise UnsupportedError(
                 f"dgse-phys at {self._level()!r}: {note}; and DGSE-S left out: {exc}"
@@ -461,9 +468,13 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             self.hypotheses()  # raises the message
         assert self.knowledge is not None
         self.knowledge.check_map(occ, res, self.name)
+        # DGSE-S's belief depends on the readings alone: it runs in its own thread beside the
+        # flows and the evidence (the solves' kernels leave a core free much of the time)
+        w_learned = self._learned_weight(len(obs))
+        job = in_background(lambda: self._learned_belief(occ, res, obs)) if w_learned > 0 else None
         hyps = self.hypotheses(obs)
         if not hyps:
-            return self._without_flows(occ, res, obs, t0)
+            return self._without_flows(occ, res, obs, t0, job)
         t_flow = time.perf_counter() - t0
         free_scale = self.knowledge.level == "map"  # proposals are solved at one speed
         cells, z = obs.cells, obs.gas
@@ -515,11 +526,10 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         log_ev, details = runs[0][2], runs[0][3]
         self._refine_speed(hyps, hw, len(obs))
         mesh = hyps[0].flow.mesh
-        w_learned = self._learned_weight(len(obs))
         learned_note = None
-        if w_learned > 0:
+        if job is not None:
             try:
-                net = self._learned_belief(occ, res, obs)
+                net = job.result()
             except InputDataError as exc:  # a map the network cannot take (its cell size)
                 w_learned, learned_note = 0.0, f"DGSE-S left out: {exc}"
             else:
@@ -629,6 +639,16 @@ def _hypothesis_info(
         "gas_log_evidence": logsumexp(log_ev) - math.log(log_ev.size) if live else None,
         "source_mode_xy": mode,
     }
+
+
+@functools.lru_cache(maxsize=1)
+def _shipped_network() -> Any:
+    """DGSE-S with the shipped weights, as :meth:`PhysicsGuidedEstimator._learned_belief` runs
+    it: loaded once per process and shared by every estimator (its estimates depend only on
+    their inputs: each draws its samples from a generator seeded afresh)."""
+    from dgse.estimators.registry import get_estimator
+
+    return get_estimator("dgse-s", model="default", seed=0, dtype="auto", channels_last=True)
 
 
 @options_from(PhysicsGuidedEstimator)
