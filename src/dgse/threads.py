@@ -22,11 +22,11 @@ from __future__ import annotations
 import functools
 import os
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from typing import Any, TypeVar
 
-__all__ = ["in_background", "map_threads", "one_blas_thread", "side_by_side", "with_one_blas_thread"]
+__all__ = ["map_threads", "one_blas_thread", "side_by_side", "with_one_blas_thread"]
 
 _T = TypeVar("_T")
 _R = TypeVar("_R")
@@ -34,7 +34,6 @@ _R = TypeVar("_R")
 WORKERS = max(1, min(2, os.cpu_count() or 1))
 _pool: ThreadPoolExecutor | None = None
 _outer: ThreadPoolExecutor | None = None
-_background: ThreadPoolExecutor | None = None
 
 _F = TypeVar("_F", bound=Callable[..., Any])
 _controller: Any = None
@@ -94,15 +93,3 @@ def side_by_side(funcs: Sequence[Callable[[], _R]]) -> list[_R]:
     if _outer is None:
         _outer = ThreadPoolExecutor(WORKERS, thread_name_prefix="dgse-side")
     return list(_outer.map(lambda f: f(), work))
-
-
-def in_background(func: Callable[[], _R]) -> Future[_R]:
-    """Start ``func()`` in a thread of its own and return its future (``.result()`` waits
-    for it and raises what it raised).  For a piece of an estimate that shares nothing with
-    the rest (a network's forward pass beside the flows' solves): while one waits on a
-    single-threaded kernel, the other keeps the second core busy.  ``func`` may use
-    :func:`map_threads`.  Calls queue one after the other."""
-    global _background
-    if _background is None:
-        _background = ThreadPoolExecutor(1, thread_name_prefix="dgse-background")
-    return _background.submit(func)

@@ -123,7 +123,7 @@ def speed_table(
     for level in levels:
         for path, case in zip(paths, cases, strict=True):
             rows = [search_times(Path(path), level, seed)] if searches else []
-            rows += estimate_times(case, level, counts, seed)
+            rows += [{**r, "case": Path(path).stem} for r in estimate_times(case, level, counts, seed)]
             for row in rows:
                 (searched if "steps" in row else estimated).append(row)
                 if progress is not None:

@@ -65,7 +65,6 @@ from __future__ import annotations
 import functools
 import math
 import time
-from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar
 
@@ -108,7 +107,7 @@ from dgse.posterior.mixture import (
 )
 from dgse.posterior.predictive import HypothesisPredictive
 from dgse.sensing.sensors import Observations
-from dgse.threads import in_background, map_threads, side_by_side, with_one_blas_thread
+from dgse.threads import map_threads, side_by_side, with_one_blas_thread
 from dgse.world.grid import Grid
 from dgse.world.layout import Layout
 
@@ -425,17 +424,14 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         post, hw = mix_posteriors(log_ev, log_prior)
         return post, hw, log_ev, details
 
-    def _without_flows(
-        self, occ: np.ndarray, res: float, obs: Observations, t0: float, job: Future[Belief] | None
-    ) -> Belief:
+    def _without_flows(self, occ: np.ndarray, res: float, obs: Observations, t0: float) -> Belief:
         """DGSE-S's belief, where the knowledge allows no flow hypothesis: at ``map``, a map
         whose edge has no two free windows for an inlet and an outlet (a walled edge, as an
         imported GADEN slice has) — the air there crosses the slice at places the map does not
-        show, and a closed room without them has no steady plume.  ``job``: that belief
-        started already (:meth:`estimate`), or None."""
+        show, and a closed room without them has no steady plume."""
         note = self._family_note or "no flow hypotheses"
         try:
-            net = job.result() if job is not None else self._learned_belief(occ, res, obs)
+            net = self._learned_belief(occ, res, obs)
         except InputDataError as exc:
             raise UnsupportedError(
                 f"dgse-phys at {self._level()!r}: {note}; and DGSE-S left out: {exc}"
@@ -468,13 +464,9 @@ class PhysicsGuidedEstimator(KnowledgeUser):
             self.hypotheses()  # raises the message
         assert self.knowledge is not None
         self.knowledge.check_map(occ, res, self.name)
-        # DGSE-S's belief depends on the readings alone: it runs in its own thread beside the
-        # flows and the evidence (the solves' kernels leave a core free much of the time)
-        w_learned = self._learned_weight(len(obs))
-        job = in_background(lambda: self._learned_belief(occ, res, obs)) if w_learned > 0 else None
         hyps = self.hypotheses(obs)
         if not hyps:
-            return self._without_flows(occ, res, obs, t0, job)
+            return self._without_flows(occ, res, obs, t0)
         t_flow = time.perf_counter() - t0
         free_scale = self.knowledge.level == "map"  # proposals are solved at one speed
         cells, z = obs.cells, obs.gas
@@ -526,10 +518,11 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         log_ev, details = runs[0][2], runs[0][3]
         self._refine_speed(hyps, hw, len(obs))
         mesh = hyps[0].flow.mesh
+        w_learned = self._learned_weight(len(obs))
         learned_note = None
-        if job is not None:
+        if w_learned > 0:
             try:
-                net = job.result()
+                net = self._learned_belief(occ, res, obs)
             except InputDataError as exc:  # a map the network cannot take (its cell size)
                 w_learned, learned_note = 0.0, f"DGSE-S left out: {exc}"
             else:
