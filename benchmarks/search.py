@@ -38,6 +38,13 @@ One command per measurement (``python benchmarks/search.py COMMAND --help``); re
       python benchmarks/search.py step-time --cases 20
       python benchmarks/search.py step-time --cases 1 --knowledge map
 
+* ``speed``: the wall-clock cost of dgse-phys at each knowledge level
+  (:func:`dgse.bench.speed.speed_table`): one search per validation scenario with the preset
+  (first step, median step) and one random-readings estimate per count with nothing cached;
+  writes ``benchmarks/results/speed/<tag>.json`` (``-o`` a folder)::
+
+      python benchmarks/search.py speed --cases 2 --counts 20 50 --tag before
+
 * ``deadline``: for every episode of ``map`` searches journaled with ``--steps`` that ended
   at its deadline, the final belief rebuilt from the recorded readings and scored by several
   point estimates (the posterior mean, the mode, the centre of the heaviest 0.5, 1 or 2 m
@@ -547,6 +554,33 @@ def step_time(argv: list[str]) -> None:
     print(f"wrote {path}")
 
 
+def speed(argv: list[str]) -> None:
+    """``speed``: dgse-phys's search steps and estimates timed per knowledge level (module doc)."""
+    from dgse.bench.speed import speed_table
+
+    ap = _parser("speed", "dgse-phys's step, first-estimate and random-readings estimate seconds")
+    ap.add_argument("--set", default="validation", choices=[k for k in SEARCH_SETS if k != "test"])
+    ap.add_argument("--cases", type=int, default=2)
+    ap.add_argument("--levels", nargs="+", default=["openings", "wind", "map"])
+    ap.add_argument("--counts", type=int, nargs="+", default=[20, 50])
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--no-search", action="store_true", help="the random-readings estimates only")
+    ap.add_argument("--tag", default="speed")
+    ap.add_argument("-o", "--out", type=Path, default=RESULTS.parent / "speed")
+    args = ap.parse_args(argv)
+    d = search_cases(RESULTS, args.set, args.cases)
+    paths = sorted(d.glob("*.npz"))
+
+    def show(row: dict) -> None:
+        print(json.dumps({k: v for k, v in row.items() if k != "step_s"}), flush=True)
+
+    out = speed_table(paths, args.levels, args.counts, args.seed, not args.no_search, show)
+    path = args.out / f"{args.tag}.json"
+    write_text(path, json.dumps(out, indent=1) + "\n")
+    print(json.dumps(out["summary"]))
+    print(f"wrote {path}")
+
+
 #: The disk radii (m) of the deadline estimates ``deadline`` scores.
 DEADLINE_RADII = (0.5, 1.0, 2.0)
 
@@ -801,6 +835,7 @@ COMMANDS: dict[str, Callable[[list[str]], None]] = {
     "merge": merge,
     "cases": cases,
     "step-time": step_time,
+    "speed": speed,
     "deadline": deadline,
     "misfit": misfit,
     "stops": stops,

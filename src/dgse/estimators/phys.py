@@ -201,14 +201,21 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         except InputDataError as exc:  # a map whose edge has no room for openings (walled)
             self._family_note = f"no opening hypotheses: {exc}"
             proposals = []
-        hyps = []
-        for prop in proposals:
+
+        def solve(prop: Any) -> FlowModel:
             layout = Layout(
                 k.occupancy, prop.inlets, prop.outlets, resolution=k.resolution, name=k.name or "map"
             )
             # the flow's shape is what matters: one speed, the wind fit scales it (see estimate)
-            fm = flow_model(layout, self.flows.map_speed, self.physics, self.flow_settings)
-            hyps.append(FlowHypothesis(prop.label(), fm, 1.0 / len(proposals)))
+            return flow_model(layout, self.flows.map_speed, self.physics, self.flow_settings)
+
+        # the proposals' solves are independent (cold starts): one per thread, as many at once
+        # as the machine has cores (the solver's kernels release the GIL)
+        flows = map_threads(solve, proposals)
+        hyps = [
+            FlowHypothesis(prop.label(), fm, 1.0 / len(proposals))
+            for prop, fm in zip(proposals, flows, strict=True)
+        ]
         self._hypotheses = hyps
         self._proposed_at = len(obs)
         self._proposed_from = (obs.cells.copy(), obs.wind.copy())
@@ -354,11 +361,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
         """DGSE-S's belief from the same readings (the shipped network, built on first use and
         shared by every estimate)."""
         if "default" not in self._networks:
-            from dgse.estimators.registry import get_estimator
-
-            self._networks["default"] = get_estimator(
-                "dgse-s", model="default", seed=0, dtype="auto", channels_last=True
-            )
+            self._networks["default"] = _shipped_network()
         return self._networks["default"].estimate(occupancy, resolution, obs)
 
     def _gas_evidence(
@@ -629,6 +632,16 @@ def _hypothesis_info(
         "gas_log_evidence": logsumexp(log_ev) - math.log(log_ev.size) if live else None,
         "source_mode_xy": mode,
     }
+
+
+@functools.lru_cache(maxsize=1)
+def _shipped_network() -> Any:
+    """DGSE-S with the shipped weights, as :meth:`PhysicsGuidedEstimator._learned_belief` runs
+    it: loaded once per process and shared by every estimator (its estimates depend only on
+    their inputs: each draws its samples from a generator seeded afresh)."""
+    from dgse.estimators.registry import get_estimator
+
+    return get_estimator("dgse-s", model="default", seed=0, dtype="auto", channels_last=True)
 
 
 @options_from(PhysicsGuidedEstimator)

@@ -139,6 +139,7 @@ import functools
 import itertools
 import json
 import math
+import threading
 import time
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
@@ -297,6 +298,8 @@ class FlowModel:
 
 
 _FLOWS: OrderedDict[tuple[str, float, float | None, str], FlowModel] = OrderedDict()
+#: Guards :data:`_FLOWS`: flows of several hypotheses are solved on threads at once.
+_FLOWS_LOCK = threading.Lock()
 
 
 def _layout_key(layout: Layout) -> str:
@@ -324,10 +327,11 @@ def flow_model(
     v = float(inlet_velocity)
     start_v = None if warm_start is None else round(float(warm_start.inlet_velocity), 9)
     key = (_layout_key(layout), round(v, 9), start_v, repr(settings))
-    hit = _FLOWS.get(key)
-    if hit is not None and hit.physics == physics:
-        _FLOWS.move_to_end(key)
-        return hit
+    with _FLOWS_LOCK:
+        hit = _FLOWS.get(key)
+        if hit is not None and hit.physics == physics:
+            _FLOWS.move_to_end(key)
+            return hit
     t0 = time.perf_counter()
     start = None if warm_start is None else warm_start.solved
     flow, ts = flow_and_transport(layout, v, physics, settings, warm_start=start)
@@ -338,9 +342,10 @@ def flow_model(
         "warm_start": None if start is None else float(warm_start.inlet_velocity),
     }
     fm = FlowModel(np.asarray(flow.wind, dtype=np.float64), ts, v, info, physics, flow)
-    _FLOWS[key] = fm
-    while len(_FLOWS) > FLOW_CACHE_SIZE:
-        _FLOWS.popitem(last=False)
+    with _FLOWS_LOCK:
+        _FLOWS[key] = fm
+        while len(_FLOWS) > FLOW_CACHE_SIZE:
+            _FLOWS.popitem(last=False)
     return fm
 
 
@@ -357,7 +362,8 @@ def check_noise_weights(mode: object, modes: tuple[str, ...] = NOISE_WEIGHTS) ->
 
 def clear_flow_cache() -> None:
     """Forget the cached flows."""
-    _FLOWS.clear()
+    with _FLOWS_LOCK:
+        _FLOWS.clear()
 
 
 # -- the posterior ----------------------------------------------------------------------------
