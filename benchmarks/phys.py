@@ -155,13 +155,14 @@ import time
 from collections import defaultdict
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from dgse.belief.knowledge import Knowledge
-from dgse.bench.commands import run_command
+from dgse.bench.commands import command_parser, run_command
 from dgse.bench.scenarios import VARIANTS, parse_seeds, perturbed_wind, search_cases, variant_case
 from dgse.cli.common import parse_params
 from dgse.errors import InputDataError
@@ -195,8 +196,7 @@ def _seeds(text: str) -> list[int]:
         raise argparse.ArgumentTypeError(str(e)) from None
 
 
-def _parser(command: str, what: str) -> argparse.ArgumentParser:
-    return argparse.ArgumentParser(prog=f"phys.py {command}", description=f"{what} (phys.py's module doc)")
+_parser = partial(command_parser, "phys.py")
 
 
 def phys_option_args(

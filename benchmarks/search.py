@@ -77,19 +77,19 @@ only ever chosen on validation episodes; the test split's are for reporting.
 
 from __future__ import annotations
 
-import argparse
 import gzip
 import json
 import math
 import os
 import sys
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from dgse.bench.commands import run_command
+from dgse.bench.commands import command_parser, run_command
 from dgse.bench.scenarios import SEARCH_SETS, WIND_VARIANTS, ToldWind, search_cases
 from dgse.files import write_text
 from dgse.presets import PRESETS
@@ -824,10 +824,7 @@ def stops(argv: list[str]) -> None:
     print(json.dumps(summary))
 
 
-def _parser(command: str, what: str) -> argparse.ArgumentParser:
-    return argparse.ArgumentParser(
-        prog=f"search.py {command}", description=f"{what} (search.py's module doc)"
-    )
+_parser = partial(command_parser, "search.py")
 
 
 COMMANDS: dict[str, Callable[[list[str]], None]] = {

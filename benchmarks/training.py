@@ -88,7 +88,6 @@ PyTorch and matplotlib are imported by the commands that use them.
 
 from __future__ import annotations
 
-import argparse
 import copy
 import csv
 import json
@@ -99,12 +98,13 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from dgse.bench.commands import run_command
+from dgse.bench.commands import command_parser, run_command
 from dgse.files import atomic_open, atomic_path, write_text
 
 REPO = Path(__file__).resolve().parents[1]
@@ -117,10 +117,7 @@ def _name(path: object) -> str:
     return (Path(str(path)).name or "?") if path else "?"
 
 
-def _parser(command: str, what: str) -> argparse.ArgumentParser:
-    return argparse.ArgumentParser(
-        prog=f"training.py {command}", description=f"{what} (training.py's module doc)"
-    )
+_parser = partial(command_parser, "training.py")
 
 
 #: The paper's dataset size, layouts.

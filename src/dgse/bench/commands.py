@@ -2,9 +2,16 @@
 
 from __future__ import annotations
 
+import argparse
 from collections.abc import Callable, Mapping
 
-__all__ = ["run_command"]
+__all__ = ["command_parser", "run_command"]
+
+
+def command_parser(script: str, command: str, what: str) -> argparse.ArgumentParser:
+    """The argument parser of ``python benchmarks/SCRIPT COMMAND``, described by ``what``
+    (the script's module doc says more)."""
+    return argparse.ArgumentParser(prog=f"{script} {command}", description=f"{what} ({script}'s module doc)")
 
 
 def run_command(

@@ -23,12 +23,12 @@ from typing import Any
 import numpy as np
 
 from dgse.belief.knowledge import Knowledge
-from dgse.presets import PRESETS
+from dgse.presets import PHYSICS_METHOD, PRESETS
 from dgse.world.case import Case
 
 __all__ = ["estimate_times", "search_times", "speed_table", "warm_up"]
 
-METHOD = "dgse-phys"
+METHOD = PHYSICS_METHOD
 
 
 def warm_up(case: Case) -> None:

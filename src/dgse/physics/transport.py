@@ -110,7 +110,9 @@ def transport_matrix(
     # room, a walled-in cell) has no concentration level: its operator is singular.  No gas
     # reaches it (a source there is refused, :func:`check_release_cells`), so its steady
     # concentration is 0: one cell of each such part reads c = 0, which makes it regular
-    pin = anchors(mesh, INLET) & ~_drained(mesh, sink)
+    pin = anchors(mesh, INLET)
+    if pin.any():
+        pin &= ~_drained(mesh, sink)
     if pin.any():
         keep = ~pin[r]
         fixed = np.flatnonzero(pin)
