@@ -10,6 +10,7 @@ import pytest
 from dgse.belief.knowledge import Knowledge, PerLevel
 from dgse.errors import InputDataError
 from dgse.estimators.phys import (
+    FUSION_SAMPLES,
     FlowHypotheses,
     GasEvidence,
     NetworkFusion,
@@ -333,7 +334,9 @@ def test_learned_belief_is_mixed_in_where_the_readings_are_few(case):
     per knowledge level (:class:`NetworkFusion`)."""
     obs = draw_observations(case, 10, seed=7)
     k = Knowledge.from_case(case, "map")
-    learned = get_estimator("dgse-s", seed=0, dtype="auto", channels_last=True)
+    # the mixture's network draws FUSION_SAMPLES (it uses only the source posterior)
+    K, T = FUSION_SAMPLES
+    learned = get_estimator("dgse-s", seed=0, dtype="auto", channels_last=True, K=K, T=T)
     net = learned.estimate(case.occupancy, case.resolution, obs).source_probs
     only_net = get_estimator("dgse-phys", knowledge=k, **{"fusion.weight": 1.0, "fusion.readings": 1e9})
     b = only_net.estimate(case.occupancy, case.resolution, obs)
@@ -377,7 +380,7 @@ def test_a_map_the_network_cannot_take_leaves_the_physics_alone(case, monkeypatc
     obs = draw_observations(case, 10, seed=7)
     est = get_estimator("dgse-phys", knowledge=k, **{"flows.map_proposals": 1})
 
-    def refuse(*args):
+    def refuse(*args, **kwargs):
         raise InputDataError("this dgse-s model works on 0.1 m cells or whole multiples of them")
 
     monkeypatch.setattr(est, "_learned_belief", refuse)
