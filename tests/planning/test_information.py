@@ -21,7 +21,7 @@ from dgse.planning.information import (
     reading_information,
 )
 from dgse.planning.paths import graph_for
-from dgse.planning.planners import SearchHistory, get_planner, posterior_median
+from dgse.planning.planners import SearchHistory, get_planner
 from dgse.posterior.adjoint import AdjointResponseModel, flow_model
 from dgse.posterior.mixture import predictive_sources
 from dgse.posterior.predictive import HypothesisPredictive
@@ -267,9 +267,9 @@ def test_stop_fires_iff_the_mass_near_the_declared_point_reaches_its_level():
         ii, jj = np.mgrid[0:40, 0:40]
         p = sum(np.exp(-((ii - a) ** 2 + (jj - b) ** 2) / (2 * rng.uniform(1, 30) ** 2)) for a, b in centres)
         belief = Belief(occ, 0.1, normalize_source_probs(p, occ))
-        x, y = posterior_median(belief)
+        x, y = belief.source_estimate()
         dist = np.hypot((jj + 0.5) * 0.1 - x, (ii + 0.5) * 0.1 - y)
-        mass = float(belief.source_probs[dist <= 1.0 + 1e-9].sum())
+        mass = float(belief.source_probs[dist <= 1.0].sum())
         history = SearchHistory(graph, step=5)
         stops = planner.should_stop(belief, history)
         assert stops == (mass >= 0.8)
@@ -282,33 +282,6 @@ def test_stop_fires_iff_the_mass_near_the_declared_point_reaches_its_level():
     assert not planner.should_stop(flat, SearchHistory(graph, step=9, time_s=100.0, time_limit_s=2000.0))
     assert planner.should_stop(flat, SearchHistory(graph, step=9, time_s=1950.0, time_limit_s=2000.0))
     assert planner.deadline_reached(SearchHistory(graph, step=9, time_s=1950.0, time_limit_s=2000.0))
-
-
-def expected_distance(belief: Belief, xy) -> float:
-    g = belief.grid
-    d = np.hypot(g.x[None, :] - xy[0], g.y[:, None] - xy[1])
-    return float((belief.source_probs * d).sum())
-
-
-def test_the_declared_point_has_the_least_expected_error():
-    """The spatial median beats the mean and every cell centre on the expected distance to the
-    source, on a split posterior where mean and median differ."""
-    occ = np.zeros((30, 40), np.uint8)
-    p = np.zeros((30, 40))
-    p[5, 5], p[6, 5], p[25, 35], p[5, 30] = 0.45, 0.15, 0.25, 0.15
-    belief = Belief(occ, 0.1, normalize_source_probs(p + 1e-12, occ))
-    med = InformationPlanner().declare(belief, deadline=False)
-    assert med == posterior_median(belief)
-    best = expected_distance(belief, med)
-    g = belief.grid
-    centres = [(float(x), float(y)) for y in g.y for x in g.x]
-    assert best <= min(expected_distance(belief, c) for c in centres) + 1e-6
-    assert best < expected_distance(belief, belief.source_estimate()) - 0.1
-    # a point mass is its own median
-    q = np.zeros((30, 40))
-    q[12, 17] = 1.0
-    one = Belief(occ, 0.1, q)
-    assert posterior_median(one) == pytest.approx(one.grid.center_of(12, 17), abs=1e-3)
 
 
 def test_settings_follow_the_protocol_and_are_checked():

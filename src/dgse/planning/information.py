@@ -27,8 +27,7 @@ episode's generator); ties go to the nearest cell.
 
 Stop (:class:`InformationStop`): once ``stop.min_observations`` readings are in, the search
 stops when the posterior mass within ``stop.radius_m`` (the success radius of
-:mod:`dgse.search.metrics`) of the point it would declare (:meth:`InformationPlanner.declare`,
-the posterior's spatial median)
+:mod:`dgse.search.metrics`) of the point it would declare (:meth:`InformationPlanner.declare`)
 reaches ``stop.level``: with a calibrated posterior that is the probability the search
 succeeds if it stops now.  A :class:`~dgse.planning.planners.Deadline` as the utility
 planner's ends it before the time limit.
@@ -46,7 +45,7 @@ from dgse.belief.predictive import ReadingMixture
 from dgse.errors import InputDataError
 from dgse.options import Settings, check_whole
 from dgse.planning.paths import Cell
-from dgse.planning.planners import Deadline, PlannerBase, SearchHistory, mass_within, posterior_median
+from dgse.planning.planners import Deadline, PlannerBase, SearchHistory, mass_within
 
 __all__ = [
     "InformationPlanner",
@@ -198,12 +197,9 @@ class InformationPlanner(PlannerBase):
         return self.deadline.reached(history)
 
     def declare(self, belief: Belief, deadline: bool) -> tuple[float, float]:
-        """The posterior's spatial median (:func:`~dgse.planning.planners.posterior_median`:
-        the least expected error); at a deadline stop with ``deadline.estimate_radius_m`` the
-        centre of the heaviest disk of that radius (:meth:`~dgse.planning.planners.Deadline.declare`)."""
-        if deadline and self.deadline.estimate_radius_m is not None:
-            return self.deadline.declare(belief, deadline)
-        return posterior_median(belief)
+        """The posterior mean; at a deadline stop with ``deadline.estimate_radius_m`` the centre
+        of the heaviest disk of that radius (:meth:`~dgse.planning.planners.Deadline.declare`)."""
+        return self.deadline.declare(belief, deadline)
 
     def stop_mass(self, belief: Belief) -> float:
         """The posterior mass within ``stop.radius_m`` of the point a stop now declares."""

@@ -93,8 +93,6 @@ __all__ = [
     "mass_near_mode",
     "mass_within",
     "planner_names",
-    "point_estimates",
-    "posterior_median",
     "register_planner",
 ]
 
@@ -608,36 +606,6 @@ def disk_estimate(belief: Belief, radius_m: float) -> tuple[float, float]:
     return belief.grid.center_of(int(i), int(j))
 
 
-def posterior_median(belief: Belief, iterations: int = 100, tol_m: float = 1e-4) -> tuple[float, float]:
-    """The spatial median ``(x, y)``, m, of the source posterior: the point whose expected
-    distance to the source is least, the Bayes point for a search's error (Weiszfeld's
-    iteration from the posterior mean, cell centres as the support; a distance below half a
-    cell counts as half a cell, which keeps a step finite on a cell of mass; then the best of
-    that point and the cell centres around it, as a median often lies on a heavy cell)."""
-    p = np.asarray(belief.source_probs, dtype=np.float64)
-    i, j = np.nonzero(p > 0)
-    w = p[i, j]
-    if w.size == 0:
-        return belief.source_estimate()
-    grid = belief.grid
-    x, y = grid.x[j], grid.y[i]
-    px, py = belief.source_estimate()
-    floor = 0.5 * belief.resolution
-    for _ in range(iterations):
-        k = w / np.maximum(np.hypot(x - px, y - py), floor)
-        nx, ny = float(k @ x / k.sum()), float(k @ y / k.sum())
-        moved = math.hypot(nx - px, ny - py)
-        px, py = nx, ny
-        if moved < tol_m:
-            break
-    ci, cj = grid.cell_of(px, py)
-    ii, jj = np.mgrid[ci - 2 : ci + 3, cj - 2 : cj + 3]
-    inside = (ii >= 0) & (ii < p.shape[0]) & (jj >= 0) & (jj < p.shape[1])
-    options = [(px, py), *zip(grid.x[jj[inside]].tolist(), grid.y[ii[inside]].tolist(), strict=True)]
-    cost = [float(w @ np.hypot(x - ox, y - oy)) for ox, oy in options]
-    return tuple(float(v) for v in options[int(np.argmin(cost))])  # type: ignore[return-value]
-
-
 #: The disks of :func:`point_estimates` (m): the values ``deadline.estimate_radius_m`` is chosen among.
 POINT_ESTIMATE_RADII = (0.5, 1.0, 2.0)
 
@@ -659,13 +627,9 @@ def point_estimates(belief: Belief) -> dict[str, tuple[float, float]]:
     posterior mean, what a search declares by default), ``mode`` (the most probable cell's
     centre), ``disk<r>m`` (:func:`disk_estimate`) and ``local<r>m`` (the posterior mean within
     that disk: the mean of the heaviest part of a split posterior) for each of
-    :data:`POINT_ESTIMATE_RADII`, and ``median`` (:func:`posterior_median`).  Every episode
-    records their errors, so a declared point can be chosen from one run."""
-    out = {
-        "mean": belief.source_estimate(),
-        "median": posterior_median(belief),
-        "mode": belief.grid.center_of(*belief.most_likely_cell()),
-    }
+    :data:`POINT_ESTIMATE_RADII`.  Every episode records their errors, so a deadline
+    rule can be chosen from one run."""
+    out = {"mean": belief.source_estimate(), "mode": belief.grid.center_of(*belief.most_likely_cell())}
     for r in POINT_ESTIMATE_RADII:
         out[f"disk{r:g}m"] = disk_estimate(belief, r)
         out[f"local{r:g}m"] = _mean_within(belief, out[f"disk{r:g}m"], r)
