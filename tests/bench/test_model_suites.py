@@ -121,4 +121,4 @@ def test_calibration_quick(bench_root: Path) -> None:
 def test_unknown_suite_is_a_clear_error(tmp_path: Path) -> None:
     with pytest.raises(UnsupportedError, match="unknown suite 'nope'; known suites: variants, gdm"):
         run_suite("nope", tmp_path)
-    assert SUITES.names() == ["variants", "gdm", "gsl", "search", "samples", "calibration"]
+    assert SUITES.names() == ["variants", "gdm", "gsl", "search", "samples", "calibration", "field"]

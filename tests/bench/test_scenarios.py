@@ -164,3 +164,59 @@ def test_run_command_dispatches_and_exits_with_the_usage(capsys) -> None:
             run_command("doc", {"go": seen.append}, argv)
         assert e.value.code == code
     assert "commands: go" in capsys.readouterr().out
+
+
+def test_gaden_cases_export_and_import_each_seed_once(tmp_path: Path, monkeypatch) -> None:
+    from tests.search import solved_two_rooms
+
+    case = solved_two_rooms()
+    calls = []
+
+    def fake_random_cases(seed: int, n_sources: int) -> list[Case]:
+        calls.append(seed)
+        if seed == scenarios.GADEN_FIRST_SEED + 1:
+            raise ConvergenceError("stalled")
+        return [case]
+
+    import dgse.physics.scenario as scenario
+
+    monkeypatch.setattr(scenario, "random_cases", fake_random_cases)
+    d = scenarios.gaden_cases(tmp_path, 3)
+    first = scenarios.GADEN_FIRST_SEED
+    assert d == tmp_path / "_cases_gaden"
+    assert sorted(p.name for p in d.iterdir()) == [
+        f"gaden{first}_src0.npz",
+        f"gaden{first + 1}_src0.unconverged",
+        f"gaden{first + 2}_src0.npz",
+    ]
+    scenarios.gaden_cases(tmp_path, 3)
+    assert calls == [first, first + 1, first + 2]  # made once
+    # the case came through a GADEN folder: the same map and source, the openings by the wind
+    got = Case.load(d / f"gaden{first}_src0.npz")
+    assert (tmp_path / "_gaden" / f"gaden{first}" / "occupancy.yaml").is_file()
+    np.testing.assert_array_equal(got.occupancy, case.occupancy)
+    np.testing.assert_allclose(got.source, case.source, atol=1e-6)
+    for mine, theirs in ((got.layout.inlets, case.layout.inlets), (got.layout.outlets, case.layout.outlets)):
+        assert [(o.side, pytest.approx(o.start_m), pytest.approx(o.end_m)) for o in theirs] == [
+            (o.side, o.start_m, o.end_m) for o in mine
+        ]
+    assert got.release_rate == pytest.approx(case.release_rate)
+    assert got.meta["gaden"]["wind"] == ["wind_simulations/steady/wind_at_cell_centers_0.csv"]
+
+
+def test_variant_case_passes_its_filament_settings(tmp_path: Path, monkeypatch) -> None:
+    from dgse.physics.filament import FilamentSettings
+
+    seen = []
+
+    def fake_filament(c: Case, settings, seed: int) -> Case:
+        seen.append(settings)
+        return c
+
+    import dgse.physics.filament as filament
+
+    monkeypatch.setattr(filament, "make_filament_case", fake_filament)
+    short = FilamentSettings(duration=20.0, warmup=10.0)
+    variant_case(_case(), "filament", tmp_path / "short", "tiny", settings=short)
+    variant_case(_case(), "filament", tmp_path / "default", "tiny")
+    assert seen == [short, FilamentSettings()]

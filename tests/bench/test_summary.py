@@ -220,6 +220,34 @@ def _seeded(root: Path, seed: int = 0) -> Path:
             {"settings": {"planner_options": {"deadline_margin_s": 60.0}}, "per_case": [{"trials": trials}]},
         )
     _finish(ctx)
+    # field: the table per group and method, the paper's rows
+    from dgse.bench.field import GROUPS, PAPER_COLUMNS, TABLE_COLUMNS, paper_rows
+
+    ctx = _suite(root, "field")
+    sec = ctx.section("field")
+    rows = []
+    for group, _ in GROUPS:
+        for method in SEARCH:
+            rows.append(
+                {
+                    "group": group,
+                    "method": method,
+                    "scenarios": 2,
+                    "episodes": 4,
+                    "SR [%]": 25.0 * int(rng.integers(0, 5)),
+                    "error [m]": round(rng.uniform(0.1, 6), 3),
+                    "ST mean [s]": round(rng.uniform(30, 2000), 1),
+                    "ST median [s]": round(rng.uniform(30, 2000), 1),
+                    "TD [m]": round(rng.uniform(1, 200), 2),
+                    "PER median": None if method == "GrGSL" else round(rng.uniform(0.5, 9), 2),
+                    "step median [s]": round(rng.uniform(0.01, 5), 4),
+                    "shortest-path time [s]": round(rng.uniform(8, 60), 1),
+                }
+            )
+    sec.table("field_search", rows, "field", TABLE_COLUMNS)
+    sec.table("paper_dgse_s", paper_rows(), "paper", PAPER_COLUMNS)
+    ctx.save_json("field_results", {"plan": {"trials": 2, "time_limit_s": 2000.0}})
+    _finish(ctx)
     return root
 
 
@@ -265,6 +293,8 @@ def test_every_number_of_the_summary_is_cited(seeded: Path) -> None:
         "(`gsl-openings`)",
         "(`variants`)",
         "(`search`",
+        "(`field`",
+        "| paper | DGSE-S",
     ):
         assert section in text
     assert _uncited_digits(text, cited) == []
@@ -373,3 +403,21 @@ def test_the_deadline_margin_is_read_by_its_recorded_and_its_settings_name(
         if "deadline_margin_s" in options
         else "planner_options.deadline.margin_s"
     ]
+
+
+def test_the_field_table_has_a_row_per_group_and_method_and_the_papers(seeded: Path) -> None:
+    from dgse.bench.field import GROUPS, PAPER_DGSE_S
+
+    text, _ = build_summary(seeded)
+    lines = [line for line in text.splitlines() if line.startswith("| ")]
+    header, body = lines[0], lines[1:]
+    assert header.startswith("| group | method | episodes | SR % |")
+    assert [tuple(c.strip() for c in r.split("|")[1:3]) for r in body[:-1]] == [
+        (g, m) for g, _ in GROUPS for m in SEARCH
+    ]
+    assert all(r.split("|")[9].strip() == "n/a" for r in body[:-1] if "| GrGSL |" in r)  # no PER
+    paper = [c.strip() for c in body[-1].split("|")[1:-1]]
+    assert paper[1] == f"DGSE-S (mean of its {len(PAPER_DGSE_S)} GADEN environments)"
+    mean_st = sum(e["st_s"][0] for e in PAPER_DGSE_S) / len(PAPER_DGSE_S)
+    assert paper[5] == f"{mean_st:.1f}"  # ST mean, three significant digits
+    assert "1 trial(s)" not in text and "2 trials per scenario" in text

@@ -9,15 +9,19 @@ building in the map frame (origin ``ORIGIN``): ``occupancy.yaml`` +
 ``.../simulations/sim1/sim.yaml`` (``source: position``), a BasicSim scene
 ``scene.yaml`` (``robots: position``) and two time steps of
 ``wind_simulations/1ms/wind_at_cell_centers_<t>.csv``.  Grid-frame facts the
-tests check are the module's constants.
+tests check are the module's constants.  The models and the wind are written by the
+package's writers (:func:`dgse.data.gaden_scenario.write_stl`, ``write_wind_csv``); the map
+and the settings here in forms the package's export does not write (a plain PGM at 0.02 m
+pixels, a colour entry among the listed models, a wind that turns above the sensors).
 """
 
 from __future__ import annotations
 
-import struct
 from pathlib import Path
 
 import numpy as np
+
+from dgse.data.gaden_scenario import box_triangles, write_stl, write_wind_csv
 
 #: Map-frame position of the map's lower-left corner, m.
 ORIGIN = (-1.0, -0.5)
@@ -31,29 +35,6 @@ INNER_WALL, INNER_DOOR = (2.0, 2.1), (1.0, 2.0)
 SOURCE, START, SOURCE_Z = (3.0, 2.2), (0.75, 0.75), 0.5
 #: Mean west-to-east wind at the sensors' height over the two time steps, m/s; above 0.8 m it blows back.
 WIND_U, WIND_ABOVE = 0.4, -3.0
-
-
-def _box(x0: float, x1: float, y0: float, y1: float, z0: float, z1: float) -> list[np.ndarray]:
-    c = np.array([[x, y, z] for x in (x0, x1) for y in (y0, y1) for z in (z0, z1)])
-    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
-    return [c[[a, b, d]] for a, b, _, d in quads] + [c[[b, e, d]] for _, b, e, d in quads]
-
-
-def write_ascii_stl(path: Path, tris: list[np.ndarray]) -> None:
-    lines = ["solid model"]
-    for t in tris:
-        lines += ["  facet normal 0 0 0", "    outer loop"]
-        lines += [f"      vertex {v[0]:.6f} {v[1]:.6f} {v[2]:.6f}" for v in t]
-        lines += ["    endloop", "  endfacet"]
-    path.write_text("\n".join([*lines, "endsolid model", ""]))
-
-
-def write_binary_stl(path: Path, tris: list[np.ndarray]) -> None:
-    # a header starting with "solid" too, as some exporters write it
-    data = b"solid binary".ljust(80, b" ") + struct.pack("<I", len(tris))
-    for t in tris:
-        data += struct.pack("<12fH", 0.0, 0.0, 0.0, *t.reshape(-1).tolist(), 0)
-    path.write_bytes(data)
 
 
 def occupancy(pixel: float = PIXEL) -> np.ndarray:
@@ -97,13 +78,14 @@ def write_gaden_scenario(
     cad = root / "cad_models"
     cad.mkdir(exist_ok=True)
     dx, dy = west_door_shift
-    write_ascii_stl(
+    write_stl(
         cad / "door_west.stl",
-        _box(ox + dx, ox + WALL + dx, oy + WEST_DOOR[0] + dy, oy + WEST_DOOR[1] + dy, 0.0, 2.0),
+        box_triangles(ox + dx, ox + WALL + dx, oy + WEST_DOOR[0] + dy, oy + WEST_DOOR[1] + dy, 0.0, 2.0),
     )
-    write_binary_stl(
+    write_stl(
         cad / "door_east.stl",
-        _box(ox + WIDTH - WALL, ox + WIDTH, oy + EAST_DOOR[0], oy + EAST_DOOR[1], 0.0, 2.0),
+        box_triangles(ox + WIDTH - WALL, ox + WIDTH, oy + EAST_DOOR[0], oy + EAST_DOOR[1], 0.0, 2.0),
+        binary=True,
     )
     config = root / "environment_configurations" / "config1"
     (config / "simulations" / "sim1").mkdir(parents=True, exist_ok=True)
@@ -134,15 +116,8 @@ def write_gaden_scenario(
         for t, u_mean in enumerate((WIND_U - 0.1, WIND_U + 0.1)):
             u = np.where(Z < 0.8, u_mean, WIND_ABOVE) + rng.normal(0.0, 0.01, X.size)
             v = rng.normal(0.0, 0.01, X.size)
-            w = np.zeros(X.size)
-            rows = np.column_stack([u, v, w, X + ox, Y + oy, Z])
-            header = '"U:0","U:1","U:2","Points:0","Points:1","Points:2"'
-            np.savetxt(
-                wind_dir / f"wind_at_cell_centers_{t}.csv",
-                rows,
-                delimiter=",",
-                header=header,
-                comments="",
-                fmt="%.6f",
+            points = np.column_stack([X + ox, Y + oy, Z])
+            write_wind_csv(
+                wind_dir / f"wind_at_cell_centers_{t}.csv", points, np.column_stack([u, v, np.zeros(X.size)])
             )
     return root

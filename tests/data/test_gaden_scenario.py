@@ -8,7 +8,16 @@ import numpy as np
 import pytest
 
 from dgse.cli.main import main
-from dgse.data.gaden_scenario import load_gaden_scenario, read_stl, read_wind_csv
+from dgse.data.gaden_scenario import (
+    box_triangles,
+    export_gaden_scenario,
+    import_gaden_scenario,
+    load_gaden_scenario,
+    read_stl,
+    read_wind_csv,
+    write_stl,
+    write_wind_csv,
+)
 from dgse.errors import InputDataError
 from dgse.world.case import Case
 from dgse.world.layout import Opening
@@ -121,7 +130,7 @@ def test_older_formats_launch_xml_source_and_numbered_outlets(tmp_path):
         '   value="$(find-pkg-share env)/B/wind_simulations/$(var simulation)/$(var simulation)"/>\n'
         " </node>\n</launch>\n"
     )
-    g.write_ascii_stl(d / "cad_models/door_north.stl", g._box(0.0, 0.4, 2.4, 2.5, 0.0, 2.0))
+    write_stl(d / "cad_models/door_north.stl", box_triangles(0.0, 0.4, 2.4, 2.5, 0.0, 2.0))
     calm = d / "wind_simulations" / "calm"
     calm.mkdir()
     for t, src in enumerate(sorted((d / "wind_simulations/1ms").glob("*.csv"))):
@@ -180,3 +189,80 @@ def test_source_and_start_options_are_map_frame(folder, tmp_path, capsys):
     assert meta["gaden"]["simulation"] is None and meta["gaden"]["scene"] is None
     code, _, err = _run(capsys, folder, "-o", out, "--source", "0.0", "1.0")  # no --height: slice at z 0
     assert code == 2 and "give --height" in err
+
+
+def test_the_writers_give_back_what_the_readers_read(tmp_path):
+    tris = box_triangles(-1.0, 0.5, 2.0, 2.25, 0.0, 2.0)
+    assert tris.shape == (12, 3, 3)
+    lo, hi = tris.reshape(-1, 3).min(axis=0), tris.reshape(-1, 3).max(axis=0)
+    np.testing.assert_allclose([lo, hi], [[-1.0, 2.0, 0.0], [0.5, 2.25, 2.0]])
+    for binary in (False, True):
+        path = write_stl(tmp_path / f"box_{binary}.stl", tris, binary=binary)
+        assert path.read_bytes().startswith(b"solid")  # a binary header may start so too
+        np.testing.assert_allclose(read_stl(path), tris, atol=1e-6)
+    rng = np.random.default_rng(0)
+    pts, wind = rng.normal(size=(7, 3)), rng.normal(size=(7, 3))
+    got_pts, got_wind = read_wind_csv(
+        write_wind_csv(tmp_path / "w" / "wind_at_cell_centers_0.csv", pts, wind)
+    )
+    np.testing.assert_allclose(got_pts, pts, atol=1e-6)
+    np.testing.assert_allclose(got_wind, wind, atol=1e-6)
+    with pytest.raises(InputDataError, match=r"\(n, 3\)"):
+        write_wind_csv(tmp_path / "bad.csv", pts, wind[:, :2])
+
+
+def _corner_case() -> Case:
+    """A 2 x 1.5 m room, an inlet from the south-west corner along the south side, an outlet
+    north at the east corner, a west-to-east wind with a northward turn (no solver needed)."""
+    H, W, res = 15, 20, 0.1
+    occ = np.zeros((H, W), np.uint8)
+    occ[5:10, 10] = 1
+    i, j = np.mgrid[0:H, 0:W]
+    wind = np.stack([np.full((H, W), 0.3), 0.02 * i + 0.1]).astype(np.float32) * (occ == 0)
+    conc = 50.0 * np.exp(-((i - 3) ** 2 + (j - 15) ** 2) / 10.0) * (occ == 0)
+    meta = {
+        "name": "corner",
+        "inlet_velocity": 0.4,
+        "release_rate_gps": 0.05,
+        "inlet": {"side": "south", "start_m": 0.0, "end_m": 0.5},
+        "outlet": {"side": "north", "start_m": 1.5, "end_m": 2.0},
+    }
+    return Case(occ, wind, conc, (1.55, 0.35), res, meta)
+
+
+def test_an_exported_case_imports_back(tmp_path):
+    case = _corner_case()
+    origin = (-3.0, 1.25)
+    d = export_gaden_scenario(case, tmp_path / "corner", origin=origin, start=(0.25, 1.25))
+    for part in ("occupancy.yaml", "occupancy.pgm", "cad_models/opening_0.stl", "scene.yaml"):
+        assert (d / part).is_file(), part
+    sc = load_gaden_scenario(d, resolution=case.resolution)
+    np.testing.assert_array_equal(sc.layout.occupancy, case.occupancy)
+    # the openings at the corners keep their sides; the wind tells the inlet from the outlet
+    assert sc.layout.inlets == case.layout.inlets and sc.layout.outlets == case.layout.outlets
+    np.testing.assert_allclose(sc.origin, origin)
+    np.testing.assert_allclose(sc.source, case.source, atol=1e-6)
+    np.testing.assert_allclose(sc.start, (0.25, 1.25), atol=1e-9)
+    assert sc.source_z == 0.5 and sc.height == 0.5
+    np.testing.assert_allclose(sc.wind, case.wind, atol=1e-6)
+    rows, cols = case.layout.inlets[0].cells(case.grid)
+    assert sc.inlet_speed == pytest.approx(float(case.wind[1, rows, cols].mean()), abs=1e-6)
+    # without the wind file the openings must be named
+    bare = export_gaden_scenario(case, tmp_path / "bare", wind=False)
+    assert not (bare / "wind_simulations").exists()
+    with pytest.raises(InputDataError, match="cannot tell inlets from outlets"):
+        load_gaden_scenario(bare, resolution=case.resolution)
+    sc = load_gaden_scenario(bare, resolution=case.resolution, inlets=["opening_0"], outlets=["opening_1"])
+    assert sc.layout.inlets == case.layout.inlets and sc.wind is None
+
+
+def test_an_exported_case_solves_again_to_the_same_case(tmp_path):
+    from tests.search import solved_two_rooms
+
+    case = solved_two_rooms()
+    d = export_gaden_scenario(case, tmp_path / "rooms")
+    out, _ = import_gaden_scenario(d, tmp_path / "rooms.npz", solve=True, release_rate=case.release_rate)
+    again = Case.load(out)
+    np.testing.assert_array_equal(again.occupancy, case.occupancy)
+    assert again.inlet_velocity == pytest.approx(case.inlet_velocity, rel=0.05)
+    np.testing.assert_allclose(again.wind, case.wind, atol=0.05)

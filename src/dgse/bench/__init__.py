@@ -19,7 +19,10 @@ Suites (paper figure/table labels in brackets):
   fig:path_compare, de];
 * ``samples``: the K/T quality and latency trade-off and the surrogate
   objective check [App. C, App. B table object];
-* ``calibration``: reliability and coverage of the predicted uncertainties.
+* ``calibration``: reliability and coverage of the predicted uncertainties;
+* ``field``: active search with filament readings on paper-size test scenarios, office
+  floors and GADEN-format scenarios, beside the paper's DGSE-S table
+  [tab:active_search_results].
 """
 
 from __future__ import annotations
@@ -92,6 +95,17 @@ SUITES: Registry[Callable[[BenchContext], None]] = Registry(
             description=(
                 "Reliability diagrams and 1/2-sigma coverage of the wind and concentration fields, "
                 "and the expected calibration error of the source posterior."
+            ),
+        ),
+        Entry(
+            "field",
+            "dgse.bench.field:run",
+            "Search with filament readings: test, building and GADEN-format scenarios",
+            description=(
+                "Closed-loop search of every search method with the filament model's time-varying "
+                "readings on the 20 paper-size test scenarios, 10 office floors of 20-30 m and 3 "
+                "generated layouts exported to GADEN's scenario format and imported back: SR, error, "
+                "ST, TD, PER, step time and the shortest-path time, beside the paper's DGSE-S table."
             ),
         ),
     ],

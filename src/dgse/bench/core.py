@@ -306,6 +306,16 @@ class BenchContext:
         # under a lock: two runs into one directory may record times at once
         update_json(self.out / TIMINGS, lambda t: {**t, name: round(float(seconds), 2)}, default={}, indent=1)
 
+    def add_seconds(self, name: str, seconds: float) -> None:
+        """Add ``seconds`` to the compute time of result ``name``: for results kept piece by piece
+        (journaled episodes), whose cost a resumed run adds to."""
+        update_json(
+            self.out / TIMINGS,
+            lambda t: {**t, name: round(float(t.get(name, 0.0)) + float(seconds), 2)},
+            default={},
+            indent=1,
+        )
+
     def compute_seconds(self) -> float:
         """Seconds spent computing this suite's results, over all (resumed) runs.
 

@@ -5,6 +5,8 @@
   of the ``dgse-phys`` searches and diagnostics, as case files made once;
 * :func:`office_floor_cases`: generated office floors (20-30 m, building scale), as case files
   made once;
+* :func:`gaden_cases`: generated scenarios written as GADEN scenario folders and imported
+  back through ``dgse import-gaden-scenario``'s library function, as case files made once;
 * :func:`walled_case`: a scenario with walls drawn at the map's edge and its openings dropped,
   a closed slice as an imported GADEN scenario is;
 * :data:`VARIANTS`, :func:`perturbed_wind`, :func:`variant_case` and :class:`ToldWind`: the
@@ -12,7 +14,7 @@
   ``wind`` rotated, smoothed or too fast) for the robustness measurements.
 
 Seed ranges: 900-963 are kept for validation (tuning), 2000-2019 for testing (never tuned
-on), 3000 on for the office floors.
+on), 3000 on for the office floors, 4000 on for the GADEN-format scenarios.
 """
 
 from __future__ import annotations
@@ -31,10 +33,12 @@ from dgse.world.case import Case
 
 __all__ = [
     "FLOOR_FIRST_SEED",
+    "GADEN_FIRST_SEED",
     "SEARCH_SETS",
     "VARIANTS",
     "WIND_VARIANTS",
     "ToldWind",
+    "gaden_cases",
     "office_floor_cases",
     "parse_seeds",
     "perturbed_wind",
@@ -54,6 +58,8 @@ SEARCH_SETS: dict[str, range] = {
 }
 #: The seed of the first office floor.
 FLOOR_FIRST_SEED = 3000
+#: The seed of the first generated scenario written in GADEN's format and imported back.
+GADEN_FIRST_SEED = 4000
 #: The robustness variants: the scenario as generated, filament readings, and the wind told
 #: at knowledge ``wind`` rotated by 20 degrees, smoothed over 3 cells or twice too fast.
 VARIANTS = ("steady", "filament", "wind_rotated", "wind_smoothed", "wind_x2")
@@ -135,6 +141,39 @@ def office_floor_cases(
     return d
 
 
+def gaden_cases(out: str | os.PathLike[str], n: int) -> Path:
+    """The first ``n`` GADEN-format scenarios as case files in ``out/_cases_gaden/``, made once:
+    per seed from :data:`GADEN_FIRST_SEED`, a random training-distribution layout and source
+    solved with the built-in solver (as :func:`search_cases` makes them), written as a GADEN
+    scenario folder ``out/_gaden/gaden<seed>/`` (:func:`dgse.data.gaden_scenario.export_gaden_scenario`:
+    ROS map, one outlet model per opening, the simulation with the source, the wind as a CSV)
+    and imported back with :func:`dgse.data.gaden_scenario.import_gaden_scenario`, solved again
+    with the built-in solver (inlets and outlets and the inlet speed from the wind file; the
+    generated release rate).  A seed whose flow does not converge (generated or imported) is
+    left out with a ``.unconverged`` note, as :func:`search_cases` does.  Files are named
+    ``gaden<seed>_src0.npz``."""
+    from dgse.data.gaden_scenario import export_gaden_scenario, import_gaden_scenario
+    from dgse.physics.scenario import random_cases
+
+    d = Path(out) / "_cases_gaden"
+    d.mkdir(parents=True, exist_ok=True)
+    for seed in range(GADEN_FIRST_SEED, GADEN_FIRST_SEED + n):
+        path = d / f"gaden{seed}_src0.npz"
+        skip = path.with_suffix(".unconverged")
+        if path.exists() or skip.exists():
+            continue
+        folder = Path(out) / "_gaden" / f"gaden{seed}"
+        try:
+            case = random_cases(seed, n_sources=1)[0]
+            export_gaden_scenario(case, folder)
+            import_gaden_scenario(
+                folder, path, solve=True, release_rate=case.release_rate, resolution=case.resolution
+            )
+        except ConvergenceError as e:
+            write_text(skip, f"{e}\n")
+    return d
+
+
 def walled_case(case: Case) -> Case:
     """``case`` with every cell on the map's edge solid (wind and gas 0 there) and no openings
     or inlet speed in its ``meta``: a closed slice, as an imported GADEN scenario is.  The air
@@ -189,17 +228,21 @@ def perturbed_wind(case: Any, variant: str) -> np.ndarray:
     return np.where(free[None], out, 0.0)
 
 
-def variant_case(case: Case, variant: str, cache: str | os.PathLike[str], tag: str) -> Case:
+def variant_case(
+    case: Case, variant: str, cache: str | os.PathLike[str], tag: str, settings: Any = None
+) -> Case:
     """The scenario the readings of ``variant`` come from: ``case``, or for ``filament`` the
-    case with the frames of a filament simulation (``dgse plume``'s simulator, seed 0), made
-    once into ``cache/<tag>_filament.npz``."""
+    case with the frames of a filament simulation (``dgse plume``'s simulator, seed 0, with
+    ``settings``, a :class:`~dgse.physics.filament.FilamentSettings`; None: its defaults), made
+    once into ``cache/<tag>_filament.npz`` (a tag names one setting: a file that exists is
+    reused whatever the settings)."""
     if variant != "filament":
         return case
     path = Path(cache) / f"{tag}_filament.npz"
     if not path.exists():
         from dgse.physics.filament import FilamentSettings, make_filament_case
 
-        make_filament_case(case, FilamentSettings(), seed=0).save(path)
+        make_filament_case(case, FilamentSettings() if settings is None else settings, seed=0).save(path)
     return Case.load(path)
 
 

@@ -79,7 +79,7 @@ from dgse.presets import DGSE_S_ETA, PRESETS, PROTOCOL, Preset
 from dgse.search.metrics import format_mean_std
 from dgse.sensing.sensors import MIN_SENSORS
 
-__all__ = ["ETA_OOD", "ETA_OOD_PAPER", "ETA_TUNED", "METHODS", "run"]
+__all__ = ["ETA_OOD", "ETA_OOD_PAPER", "ETA_TUNED", "METHODS", "is_slow", "progress_lines", "run"]
 
 #: Entropy threshold of the shipped DGSE-S model (its preset's).
 ETA_TUNED = DGSE_S_ETA
@@ -118,7 +118,7 @@ class Plan:
     extra_options: Mapping[str, Mapping[str, Any]]
 
 
-def _slow(m: Preset) -> bool:
+def is_slow(m: Preset) -> bool:
     """Whether the method's estimator takes seconds per estimate (its registry tag)."""
     from dgse.estimators.registry import ESTIMATORS
 
@@ -134,7 +134,7 @@ def make_plan(ctx: BenchContext) -> Plan:
         n_ood=ctx.pick(6, 1),
         trials=ctx.pick(1, 1),
         time_limit=ctx.pick(PROTOCOL.time_limit, 20.0),
-        overrides={m.name: {"time_limit": ctx.pick(*SLOW_TIME_LIMIT)} for m in METHODS if _slow(m)},
+        overrides={m.name: {"time_limit": ctx.pick(*SLOW_TIME_LIMIT)} for m in METHODS if is_slow(m)},
         extra_options={m.name: dict(m.quick_options) for m in METHODS if ctx.quick and m.quick_options},
     )
 
@@ -256,7 +256,7 @@ def _run_method(
                     time_limit=time_limit,
                     use_frames=use_frames,
                     record_first=keep_record is not None and i == 0,
-                    progress=_progress(ctx, f"{method.display} {kind}"),
+                    progress=progress_lines(ctx, f"{method.display} {kind}"),
                     on_episode=keep,
                     knowledge=ctx.knowledge,
                 )
@@ -292,7 +292,9 @@ def _jsonable(obj: Any) -> Any:
     return jsonable(obj)
 
 
-def _progress(ctx: BenchContext, what: str) -> Any:
+def progress_lines(ctx: BenchContext, what: str) -> Any:
+    """A :data:`dgse.search.campaign.Progress` printing one timestamped line per episode
+    (``  12:00:00 WHAT: DESC``), or None when the run shows no progress."""
     if not ctx.progress:
         return None
 

@@ -1045,6 +1045,88 @@ LOSSES: tuple[Callable[[_Writer], str], ...] = (
 )
 
 
+FIELD_KEY = ("group", "method")
+#: The columns of the ``field`` table in the summary: the suite's column, its heading here and
+#: its format; the paper's row reads the column of ``paper_dgse_s.csv`` named last (or none).
+FIELD_COLUMNS: tuple[tuple[str, str, Callable[[float], str], str | None], ...] = (
+    ("episodes", "episodes", _int, None),
+    ("SR [%]", "SR %", lambda x: f"{x:.0f}", "SR [%]"),
+    ("error [m]", "error m", _f2, "error [m]"),
+    ("ST mean [s]", "ST mean s", _sig3, "ST [s]"),
+    ("ST median [s]", "ST median s", _sig3, None),
+    ("TD [m]", "TD m", _sig3, "TD [m]"),
+    ("PER median", "PER median", _f2, "PER"),
+    ("step median [s]", "step median s", _seconds, "step [s]"),
+    ("shortest-path time [s]", "shortest-path time s", _sig3, None),
+)
+
+
+def _field_table(w: _Writer, suite: str) -> list[str]:
+    """The ``field`` suite's table (``field_search.csv``) with the paper's DGSE-S row beside it."""
+    rows = w.results.rows(suite, "field_search", FIELD_KEY)
+    if not rows:
+        raise _Missing(f"{suite}/field_search.csv: no rows")
+    plan = w.results.json(suite, "field_results.json")["plan"]
+    file = [f"{suite}/field_results.json"]
+    level = w.results.manifest(suite).get("knowledge", "map")
+    limit = w.value(plan["time_limit_s"], _int, files=file, how="plan.time_limit_s")
+    t = int(plan["trials"])
+    trials = "one trial" if t == 1 else f"{w.value(t, _int, files=file, how='plan.trials')} trials"
+
+    def cell(row: _Row, column: str, fmt: Callable[[float], str]) -> str:
+        v = row.get(column)
+        if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
+            return "n/a"
+        return w.cell(row, column, fmt)
+
+    head = ["group", "method", *(h for _, h, _, _ in FIELD_COLUMNS)]
+    lines = [
+        f"**Search with filament readings** (`{suite}`, knowledge `{level}`, {trials} per "
+        f"scenario, time limit {limit} s): SR counts the searches the method ended itself with its "
+        "estimate within 2 m; the shortest-path time is the least a search from the same starts takes "
+        "(the shortest path at the robot's speed plus one reading).",
+        "",
+        "| " + " | ".join(head) + " |",
+        "|" + "|".join("---" for _ in head) + "|",
+    ]
+    for row in rows:
+        cells = [str(row["group"]), str(row["method"])]
+        cells += [cell(row, column, fmt) for column, _, fmt, _ in FIELD_COLUMNS]
+        lines.append("| " + " | ".join(cells) + " |")
+    try:
+        paper = w.results.rows(suite, "paper_dgse_s", ("environment",))
+        mean = w.results.row(suite, "paper_dgse_s", ("environment",), environment="mean")
+        envs = [r for r in paper if r["environment"] != "mean"]
+        n = w.value(len(envs), _int, files=[f"{suite}/paper_dgse_s.csv"], how="environments")
+        cells = ["paper", f"DGSE-S (mean of its {n} GADEN environments)"]
+        cells += ["" if p is None else cell(mean, p, fmt) for _, _, fmt, p in FIELD_COLUMNS]
+        lines.append("| " + " | ".join(cells) + " |")
+        lines += [
+            "",
+            "The paper's row: the means over its environments of its DGSE-S table "
+            "(`tab:active_search_results`; PER: the mean of the in-domain values its appendix "
+            "lists), not run here.",
+        ]
+    except _Missing:
+        pass
+    return lines
+
+
+def _field(w: _Writer) -> list[str]:
+    """A section with the ``field`` table of every level it was run at ([] for none)."""
+    out: list[str] = []
+    for level in LEVELS:
+        suite = _suite_at("field", level)
+        if not w.results.has(suite):
+            continue
+        before = len(w.cited)
+        try:
+            out += [*_field_table(w, suite), ""]
+        except _Missing:
+            del w.cited[before:]
+    return ["## Search with filament readings", "", *out] if out else []
+
+
 def build_summary(directory: str | os.PathLike[str]) -> tuple[str, list[Cited]]:
     """The Markdown of the summary of the suites under ``directory`` and the numbers it cites."""
     w = _Writer(_Results(Path(directory)))
@@ -1060,6 +1142,7 @@ def build_summary(directory: str | os.PathLike[str]) -> tuple[str, list[Cited]]:
                 del w.cited[before:]  # a statement left out cites nothing
         if items:
             lines += [f"## {title}", ""] + [f"- {item}" for item in items] + [""]
+    lines += _field(w)
     return "\n".join(lines), w.cited
 
 

@@ -40,7 +40,7 @@ def bench_cmd(
         list[str],
         typer.Argument(
             metavar="SUITE...",
-            help="variants, gdm, gsl, search, samples, calibration, or all.",
+            help="variants, gdm, gsl, search, samples, calibration, field, or all.",
         ),
     ],
     out: Annotated[Path, typer.Option("--out", "-o", help="Output directory.")],

@@ -53,6 +53,12 @@ reaches made solid).  :func:`import_gaden_scenario` writes it as a layout file,
 or solves it with a physics engine into a case file (the inlet speed from the
 wind, the release rate given); both keep ``source_m``, ``start_m``,
 ``map_origin_m`` and a ``gaden`` record of the files read in their ``meta``.
+
+Writing: :func:`export_gaden_scenario` writes a case as such a folder (map, one outlet model
+per opening, configuration, simulation, wind CSV, optionally a scene), from the writers
+:func:`write_stl` and :func:`write_wind_csv` (:func:`read_stl`'s and :func:`read_wind_csv`'s
+formats) and :func:`~dgse.world.floorplan.export_ros_map`; importing it gives back the
+occupancy, the openings, the source and the wind.
 """
 
 from __future__ import annotations
@@ -74,10 +80,14 @@ from dgse.world.layout import INWARD_NORMAL, Layout, Opening
 
 __all__ = [
     "GadenScenario",
+    "box_triangles",
+    "export_gaden_scenario",
     "import_gaden_scenario",
     "load_gaden_scenario",
     "read_stl",
     "read_wind_csv",
+    "write_stl",
+    "write_wind_csv",
 ]
 
 _YAML_SUFFIXES = (".yaml", ".yml")
@@ -776,3 +786,143 @@ def import_gaden_scenario(
     [case] = solve_cases(sc.layout, v, [(sc.source, float(release_rate))], engine, name=sc.layout.name)
     case = case.with_meta(name=sc.layout.name, **sc.meta())
     return case.save(out), sc
+
+
+# -- writing --------------------------------------------------------------------------------------
+def box_triangles(x0: float, x1: float, y0: float, y1: float, z0: float, z1: float) -> np.ndarray:
+    """The 12 triangles ``(12, 3, 3)`` of the axis-aligned box ``[x0, x1] x [y0, y1] x [z0, z1]``, m."""
+    c = np.array([[x, y, z] for x in (x0, x1) for y in (y0, y1) for z in (z0, z1)], dtype=np.float64)
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    return np.stack([c[[a, b, d]] for a, b, _, d in quads] + [c[[b, e, d]] for _, b, e, d in quads])
+
+
+def write_stl(path: str | Path, triangles: np.ndarray, *, binary: bool = False, name: str = "model") -> Path:
+    """Write ``triangles`` ``(n, 3, 3)`` (m) as an STL model, ASCII or ``binary``; :func:`read_stl`
+    reads it back (a binary file's header starts with ``solid`` too, as some exporters write it)."""
+    from dgse.files import write_bytes, write_text
+
+    tris = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    if binary:
+        records = np.zeros(tris.shape[0], dtype=_BINARY_STL)
+        records["v"] = tris
+        header = f"solid {name}".encode("ascii").ljust(80, b" ")[:80]
+        return write_bytes(path, header + np.uint32(tris.shape[0]).tobytes() + records.tobytes())
+    lines = [f"solid {name}"]
+    for t in tris:
+        lines += ["  facet normal 0 0 0", "    outer loop"]
+        lines += [f"      vertex {v[0]:.6f} {v[1]:.6f} {v[2]:.6f}" for v in t]
+        lines += ["    endloop", "  endfacet"]
+    return write_text(path, "\n".join([*lines, f"endsolid {name}", ""]))
+
+
+def write_wind_csv(path: str | Path, points: np.ndarray, wind: np.ndarray) -> Path:
+    """Write points ``(n, 3)`` (m) and winds ``(n, 3)`` (m/s) as ParaView's cell-centre CSV export
+    (header ``"U:0","U:1","U:2","Points:0","Points:1","Points:2"``); :func:`read_wind_csv` reads it."""
+    import io
+
+    from dgse.files import write_text
+
+    pts, u = np.asarray(points, dtype=np.float64), np.asarray(wind, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3 or u.shape != pts.shape:
+        raise InputDataError(f"points and winds must both be (n, 3), got {pts.shape} and {u.shape}")
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    buf = io.StringIO()
+    header = '"U:0","U:1","U:2","Points:0","Points:1","Points:2"'
+    np.savetxt(buf, np.column_stack([u, pts]), delimiter=",", header=header, comments="", fmt="%.6f")
+    return write_text(path, buf.getvalue())
+
+
+#: Where :func:`export_gaden_scenario` writes the parts of a folder (GADEN's ``test_env`` layout).
+EXPORT_CONFIG = Path("environment_configurations") / "config1"
+EXPORT_SIMULATION = EXPORT_CONFIG / "simulations" / "sim1" / "sim.yaml"
+EXPORT_WIND = Path("wind_simulations") / "steady"
+
+
+def export_gaden_scenario(
+    case: Any,
+    directory: str | Path,
+    *,
+    origin: tuple[float, float] = (0.0, 0.0),
+    source_z: float = 0.5,
+    wind: bool = True,
+    start: tuple[float, float] | None = None,
+) -> Path:
+    """Write ``case`` (a :class:`~dgse.world.case.Case`) as a GADEN scenario folder that
+    :func:`load_gaden_scenario` reads back; return the folder.
+
+    The folder holds (positions in the map frame, where the map's lower-left corner lies at
+    ``origin``; parent folders are made):
+
+    * ``occupancy.yaml`` + ``occupancy.pgm``: the occupancy, one pixel per cell
+      (:func:`~dgse.world.floorplan.export_ros_map`);
+    * ``cad_models/opening_<k>.stl``: one box per inlet and outlet (ASCII STL), one cell deep at
+      the map's edge and 2 m high, listed under ``outlets_models`` of
+      ``environment_configurations/config1/config.yaml`` (GADEN names every opening an outlet:
+      the importer tells inlets from outlets by the wind, or by name without one);
+    * ``environment_configurations/config1/simulations/sim1/sim.yaml``: the source
+      (``source: position: [x, y, source_z]``) and the case's release rate;
+    * with ``wind``, ``wind_simulations/steady/wind_at_cell_centers_0.csv``: the case's wind at
+      the free cells' centres at height ``source_z`` (ParaView's CSV, :func:`write_wind_csv`),
+      named by ``unprocessed_wind_files`` of the configuration;
+    * with ``start`` (grid frame, m), ``scene.yaml``: one robot there (BasicSim's scene).
+
+    Raises:
+        InputDataError: a case without openings in its ``meta``.
+    """
+    from dgse.files import write_text
+    from dgse.world.floorplan import export_ros_map
+
+    d = Path(directory)
+    layout = case.layout
+    g = layout.grid
+    res = g.resolution
+    ox, oy = (float(v) for v in origin)
+    export_ros_map(layout, d / "occupancy.yaml", origin=(ox, oy))
+    (d / EXPORT_CONFIG).mkdir(parents=True, exist_ok=True)
+    (d / EXPORT_SIMULATION).parent.mkdir(parents=True, exist_ok=True)
+    # an opening's box: one cell deep inside the map at its side, a quarter cell short of its ends
+    # along the side, so that its footprint is nearest to its own side even at a corner
+    inset = 0.25 * res
+    models = []
+    for k, o in enumerate((*layout.inlets, *layout.outlets)):
+        a, b = o.start_m + inset, o.end_m - inset
+        x0, x1, y0, y1 = {
+            "west": (0.0, res, a, b),
+            "east": (g.width_m - res, g.width_m, a, b),
+            "south": (a, b, 0.0, res),
+            "north": (a, b, g.height_m - res, g.height_m),
+        }[o.side]
+        name = f"opening_{k}.stl"
+        write_stl(d / "cad_models" / name, box_triangles(x0 + ox, x1 + ox, y0 + oy, y1 + oy, 0.0, 2.0))
+        models.append(f"../../cad_models/{name}")
+    config = ["outlets_models:", *(f"  - {m}" for m in models)]
+    if wind:
+        config.append(f"unprocessed_wind_files: ../../{EXPORT_WIND.as_posix()}/wind_at_cell_centers")
+    config.append(f"cell_size: {res!r}")
+    write_text(d / EXPORT_CONFIG / "config.yaml", "\n".join(config) + "\n")
+    sx, sy = (float(v) for v in case.source)
+    sim = [
+        "source:",
+        "  sourceType: point",
+        f"  position: [{sx + ox!r}, {sy + oy!r}, {float(source_z)!r}]",
+        "  gasType: 0",
+    ]
+    if "release_rate_gps" in case.meta:
+        sim.append(f"releaseRate: {float(case.meta['release_rate_gps'])!r}")
+    write_text(d / EXPORT_SIMULATION, "\n".join(sim) + "\n")
+    if wind:
+        i, j = np.nonzero(layout.free)
+        pts = np.column_stack([(j + 0.5) * res + ox, (i + 0.5) * res + oy, np.full(i.size, float(source_z))])
+        u = np.column_stack([case.wind[0, i, j], case.wind[1, i, j], np.zeros(i.size)])
+        write_wind_csv(d / EXPORT_WIND / "wind_at_cell_centers_0.csv", pts, u)
+    if start is not None:
+        x, y = (float(v) for v in start)
+        scene = [
+            'map: "occupancy.yaml"',
+            "robots:",
+            '  - name: "robot"',
+            f"    position: [{x + ox!r}, {y + oy!r}, 0.0]",
+        ]
+        write_text(d / "scene.yaml", "\n".join(scene) + "\n")
+    return d

@@ -567,15 +567,18 @@ def _opening_args(layout: Layout) -> list[str]:
     ]
 
 
-def export_ros_map(layout: Layout, path: str | Path) -> tuple[Path, Path]:
+def export_ros_map(
+    layout: Layout, path: str | Path, origin: tuple[float, float] = (0.0, 0.0)
+) -> tuple[Path, Path]:
     """Write ``layout``'s occupancy as a ROS map_server map: ``<stem>.yaml`` and ``<stem>.pgm``.
 
     The image has one pixel per cell (the YAML's ``resolution`` is the layout's,
     in m), image row 0 the layout's top (north) row; free cells are 254 and solid
     ones 0 (``mode: trinary``, ``negate: 0``, ``occupied_thresh: 0.65``,
-    ``free_thresh: 0.196``); ``origin: [0.0, 0.0, 0.0]`` puts the map frame's
-    origin at the layout's lower-left corner.  :func:`load_ros_map` at the
-    layout's resolution gives back the occupancy cell for cell.
+    ``free_thresh: 0.196``); the YAML's ``origin`` is ``[x, y, 0.0]`` of ``origin``, the
+    map-frame position of the layout's lower-left corner (default: the map frame's origin
+    there).  :func:`load_ros_map` at the layout's resolution gives back the occupancy cell
+    for cell.
 
     The format has no place for inlets and outlets: they are written as YAML
     comments (``# inlets: west 1.2 2.3; ...``), which readers ignore; give them
@@ -586,6 +589,7 @@ def export_ros_map(layout: Layout, path: str | Path) -> tuple[Path, Path]:
         layout: the layout to write.
         path: the YAML path (``.yaml``/``.yml``), the image path (``.pgm``) or
             a stem; the image is written beside the YAML and named by it.
+        origin: map-frame ``(x, y)`` of the layout's lower-left corner, m.
 
     Returns:
         ``(yaml_path, pgm_path)``.
@@ -605,7 +609,7 @@ def export_ros_map(layout: Layout, path: str | Path) -> tuple[Path, Path]:
         *_opening_args(layout),
         f"image: {pgm_path.name}",
         f"resolution: {float(layout.resolution)!r}",
-        "origin: [0.0, 0.0, 0.0]",
+        f"origin: [{float(origin[0])!r}, {float(origin[1])!r}, 0.0]",
         "negate: 0",
         "occupied_thresh: 0.65",
         "free_thresh: 0.196",
