@@ -45,12 +45,16 @@ class SearchProtocol:
         time_limit: a search's time limit, s.
         min_start_distance: the least path length from a random start to the source, m (a start
             inside the 2 m success radius would make a trial trivial).
+        sample_rate_hz: readings per second of travel while the robot drives from one goal
+            to the next (:class:`dgse.search.robot.Robot`), besides the reading at each goal;
+            None: readings only at the goals, as the paper's protocol.
     """
 
     speed: float = 0.5
     dwell: float = 3.0
     time_limit: float = 2000.0
     min_start_distance: float = 2.0
+    sample_rate_hz: float | None = None
 
 
 #: The protocol of every search, benchmark and command.

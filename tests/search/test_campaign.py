@@ -239,3 +239,21 @@ def test_fixed_start_from_the_argument_or_the_case_file(tmp_path):
     assert firsts["b"] == [[0, 29], [0, 29]]  # the case file's start
     assert len({tuple(c) for c in firsts["a"]}) == 2  # drawn, as without a start
     assert "start_m" not in data["settings"]
+
+
+def test_sample_rate_is_passed_recorded_and_checked(tmp_path):
+    d = _cases(tmp_path / "cases")
+    book = tmp_path / "out.journal.jsonl"
+    plain = _campaign(d / "a.npz", trials=1, journal=book)
+    moving = _campaign(d / "a.npz", trials=1, sample_rate_hz=2.0)
+    assert "sample_rate_hz" not in plain["settings"] and moving["settings"]["sample_rate_hz"] == 2.0
+    [p], [m] = plain["per_case"][0]["trials"], moving["per_case"][0]["trials"]
+    assert p["start_cell"] == m["start_cell"]  # the same trial seed
+    assert p["n_readings"] == p["n_steps"] and m["n_readings"] > m["n_steps"]
+    assert m["metrics"]["n_readings"] == m["n_readings"] and m["settings"]["sample_rate_hz"] == 2.0
+    assert moving["aggregate"]["n_readings_mean"] == m["n_readings"]
+    # another rate is another run: the journal of the plain one is refused
+    with pytest.raises(InputDataError, match="sample_rate_hz"):
+        _campaign(d / "a.npz", trials=1, journal=book, sample_rate_hz=2.0)
+    with pytest.raises(InputDataError, match="sample_rate_hz must be a positive number"):
+        _campaign(d, sample_rate_hz=-1.0)

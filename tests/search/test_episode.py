@@ -9,10 +9,12 @@ import numpy as np
 import pytest
 import torch
 
+from dgse.errors import InputDataError
 from dgse.estimators.dgse import DGSEEstimator
 from dgse.planning.paths import graph_for
-from dgse.planning.planners import Deadline, StopRule, UtilityPlanner
+from dgse.planning.planners import Deadline, PlannerBase, StopRule, UtilityPlanner
 from dgse.search.episode import run_episode
+from dgse.search.metrics import episode_metrics
 from dgse.sensing.noise import NoiseParams
 from tests.models.helpers import tiny_model
 from tests.search import PeakEstimator, UniformEstimator, corridor_case, solved_two_rooms
@@ -179,3 +181,99 @@ def test_dgse_network_in_the_loop():
     s = r.steps[0]
     assert s.wind_mean.shape == (2, 20, 30) and s.log_conc_mean.shape == (20, 30)
     assert (case.occupancy[r.trajectory_cells[:, 0], r.trajectory_cells[:, 1]] == 0).all()
+
+
+# -- readings on the way (sample_rate_hz) ----------------------------------------------------------
+class Scripted(PlannerBase):
+    """Goes to ``goals`` in turn, never stops by itself; records what it is told each decision."""
+
+    name = "scripted"
+
+    def __init__(self, goals):
+        self.goals, self.seen = list(goals), []
+
+    def reset(self):
+        self.left, self.seen = list(self.goals), []
+
+    def should_stop(self, belief, history):
+        return False
+
+    def next_goal(self, belief, robot_cell, distances, history):
+        self.seen.append((history.step, len(history.observations), history.time_s))
+        return self.left.pop(0) if self.left else None
+
+
+def test_without_a_sample_rate_the_episode_is_the_papers():
+    case = solved_two_rooms()
+    runs = [
+        run_episode(
+            case,
+            PeakEstimator(adaptive=True),
+            UtilityPlanner(stop=StopRule(eta=0.2)),
+            rng=0,
+            time_limit=60.0,
+            **kw,
+        )
+        for kw in ({}, {"sample_rate_hz": None})
+    ]
+    a, b = runs
+    np.testing.assert_array_equal(a.trajectory_cells, b.trajectory_cells)
+    np.testing.assert_array_equal(a.trajectory_times, b.trajectory_times)
+    assert [s.goal for s in a.steps] == [s.goal for s in b.steps] and a.n_steps > 2
+    assert [(s.cell, s.gas, s.wind, s.time_s) for s in a.steps] == [
+        (s.cell, s.gas, s.wind, s.time_s) for s in b.steps
+    ]
+    np.testing.assert_array_equal(a.readings.gas, b.readings.gas)
+    assert a.n_readings == a.n_steps == len(a.readings) and all(s.n_readings == 1 for s in a.steps)
+    assert "sample_rate_hz" not in a.settings and a.to_dict()["n_readings"] == a.n_steps
+
+
+def test_readings_on_the_way_go_into_the_estimate_and_the_planner_decides_at_goals():
+    """There and back along a 2 m corridor at 0.5 m/s, 2 Hz: 7 readings on each 4 s drive."""
+    case = corridor_case()
+    est, planner = PeakEstimator(), Scripted([(5, 20), (5, 0)])
+    kw = {"start": (5, 0), "rng": 0, "noise_params": NoiseParams.zero(), "time_limit": 100.0}
+    r = run_episode(case, est, planner, sample_rate_hz=2.0, **kw)
+    assert r.reason == "planner_stop" and r.n_steps == 3 and est.calls == 3  # one estimate per step
+    assert [s.n_readings for s in r.steps] == [1, 8, 8] and r.n_readings == 17 == len(r.readings)
+    way = np.arange(1, 8) * 0.5
+    np.testing.assert_allclose(r.readings.times, [3.0, *(3.0 + way), 10.0, *(10.0 + way), 17.0])
+    there = [0, 3, 5, 8, 10, 13, 15, 18, 20]
+    np.testing.assert_array_equal(r.readings.cells[:, 1], [*there, *(20 - np.array(there[1:]))])
+    np.testing.assert_allclose(
+        r.readings.gas, case.concentration[r.readings.cells[:, 0], r.readings.cells[:, 1]]
+    )
+    # the planner is asked at the goals only, told every reading so far
+    assert [(n, m) for n, m, _ in planner.seen] == [(1, 1), (9, 9), (17, 17)]
+    assert [t for _, _, t in planner.seen] == pytest.approx([3.0, 10.0, 17.0])
+    # sampling takes no time: the clock and distance of the plain episode
+    plain = run_episode(case, PeakEstimator(), Scripted([(5, 20), (5, 0)]), **kw)
+    assert r.search_time_s == plain.search_time_s == pytest.approx(3 * 3.0 + 4.0 / 0.5)
+    assert r.distance_m == plain.distance_m == pytest.approx(4.0)
+    np.testing.assert_array_equal(r.trajectory_cells, plain.trajectory_cells)
+    assert [s.time_s for s in r.steps] == [s.time_s for s in plain.steps]
+    assert r.settings["sample_rate_hz"] == 2.0 and "sample_rate_hz" not in plain.settings
+    m = episode_metrics(r)
+    assert m["n_steps"] == 3 and m["n_readings"] == 17 and episode_metrics(plain)["n_readings"] == 3
+    assert r.to_dict(steps=True)["steps"][1]["n_readings"] == 8
+    # a drive the time limit cuts short: its readings reach no estimate
+    cut = run_episode(
+        case, PeakEstimator(), Scripted([(5, 20), (5, 0)]), sample_rate_hz=2.0, **{**kw, "time_limit": 12.0}
+    )
+    assert cut.reason == "time_limit" and cut.n_steps == 2 and cut.n_readings == 9 == len(cut.readings)
+
+
+def test_readings_on_the_way_with_the_utility_planner_and_bad_rates():
+    case = corridor_case()
+    kw = {"start": (5, 2), "rng": 1, "time_limit": 200.0}
+    r = run_episode(
+        case, PeakEstimator(adaptive=True), UtilityPlanner(stop=StopRule(eta=0.4)), sample_rate_hz=1.0, **kw
+    )
+    assert r.n_readings > r.n_steps and r.readings.times.tolist() == sorted(r.readings.times.tolist())
+    assert r.search_time_s == pytest.approx(r.n_steps * 3.0 + r.distance_m / 0.5)
+    # every reading on the way lies on the trajectory, between the goals it was taken between
+    on_path = {tuple(c) for c in r.trajectory_cells.tolist()}
+    assert all(tuple(c) in on_path for c in r.readings.cells.tolist())
+    for bad in (0.0, -2.0, math.nan):
+        with pytest.raises(InputDataError, match="sample_rate_hz must be a positive number"):
+            run_episode(case, UniformEstimator(), UtilityPlanner(), sample_rate_hz=bad, **kw)

@@ -96,6 +96,8 @@ def test_trial_seeds_are_independent():
         (["{cases}", "--method", "nope"], "unknown estimator"),
         (["{cases}", "--planner", "nope"], "unknown planner"),
         (["{cases}", "--trials", "0"], "--trials"),
+        (["{cases}", "--sample-rate", "0"], "--sample-rate must be a positive number"),
+        (["{cases}", "--sample-rate", "nan"], "--sample-rate"),
         (["{cases}", "-O", "oops"], "KEY=VALUE"),
         (["{layout}"], "layout file"),
     ],
@@ -165,6 +167,15 @@ def test_param_reaches_the_estimator_and_planner_has_no_short_form(peak, tmp_pat
     assert code == 0, err
     planner_options = json.loads(dotted.read_text())["settings"]["planner_options"]
     assert planner_options == {"stop.eta": 0.4, "stop.mass_radius_m": 0.5, "weights.w_d": 0.2}
+    # --sample-rate: readings on the way, recorded in the settings and in each trial's counts
+    moving = tmp_path / "m.json"
+    code, _, err = _run(capsys, cases, *PEAK, "--sample-rate", "2", "--json", moving, "--no-progress")
+    assert code == 0, err
+    data = json.loads(moving.read_text())
+    assert data["settings"]["sample_rate_hz"] == 2.0
+    trials = [t for c in data["per_case"] for t in c["trials"]]
+    assert sum(t["n_readings"] for t in trials) > sum(t["n_steps"] for t in trials)
+    assert "sample_rate_hz" not in json.loads(dotted.read_text())["settings"]
     # -O/--option: the old spelling still works (hidden from --help)
     other = tmp_path / "o.json"
     code, _, err = _run(capsys, cases, *PEAK, "-O", "sigma=0.2", "--json", other, "--no-progress")

@@ -398,6 +398,14 @@ MinStartDistanceOption = Annotated[
 FramesOption = Annotated[
     bool, typer.Option("--frames/--steady", help="Read a case's time-varying frames when it has them.")
 ]
+SampleRateOption = Annotated[
+    float | None,
+    typer.Option(
+        "--sample-rate",
+        metavar="HZ",
+        help="Also read every 1/HZ s while driving to a goal (default: only at the goals, as the paper).",
+    ),
+]
 
 
 def option_bundle(name: str, bundle: Callable[..., Any]) -> Callable[[F], F]:

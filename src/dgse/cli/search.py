@@ -20,6 +20,10 @@ Seeds: trial ``r`` of the case file ``<stem>.npz`` uses
 ``SeedSequence([seed, crc32(stem), r])``, so the start cells (and sensor
 noise) do not depend on the method, the planner or the other cases.
 
+``--sample-rate HZ``: the robot also reads every ``1/HZ`` seconds while it drives to a
+goal; those readings are estimated with the goal's, and the planner decides at the goals
+(:mod:`dgse.search.episode`; recorded as ``sample_rate_hz`` in ``settings``).
+
 ``--animate DIR`` also writes ``DIR/<stem>.gif`` for trial 0 of every case:
 the trajectory, measurements and the predicted wind, concentration and
 source posterior over the steps (:mod:`dgse.viz.search`).
@@ -71,6 +75,7 @@ from dgse.cli.common import (
     MethodOption,
     MinStartDistanceOption,
     ParamOption,
+    SampleRateOption,
     SpeedOption,
     ThreadsOption,
     TimeLimitOption,
@@ -157,6 +162,7 @@ def _episode_line(stem: str, trial: int, trials: int, result: EpisodeResult) -> 
     return (
         f"{stem} trial {trial + 1}/{trials}: {outcome} ({result.reason}), error {result.error_m:.2f} m, "
         f"{result.search_time_s:.0f} s, {result.distance_m:.1f} m, {len(result.steps)} measurements"
+        + (f" ({result.n_readings} readings)" if result.n_readings != len(result.steps) else "")
     )
 
 
@@ -186,6 +192,7 @@ def search_cmd(
     frames: FramesOption = True,
     speed: SpeedOption = PROTOCOL.speed,
     dwell: DwellOption = PROTOCOL.dwell,
+    sample_rate_hz: SampleRateOption = PROTOCOL.sample_rate_hz,
     min_start_distance: MinStartDistanceOption = PROTOCOL.min_start_distance,
     start: Annotated[
         tuple[float, float] | None,
@@ -345,6 +352,7 @@ def search_cmd(
                 restart=restart,
                 knowledge=level,
                 start_m=start,
+                sample_rate_hz=sample_rate_hz,
             )
         finally:
             bar.stop()

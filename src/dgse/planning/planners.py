@@ -107,7 +107,8 @@ class SearchHistory:
         trajectory: ``int64 (n, 2)`` every cell the robot entered, from the start.
         time_s: the robot's clock, s.
         distance_m: distance travelled so far, m.
-        step: the number of measurements so far (1 at the first decision).
+        step: the number of readings so far (1 at the first decision; with readings on the
+            way to the goals, :mod:`dgse.search.episode`, those count too).
         rng: the planner's random generator (seeded per episode).
         time_limit_s: the search's time limit, s (``inf``: none).
     """

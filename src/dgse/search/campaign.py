@@ -4,7 +4,9 @@
 on every case with one estimator and one planner and returns a JSON-ready
 dict (what ``dgse search --json`` writes):
 
-* ``settings``: method, model, planner, options, trials, seed, time limit, ...;
+* ``settings``: method, model, planner, options, trials, seed, time limit, ...
+  (``sample_rate_hz`` only when the robot reads on the way, so a journal of the paper's
+  protocol written before that option existed still resumes);
 * ``aggregate``: :func:`~dgse.search.metrics.aggregate` over all trials of all cases;
 * ``per_case``: one entry per case: ``case``, ``file``, ``metrics`` (the
   aggregate of its trials) and ``trials`` (each episode's summary,
@@ -227,6 +229,7 @@ def run_trials(
     restart: bool = False,
     knowledge: str = DEFAULT_LEVEL,
     start_m: Sequence[float] | None = None,
+    sample_rate_hz: float | None = PROTOCOL.sample_rate_hz,
 ) -> dict[str, Any]:
     """Run ``trials`` search episodes on every case and return the metrics (module docstring).
 
@@ -266,6 +269,8 @@ def run_trials(
             (:mod:`dgse.belief.knowledge`); recorded in ``settings``.
         start_m: the start ``(x, y)`` in m of every trial on every case (:func:`fixed_start`;
             recorded in ``settings``); None: a case file's ``meta["start_m"]``, else drawn.
+        sample_rate_hz: readings per second of travel on the way to each goal
+            (:func:`~dgse.search.episode.run_episode`'s; recorded in ``settings`` when set).
 
     Returns:
         ``{"settings", "aggregate", "per_case"}``, JSON-ready.
@@ -280,8 +285,10 @@ def run_trials(
     from dgse.planning.planners import get_planner
     from dgse.search.episode import run_episode
     from dgse.search.metrics import aggregate, episode_metrics
+    from dgse.search.robot import check_sample_rate
 
     _check_settings(trials, time_limit, speed, dwell, min_start_distance)
+    sample_rate_hz = check_sample_rate(sample_rate_hz)
     level = check_level(knowledge)
     pairs = load_cases(cases) if isinstance(cases, str | os.PathLike) else [(Path(p), c) for p, c in cases]
     if not pairs:
@@ -312,6 +319,8 @@ def run_trials(
     )
     if start_m is not None:
         settings["start_m"] = [float(v) for v in start_m]
+    if sample_rate_hz is not None:
+        settings["sample_rate_hz"] = sample_rate_hz
     starts = {path: fixed_start(case, start_m, str(path)) for path, case in pairs}
     identity = {**{k: v for k, v in settings.items() if k != "trials"}, "steps": bool(steps)}
     book = None if journal is None else Journal(journal, "search", identity, restart=restart, unit="episode")
@@ -357,6 +366,7 @@ def run_trials(
                         min_start_distance=min_start_distance,
                         on_step=step_cb,
                         knowledge=level,
+                        sample_rate_hz=sample_rate_hz,
                     )
                     row = json_safe(
                         {"trial": r, **result.to_dict(steps=steps), "metrics": episode_metrics(result)}

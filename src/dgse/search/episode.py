@@ -14,6 +14,18 @@ until the planner stops it or the clock reaches ``time_limit``.  A
 measurement is started only if its dwell ends within the limit.  When
 time runs out during a move, the robot stops where it is at the limit.
 
+Readings on the way (``sample_rate_hz``, off by default: the paper's protocol reads only at
+the goals): the robot also reads every ``1 / sample_rate_hz`` seconds of travel while it
+drives to a goal (:class:`~dgse.search.robot.Robot`: at the cell it is in then, at that
+time, with the same noise and frames; sampling takes no time).  The planner still decides
+only at the goals: at each goal, after the dwell reading, the readings of the drive and the
+goal's go into the estimator together (one estimate), then the stop test and the next goal
+(one :func:`search_step`).  So a *step* is one estimate and one decision, as without them;
+:attr:`StepRecord.n_readings` says how many readings it added, and the planner's
+``history.step`` counts readings (``stop.min_observations`` waits for that many readings,
+on the way or at goals).  Readings of a drive the time limit cuts short are used by no
+estimate (the search ended before it could decide again).
+
 The result (:class:`EpisodeResult`) holds the final estimate, the belief's
 probability-weighted mean source position (paper Sec. III-D) of the last
 belief (at the timeout for failed searches; the centroid of the free cells
@@ -65,7 +77,7 @@ from dgse.planning.planners import (
     point_estimates,
 )
 from dgse.presets import PROTOCOL
-from dgse.search.robot import Robot, random_start_cell
+from dgse.search.robot import Robot, check_sample_rate, random_start_cell
 from dgse.sensing.noise import NoiseModel, NoiseParams
 from dgse.sensing.sensors import Observations
 from dgse.world.case import Case
@@ -88,20 +100,23 @@ REASONS = ("converged", "deadline", "planner_stop", "time_limit")
 
 @dataclass(eq=False)
 class StepRecord:
-    """One search step: a measurement, the belief after it, the decision.
+    """One search step: a measurement at a goal, the belief after it, the decision.
 
     Attributes:
-        step: 1-based step index ``k`` (one per measurement location).
+        step: 1-based step index ``k`` (one per measurement location: one estimate and one
+            decision).
         cell: ``(i, j)`` where the robot measured.
-        time_s: time of the reading (end of the dwell), s.
-        gas: the gas reading, ppm.
-        wind: the wind reading ``(u_x, u_y)``, m/s.
+        time_s: time of the goal's reading (end of the dwell), s.
+        gas: the goal's gas reading, ppm.
+        wind: the goal's wind reading ``(u_x, u_y)``, m/s.
         entropy: ``H(pi_s)`` of the belief, nats.
         normalized_entropy: ``H(pi_s) / log N``.
         estimate_xy: the belief's probability-weighted mean source position, m.
         error_m: distance from ``estimate_xy`` to the true source, m.
         preprocessing_s, inference_s, planning_s: computation time of this step, s.
         goal: the chosen next cell, or None (the search ended at this step).
+        n_readings: the readings this step's estimate added: the goal's, and with readings on
+            the way (``sample_rate_hz``) those of the drive to it.
         held: the planner's stop test passed here but the stop waited for readings that
             confirm the posterior's mode (``StopRule.confirm_radius_m``) or a flow that explains
             the wind (``StopRule.max_wind_misfit``).
@@ -124,6 +139,7 @@ class StepRecord:
     planning_s: float = 0.0
     goal: Cell | None = None
     held: bool = False
+    n_readings: int = 1
     source_probs: np.ndarray | None = field(default=None, repr=False)
     wind_mean: np.ndarray | None = field(default=None, repr=False)
     log_conc_mean: np.ndarray | None = field(default=None, repr=False)
@@ -151,6 +167,7 @@ class StepRecord:
             "compute_s": self.compute_s,
             "goal": None if self.goal is None else list(self.goal),
             "held": self.held,
+            "n_readings": self.n_readings,
         }
 
 
@@ -182,7 +199,9 @@ class EpisodeResult:
         trajectory_times: ``float64 (n,)`` arrival times, s.
         record_factor: block size of the recorded maps (1: full resolution).
         resolution: the map's cell size, m.
-        settings: the episode's settings (speed, dwell, flags, noise parameters, ...).
+        settings: the episode's settings (speed, dwell, flags, noise parameters, and
+            ``sample_rate_hz`` when the robot read on the way).
+        readings: every reading the estimates used, in order (the goals' and those on the way).
         end_errors_m: the error, m, of each point estimate of the final belief
             (:func:`~dgse.planning.planners.point_estimates`: mean, mode, disks), whatever the
             episode declared; empty when it ended before any reading.
@@ -208,6 +227,7 @@ class EpisodeResult:
     resolution: float = 0.1
     settings: dict[str, Any] = field(default_factory=dict)
     end_errors_m: dict[str, float] = field(default_factory=dict)
+    readings: Observations = field(default_factory=Observations.empty, repr=False)
 
     def __post_init__(self) -> None:
         if self.reason not in REASONS:
@@ -220,8 +240,13 @@ class EpisodeResult:
 
     @property
     def n_steps(self) -> int:
-        """Number of measurements (search steps)."""
+        """Number of search steps: measurement locations, each one estimate and one decision."""
         return len(self.steps)
+
+    @property
+    def n_readings(self) -> int:
+        """Number of readings the estimates used (:attr:`n_steps` without readings on the way)."""
+        return sum(s.n_readings for s in self.steps)
 
     @property
     def measurement_cells(self) -> np.ndarray:
@@ -251,6 +276,7 @@ class EpisodeResult:
             "shortest_path_m": self.shortest_path_m if math.isfinite(self.shortest_path_m) else None,
             "time_limit_s": self.time_limit_s,
             "n_steps": self.n_steps,
+            "n_readings": self.n_readings,
             "held_stops": sum(s.held for s in self.steps),
             # the error had the search stopped at its first held stop (without the confirmation)
             "first_held_error_m": next((s.error_m for s in self.steps if s.held), None),
@@ -352,6 +378,8 @@ def search_step(
     to ``stream``, sets ``history.observations`` and asks ``planner``.
 
     Args:
+        reading: the new readings: one, or those since the last decision (the readings on
+            the way to the goal, then the goal's), all estimated at once.
         excluded: cells the goal may not be (e.g. goals a navigation stack refused): they
             count as unreachable for the planner.
     """
@@ -408,6 +436,7 @@ def run_episode(
     record_max_cells: int = 10_000,
     on_step: StepCallback | None = None,
     knowledge: str = DEFAULT_LEVEL,
+    sample_rate_hz: float | None = PROTOCOL.sample_rate_hz,
 ) -> EpisodeResult:
     """Run one active search on ``case`` (see the module docstring).
 
@@ -434,11 +463,15 @@ def run_episode(
             decision (before the move); see :data:`StepCallback`.
         knowledge: what the estimator is told about ``case`` besides its readings
             (:mod:`dgse.belief.knowledge`: ``"map"``, ``"openings"``, ``"wind"``).
+        sample_rate_hz: readings per second of travel on the way to each goal, estimated
+            with the goal's reading, the planner deciding at the goal (module docstring);
+            None: readings only at the goals (the paper's protocol).
 
     Returns:
         The :class:`EpisodeResult`.
 
     Raises:
+        InputDataError: a bad time limit, dwell, ``record_max_cells`` or ``sample_rate_hz``.
         UnsupportedError: a knowledge level the estimator does not work at.
     """
     estimator.set_knowledge(Knowledge.from_case(case, knowledge))
@@ -449,6 +482,7 @@ def run_episode(
         raise InputDataError(f"dwell must be a positive number of seconds, got {dwell}")
     if record_max_cells < 1:
         raise InputDataError(f"record_max_cells must be >= 1, got {record_max_cells}")
+    sample_rate_hz = check_sample_rate(sample_rate_hz)
     start_rng, sensor_rng, planner_rng = episode_streams(rng)
     graph = graph_for(case.occupancy, case.resolution, connectivity)
     source_cell = case.source_cell
@@ -464,6 +498,7 @@ def run_episode(
         noise_params=noise_params,
         use_frames=use_frames,
         graph=graph,
+        sample_rate_hz=sample_rate_hz,
     )
     planner.reset()
     stream = StreamingEstimator(estimator, case.occupancy, case.resolution)
@@ -474,13 +509,16 @@ def run_episode(
     belief: Belief | None = None
     reason = "time_limit"
 
+    used = 0  # the robot's readings the estimates have had
     while robot.clock + robot.dwell <= time_limit:
         obs = robot.sense()
+        new = robot.readings_since(used) if sample_rate_hz is not None else obs
+        used += len(new)
         history.trajectory = robot.trajectory_cells
         history.time_s = robot.clock
         history.distance_m = robot.distance_m
-        history.step = len(steps) + 1
-        decision = search_step(stream, planner, graph, history, obs, robot.cell)
+        history.step = used
+        decision = search_step(stream, planner, graph, history, new, robot.cell)
         belief, goal = decision.belief, decision.goal
 
         est = belief.source_estimate()
@@ -499,6 +537,7 @@ def run_episode(
             planning_s=decision.planning_s,
             goal=goal,
             held=decision.held,
+            n_readings=len(new),
         )
         if record:
             rec.source_probs = _block_reduce(belief.source_probs, factor, "sum")
@@ -556,6 +595,8 @@ def run_episode(
             "use_frames": bool(use_frames and case.frames is not None),
             "connectivity": graph.connectivity,
             "noise": robot.noise_params.to_dict(),
+            **({} if sample_rate_hz is None else {"sample_rate_hz": sample_rate_hz}),
         },
         end_errors_m=end_errors,
+        readings=stream.observations,
     )

@@ -14,7 +14,10 @@ Per episode (:func:`episode_metrics`):
 * ``per``: path efficiency ratio ``TD / d_shortest``, with ``d_shortest`` the
   shortest obstacle-free path from the start to the source cell (NaN when
   that is 0 or not finite);
-* ``n_steps``: number of measurements.
+* ``n_steps``: number of search steps: measurement locations (goals), each one estimate
+  and one decision, so ``step_seconds`` is the time of one estimate and decision;
+* ``n_readings``: the readings the estimates used (``n_steps`` unless the robot read on
+  the way to the goals, :mod:`dgse.search.episode`).
 
 :func:`aggregate` gives, over a set of episodes, ``n_trials``,
 ``success_rate`` (a fraction in [0, 1]; the paper prints percent) and for
@@ -58,6 +61,7 @@ METRICS = (
     "planning_s",
     "per",
     "n_steps",
+    "n_readings",
 )
 
 
@@ -97,6 +101,7 @@ def episode_metrics(result: EpisodeResult, radius_m: float = SUCCESS_RADIUS_M) -
         "planning_s": _mean([s.planning_s for s in result.steps]),
         "per": path_efficiency_ratio(result.distance_m, result.shortest_path_m),
         "n_steps": result.n_steps,
+        "n_readings": result.n_readings,
     }
 
 

@@ -11,6 +11,15 @@ at a constant ``speed``.  It keeps one clock (s) that advances with
 * waiting: :meth:`Robot.wait` (e.g. the measured computation time of a
   search step, when the search loop counts it).
 
+Readings on the way (``sample_rate_hz``, off by default as in the paper's protocol): while
+:meth:`Robot.move_to` drives, the robot also reads every ``1 / sample_rate_hz`` seconds of
+travel, counted from the start of each drive, at the cell it is in at that moment (the
+cell whose centre is nearest along the path: the cell it leaves until half of a step, the
+cell it enters from there on) and at that time; sampling takes no time, so the clock and
+the distance are those of the drive without it.  A reading due at (or after) the arrival
+at the goal is not taken: the goal's reading (:meth:`Robot.sense`, after the dwell) comes
+then.  A drive stopped at ``until`` reads up to that time (:func:`path_samples`).
+
 Readings follow the paper's Table I sensor models
 (:mod:`dgse.sensing.noise`): the noise parameters are drawn once per robot
 (one episode) with the case's mean free concentration, then every reading
@@ -38,7 +47,11 @@ from dgse.sensing.noise import NoiseModel, NoiseParams
 from dgse.sensing.sensors import Observations, mean_free_concentration, measure
 from dgse.world.case import Case
 
-__all__ = ["Robot", "random_start_cell"]
+__all__ = ["Robot", "check_sample_rate", "path_samples", "random_start_cell"]
+
+#: A reading this close (s) to the arrival at the goal counts as due at the arrival; a time
+#: this close to the middle of a step counts as in the cell entered (clock rounding).
+TIME_TOLERANCE_S = 1e-9
 
 
 def random_start_cell(
@@ -75,6 +88,62 @@ def random_start_cell(
     return (k // W, k % W)
 
 
+def check_sample_rate(sample_rate_hz: float | None) -> float | None:
+    """``sample_rate_hz`` as a float (None stays None: readings only at the goals).
+
+    Raises:
+        InputDataError: anything but a positive finite number of readings per second (the
+            message names the argument as ``{sample_rate_hz}``).
+    """
+    if sample_rate_hz is None:
+        return None
+    try:
+        rate = float(sample_rate_hz)
+    except (TypeError, ValueError):
+        rate = math.nan
+    if isinstance(sample_rate_hz, bool) or not (math.isfinite(rate) and rate > 0):
+        raise InputDataError(
+            "{sample_rate_hz} must be a positive number of readings per second (Hz), "
+            f"got {sample_rate_hz!r}",
+            names={"sample_rate_hz": "sample_rate_hz"},
+        )
+    return rate
+
+
+def path_samples(
+    path: np.ndarray, arrivals: np.ndarray, interval: float, until: float = math.inf
+) -> tuple[np.ndarray, np.ndarray]:
+    """Where and when a robot driving along ``path`` reads every ``interval`` seconds.
+
+    Args:
+        path: ``int (m + 1, 2)`` the cells of the drive, from the robot's cell to the goal.
+        arrivals: ``(m + 1,)`` the time at each cell's centre, s (``arrivals[0]``: the start
+            of the drive); increasing.
+        interval: seconds of travel between readings (> 0).
+        until: no reading after this time (the drive stops there), s.
+
+    Returns:
+        ``cells int64 (n, 2)`` and ``times (n,)``: the readings at ``arrivals[0] + k interval``
+        for ``k = 1, 2, ...`` before the arrival at the goal (one due there within
+        :data:`TIME_TOLERANCE_S` is the goal's) and not after ``until``, each at the cell
+        whose centre is nearest along the path (the cell entered from the middle of a step on).
+    """
+    cells = np.asarray(path, dtype=np.int64).reshape(-1, 2)
+    t = np.asarray(arrivals, dtype=np.float64)
+    if len(cells) != len(t):
+        raise InputDataError(f"{len(cells)} path cells but {len(t)} arrival times")
+    if len(cells) < 2:
+        return np.zeros((0, 2), np.int64), np.zeros(0)
+    last = min(float(t[-1]), float(until) + TIME_TOLERANCE_S)
+    n = max(0, math.floor((last - float(t[0])) / interval) + 1)
+    times = float(t[0]) + interval * np.arange(1, n + 1)
+    times = times[(times < t[-1] - TIME_TOLERANCE_S) & (times <= float(until) + TIME_TOLERANCE_S)]
+    seg = np.clip(np.searchsorted(t, times, side="right") - 1, 0, len(t) - 2)
+    frac = (times - t[seg]) / (t[seg + 1] - t[seg])
+    at = seg + (frac >= 0.5 - TIME_TOLERANCE_S)
+    return cells[at], times
+
+
 class Robot:
     """A point robot on a case's map: moves, dwells, senses; one clock.
 
@@ -94,6 +163,8 @@ class Robot:
         graph: the move graph (default: :func:`graph_for` the case's map, 8-connected).
         min_start_distance: for a random start, the least path length in m
             to the source.
+        sample_rate_hz: readings per second of travel while driving (module docstring);
+            None: readings only when :meth:`sense` is called.
 
     Attributes:
         cell: the current cell.
@@ -115,6 +186,7 @@ class Robot:
         use_frames: bool = True,
         graph: FreeSpaceGraph | None = None,
         min_start_distance: float = 0.0,
+        sample_rate_hz: float | None = PROTOCOL.sample_rate_hz,
     ) -> None:
         if not (math.isfinite(speed) and speed > 0):
             raise InputDataError(f"speed must be a positive number of m/s, got {speed}")
@@ -127,6 +199,7 @@ class Robot:
         self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
         self.speed = float(speed)
         self.dwell = float(dwell)
+        self.sample_rate_hz = check_sample_rate(sample_rate_hz)
         self.use_frames = bool(use_frames)
         if start is None:
             start = random_start_cell(self.graph, self.rng, case.source_cell, min_start_distance)
@@ -163,6 +236,26 @@ class Robot:
         return out
 
     @property
+    def n_readings(self) -> int:
+        """The number of readings so far (at goals and on the way)."""
+        return sum(len(o) for o in self._obs)
+
+    def readings_since(self, n: int) -> Observations:
+        """The readings after the first ``n``, in order (e.g. those since the last decision)."""
+        out: list[Observations] = []
+        seen = 0
+        for o in self._obs:
+            if seen + len(o) > n:
+                out.append(o if seen >= n else o.take(np.arange(n - seen, len(o))))
+            seen += len(o)
+        if not out:
+            return Observations.empty()
+        first = out[0]
+        for o in out[1:]:
+            first = first.concat(o)
+        return first
+
+    @property
     def position(self) -> tuple[float, float]:
         """``(x, y)`` in m of the current cell's centre."""
         res = self.graph.resolution
@@ -185,7 +278,8 @@ class Robot:
         With ``until`` (a time in s), the robot stops when the clock reaches
         it: the distance covered until then counts (the last partial step
         included), the clock is set to ``until``, and :attr:`cell` stays the
-        last cell fully reached.
+        last cell fully reached.  With :attr:`sample_rate_hz`, the readings on the way
+        (module docstring) are taken and kept in :attr:`observations`.
 
         Returns:
             True when the robot reached ``goal``.
@@ -195,9 +289,19 @@ class Robot:
         """
         path = self.graph.path(self.cell, goal)
         res = self.graph.resolution
-        for a, b in itertools.pairwise(path):
-            step = res * (math.sqrt(2.0) if a[0] != b[0] and a[1] != b[1] else 1.0)
-            arrival = self.clock + step / self.speed
+        steps = [
+            res * (math.sqrt(2.0) if a[0] != b[0] and a[1] != b[1] else 1.0)
+            for a, b in itertools.pairwise(path)
+        ]
+        arrivals = [self.clock]
+        for step in steps:
+            arrivals.append(arrivals[-1] + step / self.speed)
+        if self.sample_rate_hz is not None:
+            stop = math.inf if until is None else max(float(until), self.clock)
+            cells, times = path_samples(np.array(path), np.array(arrivals), 1.0 / self.sample_rate_hz, stop)
+            if len(times):
+                self._obs.append(self._read(cells, times))
+        for b, step, arrival in zip(path[1:], steps, arrivals[1:], strict=True):
             if until is not None and arrival > until:
                 partial = max(0.0, float(until) - self.clock) * self.speed
                 self.distance_m += partial
@@ -218,11 +322,14 @@ class Robot:
             after the dwell, ``noise`` = :attr:`noise_params`).
         """
         self.clock += self.dwell
-        cell = np.array([self.cell], dtype=np.int64)
-        t = self.clock
-        frames = self.use_frames and self.case.frames is not None
-        obs = measure(self.case, cell, self.noise_params, self.rng, t=t if frames else None)
-        if not frames:
-            obs = Observations(obs.cells, obs.gas, obs.wind, np.array([t]), obs.noise)
+        obs = self._read(np.array([self.cell], dtype=np.int64), np.array([self.clock]))
         self._obs.append(obs)
+        return obs
+
+    def _read(self, cells: np.ndarray, times: np.ndarray) -> Observations:
+        """Noisy readings at ``cells`` at ``times`` s (the frames at those times, when read)."""
+        frames = self.use_frames and self.case.frames is not None
+        obs = measure(self.case, cells, self.noise_params, self.rng, t=times if frames else None)
+        if not frames:
+            obs = Observations(obs.cells, obs.gas, obs.wind, np.asarray(times, dtype=np.float64), obs.noise)
         return obs
