@@ -43,8 +43,9 @@ def test_presets_extend_per_level_and_user_options_win() -> None:
     # random-readings estimates do not take the search options
     assert resolve("dgse-phys", "map", search=False).estimator_options == {}
     assert resolve("dgse-s", "map", search=False).estimator_options == {}
-    user = resolve("dgse-phys", "openings", search=True, planner_options={"stop.mass_level": 0.8})
-    assert user.planner_options["stop.mass_level"] == 0.8
+    assert phys.planner == at_map.planner == at_openings.planner == "info"
+    user = resolve("dgse-phys", "openings", search=True, planner_options={"stop.level": 0.8})
+    assert user.planner_options["stop.level"] == 0.8
     # another planner than the preset's keeps its own defaults
     assert resolve("dgse-phys", "openings", search=True, planner="infotaxis").planner_options == {}
     assert resolve(None, "wind", search=True).method == DEFAULT_METHOD["wind"] == "dgse-phys"

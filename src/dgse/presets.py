@@ -152,19 +152,6 @@ class ResolvedMethod:
 #: (its posteriors are broader than the paper's model's, whose threshold is 0.65).
 DGSE_S_ETA = 0.78
 
-#: The utility planner's settings in a dgse-phys search (every level).
-PHYS_SEARCH_PLANNER: dict[str, Any] = {
-    "stop.min_observations": MIN_SENSORS,
-    "stop.mass_radius_m": 1.0,
-    "stop.mass_level": 0.9,
-    "stop.confirm_radius_m": 1.0,
-    "stop.confirm_readings": 1,
-    "stop.confirm_sigmas": 2.0,
-    "weights.source_radius_m": 1.0,
-    "weights.revisit_radius_m": 0.5,
-    "deadline.margin_s": 60.0,
-}
-
 #: PMFS's filament simulations in a search, cheaper than the published ones (about 20 CPU-s
 #: per estimate on two cores with those, 0.6 s with these): recorded iterations, warm-up,
 #: first quadtree leaf.
@@ -191,25 +178,17 @@ PRESETS: dict[str, Preset] = {
         Preset(
             PHYSICS_METHOD,
             "dgse-phys",
+            "info",
             search_estimator_options={"fusion.floor": 0.0},
-            planner_options=PHYS_SEARCH_PLANNER,
             at_level={
                 "map": {
                     "search_estimator": {
                         "evidence.effective_readings": 30.0,
                         "evidence.effective_growth": 0.0,
                     },
-                    "planner": {"stop.max_wind_misfit": 0.7, "deadline.estimate_radius_m": 1.0},
+                    "planner": {"deadline.estimate_radius_m": 1.0},
                 }
             },
-        ),
-        Preset(
-            "dgse-phys-info",
-            "dgse-phys",
-            "info",
-            search_estimator_options={"fusion.floor": 0.0},
-            label="DGSE-Phys (information)",
-            color="#9edae5",
         ),
         Preset("dualmode", "dualmode", "dualmode", label="Dual-mode"),
         Preset("grgsl", "grgsl", "infotaxis"),

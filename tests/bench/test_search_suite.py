@@ -115,9 +115,9 @@ def test_dgse_phys_plans_per_knowledge_level():
 
     phys = next(m for m in METHODS if m.name == "dgse-phys")
     at_map = phys.planner_options_at("map")
-    assert at_map["stop.max_wind_misfit"] == 0.7 and at_map["deadline.estimate_radius_m"] == 1.0
+    assert at_map["deadline.estimate_radius_m"] == 1.0
     at_openings = phys.planner_options_at("openings")
-    assert "stop.max_wind_misfit" not in at_openings and "deadline.estimate_radius_m" not in at_openings
+    assert "deadline.estimate_radius_m" not in at_openings
     assert "1 m disk" in _level_extras("map") and _level_extras("openings") == ""
     # and the estimator options the map searches were measured with, there only
     assert phys.estimator_options_at("map", search=True)["evidence.effective_readings"] == 30.0

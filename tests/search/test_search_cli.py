@@ -262,9 +262,17 @@ def test_step_text_and_default_names():
 
     rec = StepRecord(4, (1, 2), 123.4, 5.0, (0.1, 0.0), 3.0, 0.71, (1.0, 2.0), 0.456)
     assert _step_text("a", 0, 5, rec, 2000.0) == "a trial 1/5: step 4, 123/2000 s, H 0.71, error 0.46 m"
-    assert step_text(rec, 2000.0, 0.78) == (
-        "searching: step 4, 123 of 2000 s simulated, entropy 0.71 of log N (stops at 0.78), error 0.46 m"
+    from dgse.planning.planners import get_planner
+
+    stop = get_planner("utility", **{"stop.eta": 0.78}).describe_stop()
+    assert step_text(rec, 2000.0, stop) == (
+        "searching: step 4, 123 of 2000 s simulated, entropy 0.71 of log N (stops when the entropy is "
+        "at most 0.78 of log N), error 0.46 m"
     )
+    info = get_planner("info").describe_stop()
+    assert info == "95% of the source posterior lies within 2 m of its mean"
+    mass = get_planner("utility", **{"stop.mass_radius_m": 1.0}).describe_stop()
+    assert mass == "90% of the source posterior lies within 1 m of its mode"
     assert str(default_output("search", "my/model x", "utility")) == "dgse-out/search-my_model_x-utility.json"
 
 

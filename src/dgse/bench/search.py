@@ -744,9 +744,6 @@ def _level_extras(level: str) -> str:
     words = []
     if "evidence.effective_readings" in extra:
         words.append(f"the gas evidence counts at most {extra['evidence.effective_readings']:g} readings")
-    if "stop.max_wind_misfit" in extra:
-        share = f"{extra['stop.max_wind_misfit']:.0%}"
-        words.append(f"no stop while the best flow leaves over {share} of the wind unexplained")
     if "deadline.estimate_radius_m" in extra:
         words.append(
             f"a deadline stop declares the {extra['deadline.estimate_radius_m']:g} m disk "

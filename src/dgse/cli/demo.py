@@ -53,15 +53,14 @@ def _told(level: str) -> str:
     }[level]
 
 
-def step_text(rec: StepRecord, time_limit: float, eta: float | str) -> str:
+def step_text(rec: StepRecord, time_limit: float, stop: str) -> str:
     """The search status line after step ``rec``: step, simulated clock, entropy, error.
 
-    ``eta``: the entropy test's threshold, or a text saying what the stop test is instead.
+    ``stop``: the planner's stop test in words (:meth:`~dgse.planning.planners.Planner.describe_stop`).
     """
-    stop = f"stops at {eta:g}" if isinstance(eta, float | int) else f"stops when {eta}"
     return (
         f"searching: step {rec.step}, {rec.time_s:.0f} of {time_limit:g} s simulated, "
-        f"entropy {rec.normalized_entropy:.2f} of log N ({stop}), error {rec.error_m:.2f} m"
+        f"entropy {rec.normalized_entropy:.2f} of log N (stops when {stop}), error {rec.error_m:.2f} m"
     )
 
 
@@ -126,13 +125,7 @@ def demo_cmd(
     estimator = get_estimator(run.estimator, **kwargs)
     require_level(estimator, method, level)
     planner = get_planner(run.planner, **run.planner_options)
-    opts = run.planner_options
-    stop_at: float | str = (
-        f"{opts.get('stop.mass_level', 0.9):.0%} of the source posterior lies within "
-        f"{opts['stop.mass_radius_m']:g} m of its mode"
-        if "stop.mass_radius_m" in opts
-        else float(opts.get("stop.eta", opts.get("eta", 0.65)))
-    )
+    stop_at = planner.describe_stop()
     written: list[Path] = []
 
     def kept() -> str:

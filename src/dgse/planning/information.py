@@ -201,6 +201,11 @@ class InformationPlanner(PlannerBase):
         of the heaviest disk of that radius (:meth:`~dgse.planning.planners.Deadline.declare`)."""
         return self.deadline.declare(belief, deadline)
 
+    def describe_stop(self) -> str:
+        """The share of the posterior the stop needs near the declared point, and the radius."""
+        st = self.stop
+        return f"{st.level:.0%} of the source posterior lies within {st.radius_m:g} m of its mean"
+
     def stop_mass(self, belief: Belief) -> float:
         """The posterior mass within ``stop.radius_m`` of the point a stop now declares."""
         return mass_near_point(belief, self.declare(belief, False), self.stop.radius_m)

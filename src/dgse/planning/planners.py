@@ -178,6 +178,10 @@ class Planner(Protocol):
         (``deadline``: at a deadline stop)."""
         ...
 
+    def describe_stop(self) -> str:
+        """The stop test in words, for a progress line ("stops when ...")."""
+        ...
+
 
 class PlannerBase:
     """What a planner without these rules does: no held stops, no deadline stops, and the
@@ -198,6 +202,10 @@ class PlannerBase:
     def declare(self, belief: Belief, deadline: bool) -> tuple[float, float]:
         """The posterior mean (:meth:`~dgse.belief.belief.Belief.source_estimate`)."""
         return belief.source_estimate()
+
+    def describe_stop(self) -> str:
+        """The planner's own stop test, unnamed."""
+        return "its own stop test passes"
 
 
 def _radius_or_none(name: str, value: float | None) -> float | None:
@@ -456,6 +464,15 @@ class UtilityPlanner(PlannerBase):
         if limit is None or not isinstance(v, int | float):
             return False
         return not (float(v) <= limit)
+
+    def describe_stop(self) -> str:
+        """The mass test's share and radius, or the entropy test's threshold."""
+        st = self.stop
+        if st.mass_radius_m is not None:
+            return (
+                f"{st.mass_level:.0%} of the source posterior lies within {st.mass_radius_m:g} m of its mode"
+            )
+        return f"the entropy is at most {st.eta:g} of log N"
 
     def deadline_reached(self, history: SearchHistory | None) -> bool:
         """True when ``deadline.margin_s`` is set and less than it is left of the time limit.
