@@ -89,9 +89,10 @@ def test_demo_out_file_fails_within_seconds(capsys, tmp_path):
     [
         (["--method", "dgse-s", "-p", "foo=1"], ["unknown estimator 'dgse-s' option(s) foo"]),
         (["--method", "dgse-s", "-O", "K=abc"], ["option K='abc' must be an integer"]),
-        (["-P", "bogus=1"], ["unknown planner 'utility' option(s) bogus"]),
-        (["-P", "stop.etta=0.5"], ["option(s) stop.etta; known: stop.confirm_radius_m"]),
-        (["-P", "stop.eta=1.5"], ["stop.eta must lie in [0, 1]"]),
+        (["-P", "bogus=1"], ["unknown planner 'info' option(s) bogus"]),
+        (["-P", "stop.levl=0.5"], ["option(s) stop.levl; known: stop.level"]),
+        (["-P", "stop.level=1.5"], ["stop.level must lie in (0, 1]"]),
+        (["--planner", "utility", "-P", "stop.eta=1.5"], ["stop.eta must lie in [0, 1]"]),
         (
             ["--method", "dgse-phys", "--knowledge", "openings", "-p", "fusion.flor=0"],
             ["fusion.flor; known: fusion.floor"],

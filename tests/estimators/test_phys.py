@@ -496,18 +496,19 @@ def test_field_variances_add_a_model_error_the_planner_leaves_out(case):
     assert PredictedFields().model_error.map == (0.15, 0.3, 0.1, 1.0)
 
 
-def test_search_planner_at_map_holds_stops_and_declares_the_heaviest_disk():
-    """At ``map`` a search stop waits for a flow that explains the wind and a deadline stop
-    declares the centre of the 1 m disk with the most mass; other levels do neither."""
+def test_search_planner_at_map_declares_the_heaviest_disk_at_a_deadline():
+    """A search's information planner stops on 95 % within 2 m at every level; at ``map`` a
+    deadline stop declares the centre of the 1 m disk with the most mass, elsewhere the mean."""
     from dgse.planning.planners import get_planner
 
-    at_map = get_planner("utility", **search_planner("map"))
-    assert at_map.stop.max_wind_misfit == pytest.approx(0.7)
+    assert PHYS.planner == "info"
+    at_map = get_planner(PHYS.planner, **search_planner("map"))
     assert at_map.deadline.estimate_radius_m == pytest.approx(1.0)
     for level in ("openings", "wind"):
-        planner = get_planner("utility", **search_planner(level))
-        assert planner.stop.max_wind_misfit is None and planner.deadline.estimate_radius_m is None
-        assert planner.stop.mass_radius_m == at_map.stop.mass_radius_m == 1.0
+        planner = get_planner(PHYS.planner, **search_planner(level))
+        assert planner.deadline.estimate_radius_m is None
+        assert planner.stop.radius_m == at_map.stop.radius_m == 2.0
+        assert planner.stop.level == at_map.stop.level == 0.95
 
 
 def test_gas_evidence_tempering_follows_the_level_and_searches_keep_theirs(case):
