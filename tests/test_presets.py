@@ -7,6 +7,7 @@ on one small case they must run the same episodes.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +16,7 @@ import pytest
 from dgse.bench.search import METHODS
 from dgse.cli.main import main
 from dgse.errors import UnsupportedError
+from dgse.files import json_safe
 from dgse.physics.scenario import solve_cases
 from dgse.presets import DEFAULT_METHOD, PRESETS, preset, resolve
 from dgse.search.campaign import estimator_options, run_trials
@@ -39,7 +41,10 @@ def test_presets_extend_per_level_and_user_options_win() -> None:
     assert at_openings.planner_options == dict(phys.planner_options)
     assert at_map.estimator_options["evidence.effective_readings"] == 30.0
     assert at_map.estimator_options["evidence.effective_growth"] == 0.0
-    assert "evidence.effective_readings" not in at_openings.estimator_options
+    # a search at openings never tempers the gas evidence; a random-readings estimate does
+    assert at_openings.estimator_options["evidence.effective_readings"] == math.inf
+    random_readings = resolve("dgse-phys", "openings", search=False)
+    assert "evidence.effective_readings" not in random_readings.estimator_options
     # random-readings estimates do not take the search options
     assert resolve("dgse-phys", "map", search=False).estimator_options == {}
     assert resolve("dgse-s", "map", search=False).estimator_options == {}
@@ -68,9 +73,9 @@ def test_cli_search_runs_the_benchmarks_episodes(case_file: Path, tmp_path: Path
     cli = json.loads(out.read_text())
     run = resolve("dgse-phys", level, search=True)
     assert cli["resolved"]["planner_options"] == run.planner_options
-    assert {
-        k: v for k, v in cli["resolved"]["estimator_options"].items() if k != "seed"
-    } == run.estimator_options
+    assert {k: v for k, v in cli["resolved"]["estimator_options"].items() if k != "seed"} == json_safe(
+        run.estimator_options
+    )  # an infinite option is written as null
     # the episode as the search benchmark runs it (dgse.bench.search: the preset at this level)
     m = next(m for m in METHODS if m.name == "dgse-phys")
     bench = run_trials(

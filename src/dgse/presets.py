@@ -14,6 +14,7 @@ defaults and the paper's utility planner.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -181,13 +182,14 @@ PRESETS: dict[str, Preset] = {
             "info",
             search_estimator_options={"fusion.floor": 0.0},
             at_level={
+                "openings": {"search_estimator": {"evidence.effective_readings": math.inf}},
                 "map": {
                     "search_estimator": {
                         "evidence.effective_readings": 30.0,
                         "evidence.effective_growth": 0.0,
                     },
                     "planner": {"deadline.estimate_radius_m": 1.0},
-                }
+                },
             },
         ),
         Preset("dualmode", "dualmode", "dualmode", label="Dual-mode"),

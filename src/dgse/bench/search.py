@@ -743,7 +743,12 @@ def _level_extras(level: str) -> str:
     extra = {k: v for part in PRESETS["dgse-phys"].at_level.get(level, {}).values() for k, v in part.items()}
     words = []
     if "evidence.effective_readings" in extra:
-        words.append(f"the gas evidence counts at most {extra['evidence.effective_readings']:g} readings")
+        cap = float(extra["evidence.effective_readings"])
+        words.append(
+            f"the gas evidence counts at most {cap:g} readings"
+            if math.isfinite(cap)
+            else "the gas evidence is not tempered"
+        )
     if "deadline.estimate_radius_m" in extra:
         words.append(
             f"a deadline stop declares the {extra['deadline.estimate_radius_m']:g} m disk "
