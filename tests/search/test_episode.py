@@ -263,3 +263,33 @@ def test_readings_on_the_way_with_the_utility_planner_and_bad_rates():
     for bad in (0.0, -2.0, math.nan):
         with pytest.raises(InputDataError, match="sample_rate_hz must be a positive number"):
             run_episode(case, UniformEstimator(), UtilityPlanner(), sample_rate_hz=bad, **kw)
+
+
+@pytest.mark.parametrize(
+    ("method", "cells", "estimate"),
+    [
+        ("dgse-s", [(5, 2), (1, 2), (3, 5), (3, 9), (0, 7), (0, 11), (1, 13), (1, 15)], (1.55, 0.286465)),
+        ("dgse-phys", [(5, 2), (4, 2), (3, 2), (2, 2), (1, 2)], (0.486049, 0.515778)),
+    ],
+)
+def test_the_presets_planners_keep_their_searches(method, cells, estimate):
+    """Each preset's planner with its options on a fixed noise-free search: the cells measured
+    and the declared source are pinned, so a change of the utility planner's entropy rule or of
+    the information planner's choice or stop shows here."""
+    from dgse.planning.planners import get_planner
+    from dgse.presets import resolve
+
+    run = resolve(method, "openings", search=True)
+    planner = get_planner(run.planner, **run.planner_options)
+    r = run_episode(
+        corridor_case(),
+        PeakEstimator(adaptive=True),
+        planner,
+        start=(5, 2),
+        rng=4,
+        noise_params=NoiseParams.zero(),
+        time_limit=400,
+    )
+    assert r.reason == "converged"
+    assert [tuple(int(v) for v in s.cell) for s in r.steps] == cells
+    assert r.estimate_xy == pytest.approx(estimate, abs=1e-6)
