@@ -1,39 +1,41 @@
-"""dgse-phys in active search: the searches, their step cost, and what their stops knew.
+"""dgse-phys in active search: the searches, their step cost, and the proposals at ``map``.
 
 One command per measurement (``python benchmarks/search.py COMMAND --help``); results go to
 ``benchmarks/results/phys_search/`` (``-o``):
 
-* ``run``: the utility planner on a scenario set (``dgse.bench.scenarios.SEARCH_SETS``: seeds
+* ``run``: a method's searches on a scenario set (``dgse.bench.scenarios.SEARCH_SETS``: seeds
   900-907 ``validation``, 908-923 ``validation2``, 924-963 ``validation3``, 2000-2019
-  ``test``; made once into ignored ``_cases_<set>/`` folders, ``cases`` makes them alone) with
-  a method at a knowledge level and a stop rule (:data:`RULES`); writes the search metrics and
-  how the searches ended (``stops``: mass stops and how many lie within 2 m of the source,
-  deadline stops, the stops a confirmation held).  Every finished episode is journaled beside
-  the JSON, so an interrupted run resumes; ``--steps`` keeps every step's readings in the
-  journal (what ``deadline``, ``misfit`` and ``stops`` rebuild beliefs from).  ``dgse-phys``
-  runs with its search preset at the level (:mod:`dgse.presets`); ``-E`` overrides an
-  estimator option, ``-P`` a planner option of the rule.  Output names:
-  ``<set>_<method>_<level>_<rule>[_<tag>].json``::
+  ``test``; made once into ignored ``_cases_<set>/`` folders, ``cases`` makes them alone) at a
+  knowledge level, as ``dgse search`` runs them: the method's preset (:mod:`dgse.presets`:
+  estimator options, planner and planner options at the level; ``--planner`` another
+  registered planner with its own defaults), ``-E`` over an estimator option, ``-P`` over a
+  planner option; writes the search metrics and how the searches ended (``stops``: stops of
+  the stop test and how many lie within 2 m of the source, deadline stops and what each point
+  estimate of their final beliefs would have declared).  Every finished episode is journaled
+  beside the JSON, so an interrupted run resumes; ``--steps`` keeps every step's readings in
+  the journal (what ``misfit`` rebuilds proposals from).  Output names:
+  ``<set>_<method>_<level>_<planner>[_<tag>].json``::
 
-      python benchmarks/search.py run --set validation --rule mass1m90 --knowledge openings
-      python benchmarks/search.py run --set validation3 --knowledge map \\
-          --rule mass1m90-disk1m-deadline60s-revisit0.5m-gas1m --seed 0 --tag base-s0
-      python benchmarks/search.py run --set validation3 --knowledge map \\
-          --rule mass1m90-disk1m-deadline60s-revisit0.5m-gas1m --seed S -P stop.max_wind_misfit=0.7 \\
-          -P deadline.estimate_radius_m=1.0 --tag fit0.7-disk1-sS-steps --steps
-      python benchmarks/search.py run --set test --knowledge wind --told-wind wind_smoothed \\
-          --rule mass1m90-disk1m-deadline60s-revisit0.5m-gas1m --seed 0 --tag smoothed-s0
+      python benchmarks/search.py run --set validation --knowledge openings
+      python benchmarks/search.py run --set validation3 --knowledge map --seed 1 --tag s1-steps --steps
+      python benchmarks/search.py run --set test --knowledge wind --told-wind wind_smoothed --tag smoothed-s0
 
-  Of the noise-weight comparisons of ``docs/decisions.md``, ``seed0-mix`` is this command as
-  it runs now (the mixture is dgse-phys's only gas evidence); ``seed0``, ``seed0-cand`` and
+  The result files named ``<set>_<method>_<level>_<rule>[_<tag>].json`` (``paper``,
+  ``mass1m90``, ``...-revisit0.5m-gas1m``) are searches with the utility planner and one of
+  the stop rules it had then (the mass stop, its confirmation, the disk source term, the
+  revisit discount, the held stop on the wind misfit, a deadline); this script at commit
+  41797cb runs them (``run --rule``), with its ``deadline`` and ``stops`` commands that
+  rebuilt their final beliefs.  Of the noise-weight comparisons of ``docs/decisions.md``,
+  ``seed0-mix`` ran the mixture as dgse-phys runs it now; ``seed0``, ``seed0-cand`` and
   ``seed0-larger`` ran one weighting alone through a dgse-phys option that is removed
   (``-E 'noise_weights="plug-in"'``, ``"candidate"``, ``"larger"``; this script at commit
   7ba21b2 takes it).
 * ``merge``: one result from the JSON files of runs made apart (one ``--files`` case per
   process): ``python benchmarks/search.py merge OUT.json RESULT.json...``.
-* ``step-time``: the computation seconds of every search step of dgse-phys (the first
-  estimate, which solves the flows, and the median and 90th percentile of the rest) on the
-  first test scenarios; writes ``step_time.json`` (``step_time_map.json`` at ``map``)::
+* ``step-time``: the computation seconds of every search step of dgse-phys with its preset
+  (the first estimate, which solves the flows, and the median and 90th percentile of the
+  rest) on the first test scenarios; writes ``step_time.json`` (``step_time_map.json`` at
+  ``map``)::
 
       python benchmarks/search.py step-time --cases 20
       python benchmarks/search.py step-time --cases 1 --knowledge map
@@ -45,41 +47,27 @@ One command per measurement (``python benchmarks/search.py COMMAND --help``); re
 
       python benchmarks/search.py speed --cases 2 --counts 20 50 --tag before
 
-* ``deadline``: for every episode of ``map`` searches journaled with ``--steps`` that ended
-  at its deadline, the final belief rebuilt from the recorded readings and scored by several
-  point estimates (the posterior mean, the mode, the centre of the heaviest 0.5, 1 or 2 m
-  disk, :meth:`dgse.planning.planners.UtilityPlanner.declare`)::
-
-      python benchmarks/search.py deadline \\
-          benchmarks/results/phys_search/validation3*_map_*-gas1m_base-s0.journal.jsonl \\
-          benchmarks/results/phys_search/validation3-files3_*-gas1m_fit0.7-s0.journal.jsonl \\
-          -o benchmarks/results/phys_search/deadline_estimate_validation3.json
-
 * ``misfit``: were the true openings among dgse-phys's proposals at ``map`` (from an
-  episode's first 64 wind readings), and what was the best proposal's wind misfit::
+  episode's first 64 wind readings), and what was the best proposal's wind misfit, for
+  searches at ``map`` journaled with ``--steps``::
 
+      python benchmarks/search.py run --set validation3 --knowledge map --tag s0-steps --steps
       python benchmarks/search.py misfit \\
-          benchmarks/results/phys_search/validation3*_map_*-gas1m_base-s0.journal.jsonl \\
-          -o benchmarks/results/phys_search/map_proposal_misfit_validation3.json
+          benchmarks/results/phys_search/validation3_dgse-phys_map_info_s0-steps.journal.jsonl \\
+          -o benchmarks/results/phys_search/map_proposal_misfit_validation3_info.json
 
-* ``stops``: what a mass stop at ``map`` knew when it fired: the belief the stop saw rebuilt
-  and the statistics a stop rule could hold on (readings, the flow hypotheses' weights and
-  agreement, wind and gas misfit, DGSE-S's own mass near the mode)::
+  (``map_proposal_misfit_validation3*.json`` are of the utility planner's searches, journals
+  of ``run --rule`` at commit 41797cb.)
 
-      python benchmarks/search.py stops \\
-          benchmarks/results/phys_search/validation3_*_map_*-gas1m_fit0.7-disk1-s1-steps.journal.jsonl.gz \\
-          -o benchmarks/results/phys_search/map_stop_diagnostics_validation3_s1.json
-
-``deadline``, ``misfit`` and ``stops`` read journals as written or gzipped; the case files
-they name are the set's (``python benchmarks/search.py cases --set validation3``).  A rule is
-only ever chosen on validation episodes; the test split's are for reporting.
+``misfit`` reads journals as written or gzipped; the case files they name are the set's
+(``python benchmarks/search.py cases --set validation3``).  A setting is only ever chosen on
+validation episodes; the test split's are for reporting.
 """
 
 from __future__ import annotations
 
 import gzip
 import json
-import math
 import os
 import sys
 from collections.abc import Callable
@@ -92,89 +80,13 @@ import numpy as np
 from dgse.bench.commands import command_parser, run_command
 from dgse.bench.scenarios import SEARCH_SETS, WIND_VARIANTS, ToldWind, search_cases
 from dgse.files import write_text
-from dgse.presets import PRESETS
+from dgse.presets import resolve
 from dgse.search.campaign import json_safe, run_trials
 from dgse.world.case import Case
 
 RESULTS = Path(__file__).resolve().parents[1] / "benchmarks" / "results" / "phys_search"
 #: A stop within this distance of the source means something.
 SUCCESS_M = 2.0
-
-#: The stop rules of ``run`` (the utility planner's settings, :mod:`dgse.planning.planners`):
-#:
-#: * ``paper``: the entropy test from the 5th reading (``stop.min_observations=5``);
-#: * ``paper-eta0.78``: the same with the shipped DGSE-S's threshold (``stop.eta=0.78``,
-#:   ``dgse demo``'s, tuned on the validation split by ``python benchmarks/training.py eta``);
-#: * ``confirm``: the same, and a stop needs 2 readings within 1 m of the posterior's mode
-#:   (``stop.confirm_radius_m=1``, ``stop.confirm_readings=2``);
-#: * ``mass1m90`` / ``mass2m95``: instead of the entropy test, stop once the posterior holds
-#:   90 % within 1 m (95 % within 2 m) of its mode (``stop.mass_radius_m``, ``stop.mass_level``);
-#: * ``mass1m90-disk1m`` / ``mass1m90-disk0.5m``: ``mass1m90``, and the utility's source term
-#:   is the posterior mass within 1 m (0.5 m) of a cell (``weights.source_radius_m``), not the
-#:   cell's own;
-#: * ``mass1m90-disk1m-deadline60s``: and the search stops with its estimate once less than
-#:   60 s of the time limit is left (``deadline.margin_s``); such stops are counted apart
-#:   (``deadline_stops``);
-#: * ``mass1m90-disk1m-deadline60s-revisit0.5m``: and the variance terms of a cell are divided
-#:   by one plus the cells measured within 0.5 m of it (``weights.revisit_radius_m``);
-#: * ``...-revisit0.5m-confirm1m``: and a stop needs 2 readings within 1 m of the mode;
-#: * ``...-revisit0.5m-gas1m``: and a stop needs 1 reading within 1 m of the mode above twice
-#:   the estimator's noise floor (``stop.confirm_readings=1``, ``stop.confirm_sigmas=2``): gas
-#:   smelt there.  Every trial records the stops the confirmation held (``held_stops``) and the
-#:   error of the first (``first_held_error_m``).  This rule is dgse-phys's search preset
-#:   (:data:`dgse.presets.PRESETS`); at knowledge ``map`` the preset adds
-#:   ``stop.max_wind_misfit=0.7`` and ``deadline.estimate_radius_m=1``: ``run`` takes them as
-#:   ``-P stop.max_wind_misfit=0.7 -P deadline.estimate_radius_m=1.0`` (files tagged
-#:   ``fit0.7-disk1``) and notes what of the preset a run leaves out.
-#:
-#: The rule ``...-revisit0.5m-twice`` (the mass test at two readings in a row, not adopted:
-#: ``docs/decisions.md``) is removed with its planner option; its result file stays in
-#: ``benchmarks/results/phys_search/``, and this script at commit 7ba21b2 runs it.
-RULES: dict[str, dict[str, Any]] = {
-    "paper": {"stop.min_observations": 5},
-    "paper-eta0.78": {"stop.min_observations": 5, "stop.eta": 0.78},
-    "confirm": {"stop.min_observations": 5, "stop.confirm_radius_m": 1.0, "stop.confirm_readings": 2},
-    "mass1m90": {"stop.min_observations": 5, "stop.mass_radius_m": 1.0, "stop.mass_level": 0.9},
-    "mass2m95": {"stop.min_observations": 5, "stop.mass_radius_m": 2.0, "stop.mass_level": 0.95},
-    "mass1m90-disk1m": {
-        "stop.min_observations": 5,
-        "stop.mass_radius_m": 1.0,
-        "stop.mass_level": 0.9,
-        "weights.source_radius_m": 1.0,
-    },
-    "mass1m90-disk1m-deadline60s": {
-        "stop.min_observations": 5,
-        "stop.mass_radius_m": 1.0,
-        "stop.mass_level": 0.9,
-        "weights.source_radius_m": 1.0,
-        "deadline.margin_s": 60.0,
-    },
-    "mass1m90-disk1m-deadline60s-revisit0.5m": {
-        "stop.min_observations": 5,
-        "stop.mass_radius_m": 1.0,
-        "stop.mass_level": 0.9,
-        "weights.source_radius_m": 1.0,
-        "deadline.margin_s": 60.0,
-        "weights.revisit_radius_m": 0.5,
-    },
-    "mass1m90-disk0.5m": {
-        "stop.min_observations": 5,
-        "stop.mass_radius_m": 1.0,
-        "stop.mass_level": 0.9,
-        "weights.source_radius_m": 0.5,
-    },
-}
-RULES["mass1m90-disk1m-deadline60s-revisit0.5m-confirm1m"] = {
-    **RULES["mass1m90-disk1m-deadline60s-revisit0.5m"],
-    "stop.confirm_radius_m": 1.0,
-    "stop.confirm_readings": 2,
-}
-RULES["mass1m90-disk1m-deadline60s-revisit0.5m-gas1m"] = {
-    **RULES["mass1m90-disk1m-deadline60s-revisit0.5m"],
-    "stop.confirm_radius_m": 1.0,
-    "stop.confirm_readings": 1,
-    "stop.confirm_sigmas": 2.0,
-}
 
 
 def journal_episodes(journals: list[Path]) -> dict[str, tuple[Any, dict[str, Any]]]:
@@ -223,7 +135,8 @@ def map_estimator_at_end(case: Any, obs: Any, **options: Any) -> Any:
 
 
 def stop_quality(result: dict[str, Any]) -> dict[str, Any]:
-    """Entropy stops (episodes that terminated) and the share of them within 2 m of the source."""
+    """The stop test's stops (reason ``converged``) and the share of them within 2 m of the
+    source; the deadline stops and what each point estimate would have declared at them."""
     rows = [t for c in result["per_case"] for t in c["trials"]]
     ended = [t for t in rows if t.get("terminated")]
     late = [t for t in ended if t.get("reason") == "deadline"]
@@ -231,34 +144,12 @@ def stop_quality(result: dict[str, Any]) -> dict[str, Any]:
     near = [t for t in stops if t["error_m"] <= SUCCESS_M]
     out: dict[str, Any] = {
         "episodes": len(rows),
-        "entropy_stops": len(stops),
+        "converged_stops": len(stops),
         "stops_within_2m": len(near),
         "stops_within_2m_share": (len(near) / len(stops)) if stops else None,
         "deadline_stops": len(late),
         "deadline_stops_within_2m": sum(t["error_m"] <= SUCCESS_M for t in late),
     }
-    held = [t for t in rows if t.get("held_stops")]
-    if held:
-        # the same run read as the rule without the confirmation: an episode with a held stop
-        # would have ended there (as a mass stop) with that step's error; the others the same
-        def without(t: dict[str, Any]) -> tuple[float, bool]:
-            if t.get("held_stops"):
-                return float(t["first_held_error_m"]), True
-            return float(t["error_m"]), bool(t.get("terminated")) and t.get("reason") != "deadline"
-
-        w = [without(t) for t in rows]
-        w_stops = [e for e, stop in w if stop]
-        out["held"] = {
-            "episodes_with_held_stops": len(held),
-            "held_stop_errors_m": [round(float(t["first_held_error_m"]), 3) for t in held],
-            "final_errors_m": [round(float(t["error_m"]), 3) for t in held],
-            "without_confirmation": {
-                "found": sum(e <= SUCCESS_M for e, _ in w),
-                "error_m_mean": sum(e for e, _ in w) / len(w),
-                "mass_stops": len(w_stops),
-                "mass_stops_within_2m": sum(e <= SUCCESS_M for e in w_stops),
-            },
-        }
     # the deadline stops read every way (``end_errors_m``: what each point estimate of the final
     # belief would have declared), so that ``deadline.estimate_radius_m`` is chosen from one run
     recorded = [t for t in late if t.get("end_errors_m")]
@@ -288,15 +179,11 @@ def write_result(path: Path, result: dict[str, Any], label: str, extra: str = ""
 
 
 #: Planner options a run without them answers for some episodes (``--fill``), and which:
-#: ``stop.max_wind_misfit`` only holds stops (a stop test that passed returns False instead), so
-#: an episode that ended at its deadline is the same with it; ``deadline.estimate_radius_m``
-#: only changes what a deadline stop declares, so an episode that stopped before is the same.
-FILL_OPTIONS = {"stop.max_wind_misfit": "deadline", "deadline.estimate_radius_m": "converged"}
+#: ``deadline.estimate_radius_m`` only changes what a deadline stop declares, so an episode that
+#: stopped before is the same.
+FILL_OPTIONS = {"deadline.estimate_radius_m": "converged"}
 #: The names the result files recorded before the settings objects give those options.
-RECORDED_NAMES = {
-    "stop.max_wind_misfit": "max_wind_misfit",
-    "deadline.estimate_radius_m": "deadline_estimate_radius_m",
-}
+RECORDED_NAMES = {"deadline.estimate_radius_m": "deadline_estimate_radius_m"}
 
 
 def _without(settings: dict[str, Any], option: str | None) -> dict[str, Any]:
@@ -353,11 +240,16 @@ def merged(paths: list[Path], fill: Path | None = None, fill_option: str | None 
 
 
 def run(argv: list[str]) -> None:
-    """``run``: searches of a scenario set with a method, knowledge level and stop rule (module doc)."""
-    ap = _parser("run", "active search on a scenario set with a method, knowledge level and stop rule")
+    """``run``: a method's searches of a scenario set at a knowledge level (module doc)."""
+    ap = _parser("run", "active search on a scenario set with a method (its preset) at a knowledge level")
     ap.add_argument("--set", choices=sorted(SEARCH_SETS), default="validation")
-    ap.add_argument("--rule", choices=sorted(RULES), default="confirm")
     ap.add_argument("--method", default="dgse-phys")
+    ap.add_argument(
+        "--planner",
+        default=None,
+        help="another registered planner than the method's (its own defaults then apply, as "
+        "`dgse search --planner`)",
+    )
     ap.add_argument("--knowledge", default="openings", choices=["map", "openings", "wind"])
     ap.add_argument("--trials", type=int, default=1)
     ap.add_argument("--seed", type=int, default=0)
@@ -385,7 +277,7 @@ def run(argv: list[str]) -> None:
         action="append",
         default=[],
         metavar="KEY=JSON",
-        help="a planner option over the rule's, e.g. -P stop.min_observations=60 (repeatable)",
+        help="a planner option over the preset's, e.g. -P stop.min_observations=60 (repeatable)",
     )
     ap.add_argument(
         "--steps",
@@ -411,47 +303,41 @@ def run(argv: list[str]) -> None:
         set_name = f"{args.set}-files{len(cases)}"
     else:
         cases = search_cases(args.out, args.set, args.cases)
-    stem = f"{set_name}_{args.method}_{args.knowledge}_{args.rule}" + (f"_{args.tag}" if args.tag else "")
-    # dgse-phys searches as dgse demo runs them, unless -E says otherwise
-    est_opts = (
-        PRESETS["dgse-phys"].estimator_options_at(args.knowledge, search=True)
-        if args.method == "dgse-phys"
-        else {}
+    user: dict[str, dict[str, Any]] = {}
+    for flag, items in (("-E", args.estimator_option), ("-P", args.planner_option)):
+        user[flag] = {}
+        for item in items:
+            key, sep, value = item.partition("=")
+            if not sep:
+                ap.error(f"{flag} takes KEY=JSON, got {item!r}")
+            user[flag][key] = json.loads(value)
+    # the method as dgse search runs it (its preset at the level), the user's options on top
+    method = resolve(
+        args.method,
+        args.knowledge,
+        search=True,
+        planner=args.planner,
+        estimator_options=user["-E"],
+        planner_options=user["-P"],
     )
-    for item in args.estimator_option:
-        key, sep, value = item.partition("=")
-        if not sep:
-            ap.error(f"-E takes KEY=JSON, got {item!r}")
-        est_opts[key] = json.loads(value)
-    planner_opts = dict(RULES[args.rule])
-    for item in args.planner_option:
-        key, sep, value = item.partition("=")
-        if not sep:
-            ap.error(f"-P takes KEY=JSON, got {item!r}")
-        planner_opts[key] = json.loads(value)
-    missing = {
-        k: v
-        for k, v in PRESETS["dgse-phys"].at_level.get(args.knowledge, {}).get("planner", {}).items()
-        if args.method == "dgse-phys" and k not in planner_opts
-    }
-    if missing:  # kept out of the defaults: the recorded runs' commands must mean what they meant
-        opts = " ".join(f"-P {k}={json.dumps(v)}" for k, v in missing.items())
-        print(f"note: dgse demo's search at {args.knowledge} also sets {opts}; this run does not", flush=True)
+    est_opts = method.estimator_options
+    tag = f"_{args.tag}" if args.tag else ""
+    stem = f"{set_name}_{args.method}_{args.knowledge}_{method.planner}{tag}"
     if args.told_wind is not None and args.knowledge != "wind":
         ap.error("--told-wind changes only what --knowledge wind is told")
-    estimator: Any = args.method
+    estimator: Any = method.estimator
     if args.told_wind is not None:
         from dgse.estimators.registry import get_estimator
 
-        estimator = ToldWind(get_estimator(args.method, **est_opts), args.told_wind)
+        estimator = ToldWind(get_estimator(method.estimator, **est_opts), args.told_wind)
     result = run_trials(
         cases,
         estimator,
-        "utility",
+        method.planner,
         method=args.method,
         trials=args.trials,
         seed=args.seed,
-        planner_options=planner_opts,
+        planner_options=method.planner_options,
         estimator_options=est_opts,
         knowledge=args.knowledge,
         steps=args.steps,
@@ -461,7 +347,6 @@ def run(argv: list[str]) -> None:
         for trial in case["trials"]:
             trial.pop("steps", None)
     result["stops"] = stop_quality(result)
-    result["settings"]["rule"] = args.rule
     result["settings"]["set"] = args.set
     result["settings"]["estimator_options"] = est_opts
     result["settings"]["told_wind"] = args.told_wind
@@ -510,18 +395,16 @@ def step_time(argv: list[str]) -> None:
     ap.add_argument("--knowledge", choices=("openings", "map"), default="openings")
     args = ap.parse_args(argv)
     d = search_cases(args.out, "test", args.cases)
+    method = resolve("dgse-phys", args.knowledge, search=True)
     rows = []
     for path in sorted(d.glob("*.npz")):
         res = run_trials(
             path,
-            "dgse-phys",
-            "utility",
+            method.estimator,
+            method.planner,
             trials=1,
-            planner_options={
-                "stop.min_observations": 5,
-                **PRESETS["dgse-phys"].planner_options_at(args.knowledge),
-            },
-            estimator_options=PRESETS["dgse-phys"].estimator_options_at(args.knowledge, search=True),
+            planner_options=method.planner_options,
+            estimator_options=method.estimator_options,
             knowledge=args.knowledge,
             steps=True,
         )
@@ -542,7 +425,9 @@ def step_time(argv: list[str]) -> None:
     out = {
         "cores": os.cpu_count(),
         "load_average_at_end": os.getloadavg(),
-        "estimator_options": PRESETS["dgse-phys"].estimator_options_at(args.knowledge, search=True),
+        "estimator_options": method.estimator_options,
+        "planner": method.planner,
+        "planner_options": method.planner_options,
         "knowledge": args.knowledge,
         "episodes": rows,
         # every step after each episode's first, pooled over the episodes
@@ -579,65 +464,6 @@ def speed(argv: list[str]) -> None:
     write_text(path, json.dumps(out, indent=1) + "\n")
     print(json.dumps(out["summary"]))
     print(f"wrote {path}")
-
-
-#: The disk radii (m) of the deadline estimates ``deadline`` scores.
-DEADLINE_RADII = (0.5, 1.0, 2.0)
-
-
-def deadline_row(case: Case, row: dict) -> dict:
-    """Every point estimate's error of one deadline episode's rebuilt final belief."""
-    from dgse.planning.planners import Deadline, UtilityPlanner
-
-    obs = step_observations(row["steps"])
-    est = map_estimator_at_end(case, obs, **PRESETS["dgse-phys"].estimator_options_at("map", search=True))
-    belief = est.estimate(case.occupancy, case.resolution, obs)
-    sx, sy = (float(v) for v in case.source)
-
-    def error(xy: tuple[float, float]) -> float:
-        return math.hypot(xy[0] - sx, xy[1] - sy)
-
-    i, j = belief.most_likely_cell()
-    out = {
-        "journal_error_m": row["error_m"],
-        "mean": error(belief.source_estimate()),
-        "mode": error(((j + 0.5) * case.resolution, (i + 0.5) * case.resolution)),
-        "wind_misfit": belief.info["wind_misfit"],
-    }
-    for r in DEADLINE_RADII:
-        planner = UtilityPlanner(deadline=Deadline(estimate_radius_m=r))
-        out[f"disk{r:g}m"] = error(planner.declare(belief, True))
-    # the search's own posterior mean: what it declared, unless it declared a disk's centre
-    # (deadline.estimate_radius_m), when its journal row records the mean beside
-    searched = row.get("end_errors_m", {}).get("mean", row["error_m"])
-    if abs(out["mean"] - searched) > 1e-6:
-        raise SystemExit(f"rebuilt mean {out['mean']:.3f} m off, the search's {searched:.3f} m")
-    return out
-
-
-def deadline(argv: list[str]) -> None:
-    """``deadline``: what a search should declare when it ends at its deadline (module doc)."""
-    ap = _parser("deadline", "what a search at knowledge map should declare when it ends at its deadline")
-    ap.add_argument("journals", type=Path, nargs="+", help="search journals written with --steps")
-    ap.add_argument("-o", "--out", type=Path, required=True)
-    args = ap.parse_args(argv)
-    rows = {}
-    for name, (case, row) in sorted(journal_episodes(args.journals).items()):
-        if row["reason"] != "deadline":
-            continue
-        rows[name] = deadline_row(case, row)
-        print(name, {k: round(v, 2) for k, v in rows[name].items()}, flush=True)
-    keys = ["mean", "mode", *(f"disk{r:g}m" for r in DEADLINE_RADII)]
-    summary = {
-        k: {
-            "within_2m": sum(r[k] <= SUCCESS_M for r in rows.values()),
-            "error_m_mean": float(np.mean([r[k] for r in rows.values()])) if rows else None,
-        }
-        for k in keys
-    }
-    summary["deadline_episodes"] = len(rows)
-    write_text(args.out, json.dumps({"summary": summary, "episodes": rows}, indent=1))
-    print(json.dumps(summary))
 
 
 #: The wind readings of an episode's start ``misfit`` proposes openings from.
@@ -732,98 +558,6 @@ def misfit(argv: list[str]) -> None:
     print(json.dumps(summary))
 
 
-#: Radius (m) of ``stops``'s agreement and network-mass statistics.
-RADIUS_M = 1.0
-#: Hypotheses at least this heavy are counted as weighty.
-WEIGHTY = 0.01
-
-
-def stop_row(case: Case, row: dict[str, Any], network: Any) -> dict[str, Any]:
-    """The statistics of the module doc for one episode's stop."""
-    from dgse.planning.planners import mass_around, mass_within
-    from dgse.world.grid import Grid
-
-    obs = step_observations(row["steps"])
-    est = map_estimator_at_end(case, obs, **PRESETS["dgse-phys"].estimator_options_at("map", search=True))
-    belief = est.estimate(case.occupancy, case.resolution, obs)
-    mx, my = belief.source_estimate()
-    sx, sy = (float(v) for v in case.source)
-    if abs(math.hypot(mx - sx, my - sy) - row["error_m"]) > 1e-6:
-        raise SystemExit(
-            f"{row['case']}: rebuilt mean {math.hypot(mx - sx, my - sy):.3f} m off, "
-            f"the search's {row['error_m']:.3f} m"
-        )
-    grid = Grid(belief.shape, case.resolution)
-    i, j = belief.most_likely_cell()
-    mode = grid.center_of(i, j)
-    hyps = belief.info["hypotheses"]
-    weights = np.array([h["weight"] for h in hyps])
-    agree = sum(
-        h["weight"]
-        for h in hyps
-        if h["source_mode_xy"] is not None and math.dist(h["source_mode_xy"], mode) <= RADIUS_M
-    )
-    net = network.estimate(case.occupancy, case.resolution, obs)
-    net_mode = grid.center_of(*net.most_likely_cell())
-    net_disks = mass_within(net.source_probs, case.resolution, RADIUS_M)
-    return {
-        "error_m": row["error_m"],
-        "within_2m": row["error_m"] <= SUCCESS_M,
-        "readings": len(obs),
-        "search_time_s": row["search_time_s"],
-        "max_weight": float(weights.max()),
-        "weighty_hypotheses": int((weights >= WEIGHTY).sum()),
-        "agreement": float(agree),
-        "wind_misfit": belief.info["wind_misfit"],
-        "gas_misfit": belief.info["gas_misfit"],
-        "network_mass_1m": mass_around(net.source_probs, case.resolution, (i, j), RADIUS_M),
-        "network_peak_mass_1m": float(net_disks[case.occupancy == 0].max()),
-        "network_mode_m": math.dist(net_mode, mode),
-        "network_error_m": math.dist(net.source_estimate(), (sx, sy)),
-    }
-
-
-def stops(argv: list[str]) -> None:
-    """``stops``: what a mass stop at ``map`` knew when it fired (module doc)."""
-    from dgse.estimators.registry import get_estimator
-
-    ap = _parser("stops", "what a mass stop at knowledge map knew when it fired")
-    ap.add_argument("journals", type=Path, nargs="+", help="search journals written with --steps")
-    ap.add_argument("-o", "--out", type=Path, required=True)
-    args = ap.parse_args(argv)
-    network = get_estimator("dgse-s", model="default", seed=0, dtype="auto", channels_last=True)
-    rows: dict[str, dict[str, Any]] = {}
-    for name, (case, row) in sorted(journal_episodes(args.journals).items()):
-        if row["reason"] != "converged":
-            continue
-        rows[name] = stop_row(case, row, network)
-        print(
-            name, {k: round(v, 3) if isinstance(v, float) else v for k, v in rows[name].items()}, flush=True
-        )
-    right = [r for r in rows.values() if r["within_2m"]]
-    wrong = [r for r in rows.values() if not r["within_2m"]]
-    keys = [
-        "readings",
-        "max_weight",
-        "agreement",
-        "wind_misfit",
-        "gas_misfit",
-        "network_mass_1m",
-        "network_peak_mass_1m",
-        "network_mode_m",
-    ]
-    summary: dict[str, Any] = {"mass_stops": len(rows), "within_2m": len(right)}
-    for key in keys:
-        summary[key] = {
-            "right": [float(np.min([r[key] for r in right])), float(np.max([r[key] for r in right]))]
-            if right
-            else None,
-            "wrong": sorted(float(r[key]) for r in wrong),
-        }
-    write_text(args.out, json.dumps({"summary": summary, "stops": rows}, indent=1) + "\n")
-    print(json.dumps(summary))
-
-
 _parser = partial(command_parser, "search.py")
 
 
@@ -833,9 +567,7 @@ COMMANDS: dict[str, Callable[[list[str]], None]] = {
     "cases": cases,
     "step-time": step_time,
     "speed": speed,
-    "deadline": deadline,
     "misfit": misfit,
-    "stops": stops,
 }
 
 

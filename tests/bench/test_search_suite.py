@@ -120,6 +120,13 @@ def test_dgse_phys_plans_per_knowledge_level():
     at_openings = phys.planner_options_at("openings")
     assert "deadline.estimate_radius_m" not in at_openings
     assert "1 m disk" in _level_extras("map") and "disk" not in _level_extras("openings")
+    # the report names the planner and the stop the preset runs, as the planner states them
+    from dgse.bench.search import _phys_planner_words
+    from dgse.planning.planners import get_planner
+
+    words = _phys_planner_words("openings")
+    assert words.startswith("information planner (") and get_planner("info").describe_stop() in words
+    assert "5th reading" in words and "60 s before the time limit" in words
     # and the estimator options the map searches were measured with, there only
     assert phys.estimator_options_at("map", search=True)["evidence.effective_readings"] == 30.0
     assert phys.estimator_options_at("openings", search=True) == {

@@ -11,6 +11,7 @@ import torch
 
 from dgse.errors import InputDataError
 from dgse.estimators.dgse import DGSEEstimator
+from dgse.planning.information import InformationPlanner, InformationStop
 from dgse.planning.paths import graph_for
 from dgse.planning.planners import Deadline, PlannerBase, StopRule, UtilityPlanner
 from dgse.search.episode import run_episode
@@ -76,16 +77,19 @@ def test_no_gas_ends_at_the_time_limit():
     assert none.estimate_xy == pytest.approx(r.estimate_xy)
 
 
+def _deadline_only(**deadline) -> InformationPlanner:
+    """The information planner with a stop that never passes: only its deadline ends a search."""
+    return InformationPlanner(stop=InformationStop(radius_m=0.01, level=1.0), deadline=Deadline(**deadline))
+
+
 def test_deadline_stop_ends_before_the_limit():
     """deadline.margin_s: the search that would time out declares its estimate instead."""
     case = corridor_case(gas=False)
-    r = run_episode(
-        case, UniformEstimator(), UtilityPlanner(deadline=Deadline(margin_s=10.0)), rng=2, time_limit=100.0
-    )
+    r = run_episode(case, UniformEstimator(), _deadline_only(margin_s=10.0), rng=2, time_limit=100.0)
     assert r.reason == "deadline" and r.terminated
     assert 90.0 <= r.search_time_s < 100.0
     # deadline.estimate_radius_m: the declared source, not the belief's mean (which the steps keep)
-    planner = UtilityPlanner(deadline=Deadline(margin_s=10.0, estimate_radius_m=0.3))
+    planner = _deadline_only(margin_s=10.0, estimate_radius_m=0.3)
     d = run_episode(case, UniformEstimator(), planner, rng=2, time_limit=100.0)
     assert d.reason == "deadline" and d.steps[-1].estimate_xy == pytest.approx(r.estimate_xy)
     assert d.estimate_xy != pytest.approx(r.estimate_xy)
@@ -95,24 +99,6 @@ def test_deadline_stop_ends_before_the_limit():
     assert r.end_errors_m["mean"] == pytest.approx(r.error_m) == pytest.approx(d.end_errors_m["mean"])
     assert {"mean", "mode", "disk0.5m", "local1m"} <= set(d.end_errors_m)
     assert d.to_dict()["end_errors_m"] == d.end_errors_m
-
-
-def test_a_stop_in_clean_air_is_held_and_recorded():
-    """confirm_sigmas: a sharp mode where only zeros were read is no stop; the trial says
-    which stops were held and what the first would have reported."""
-    case = corridor_case(gas=False)
-    est = PeakEstimator(sigma=0.05, threshold=-1.0)  # peaked at the first zero
-    kw = {"start": (5, 2), "rng": 2, "time_limit": 40.0}
-    plain = run_episode(case, est, UtilityPlanner(deadline=Deadline(margin_s=4.0)), **kw)
-    assert plain.reason == "converged" and plain.n_steps == 1 and not plain.steps[0].held
-    confirm = StopRule(confirm_radius_m=0.5, confirm_readings=1, confirm_sigmas=2.0)
-    r = run_episode(case, est, UtilityPlanner(stop=confirm, deadline=Deadline(margin_s=4.0)), **kw)
-    assert r.reason == "deadline" and r.n_steps > 3
-    assert all(s.held for s in r.steps[:-1]) and not r.steps[-1].held  # the deadline stop is no held one
-    d = r.to_dict(steps=True)
-    assert d["held_stops"] == r.n_steps - 1 and d["steps"][0]["held"]
-    assert d["first_held_error_m"] == pytest.approx(plain.error_m)
-    assert plain.to_dict()["held_stops"] == 0 and plain.to_dict()["first_held_error_m"] is None
 
 
 def test_seeding_compute_time_and_downsampled_records():
@@ -277,3 +263,33 @@ def test_readings_on_the_way_with_the_utility_planner_and_bad_rates():
     for bad in (0.0, -2.0, math.nan):
         with pytest.raises(InputDataError, match="sample_rate_hz must be a positive number"):
             run_episode(case, UniformEstimator(), UtilityPlanner(), sample_rate_hz=bad, **kw)
+
+
+@pytest.mark.parametrize(
+    ("method", "cells", "estimate"),
+    [
+        ("dgse-s", [(5, 2), (1, 2), (3, 5), (3, 9), (0, 7), (0, 11), (1, 13), (1, 15)], (1.55, 0.286465)),
+        ("dgse-phys", [(5, 2), (4, 2), (3, 2), (2, 2), (1, 2)], (0.486049, 0.515778)),
+    ],
+)
+def test_the_presets_planners_keep_their_searches(method, cells, estimate):
+    """Each preset's planner with its options on a fixed noise-free search: the cells measured
+    and the declared source are pinned, so a change of the utility planner's entropy rule or of
+    the information planner's choice or stop shows here."""
+    from dgse.planning.planners import get_planner
+    from dgse.presets import resolve
+
+    run = resolve(method, "openings", search=True)
+    planner = get_planner(run.planner, **run.planner_options)
+    r = run_episode(
+        corridor_case(),
+        PeakEstimator(adaptive=True),
+        planner,
+        start=(5, 2),
+        rng=4,
+        noise_params=NoiseParams.zero(),
+        time_limit=400,
+    )
+    assert r.reason == "converged"
+    assert [tuple(int(v) for v in s.cell) for s in r.steps] == cells
+    assert r.estimate_xy == pytest.approx(estimate, abs=1e-6)

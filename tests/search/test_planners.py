@@ -20,7 +20,6 @@ from dgse.planning.planners import (
     UtilityWeights,
     disk_estimate,
     get_planner,
-    mass_near_mode,
     mass_within,
     planner_names,
     point_estimates,
@@ -37,14 +36,6 @@ def _belief(occ, probs, res=1.0, wind_var=None, conc_var=None) -> Belief:
     if conc_var is not None:
         kw.update(log_conc_mean=np.zeros((H, W)), log_conc_var=conc_var)
     return Belief(occ, res, normalize_source_probs(probs, occ), **kw)
-
-
-def _peaked_room() -> tuple[Belief, FreeSpaceGraph]:
-    """A 5 x 5 m empty room (0.5 m cells) and a belief sure of its centre cell (5, 5)."""
-    occ = np.zeros((10, 10), np.uint8)
-    peaked = np.zeros((10, 10))
-    peaked[5, 5] = 1.0
-    return _belief(occ, peaked, res=0.5), FreeSpaceGraph(occ, 0.5)
 
 
 def _history(graph, cells=()) -> SearchHistory:
@@ -145,88 +136,6 @@ def test_min_observations_delays_the_entropy_test():
             UtilityPlanner(stop=StopRule(min_observations=bad))
 
 
-def test_a_stop_needs_readings_near_the_mode():
-    """stop.confirm_radius_m: a confident mode nobody measured at is visited before the stop."""
-    belief, g = _peaked_room()
-    planner = UtilityPlanner(stop=StopRule(confirm_radius_m=1.0, confirm_readings=2))
-    far = _history(g, [(0, 0), (0, 1), (9, 9)])
-    assert UtilityPlanner().should_stop(belief, far)  # the paper's rule stops from afar
-    assert not planner.should_stop(belief, far)
-    # the next goal is the mode itself (unmeasured), then the nearest unmeasured cell to it
-    assert planner.next_goal(belief, (0, 1), g.distances_from((0, 1)), far) == (5, 5)
-    one = _history(g, [(0, 0), (5, 5)])
-    assert not planner.should_stop(belief, one)
-    goal = planner.next_goal(belief, (5, 5), g.distances_from((5, 5)), one)
-    assert goal is not None and max(abs(goal[0] - 5), abs(goal[1] - 5)) == 1
-    two = _history(g, [(0, 0), (5, 5), (5, 7)])  # (5, 7) is 1.0 m from the mode
-    assert planner.should_stop(belief, two)
-    # without a confident belief the rule changes nothing
-    flat = _belief(belief.occupancy, np.ones((10, 10)), res=0.5)
-    assert not planner.should_stop(flat, two)
-    assert planner.next_goal(flat, (0, 0), g.distances_from((0, 0)), far) == UtilityPlanner().next_goal(
-        flat, (0, 0), g.distances_from((0, 0)), far
-    )
-    for bad in ({"confirm_radius_m": 0.0}, {"confirm_radius_m": math.nan}, {"confirm_readings": 0}):
-        with pytest.raises(InputDataError, match=r"stop\.confirm"):
-            UtilityPlanner(stop=StopRule(**bad))
-
-
-def test_a_stop_can_need_gas_above_the_noise_floor_near_the_mode():
-    """stop.confirm_sigmas: readings near the mode count only above that many noise floors."""
-    belief, g = _peaked_room()
-    belief.info["noise_floor_ppm"] = 10.0
-    planner = UtilityPlanner(stop=StopRule(confirm_radius_m=1.0, confirm_readings=1, confirm_sigmas=2.0))
-    h = _history(g, [(0, 0), (5, 5), (5, 6)])
-    h.step = 3
-    h.observations.gas[:] = [500.0, 0.0, 15.0]  # high far away; near the mode: a zero and 1.5 floors
-    assert UtilityPlanner(stop=StopRule(confirm_radius_m=1.0, confirm_readings=1)).should_stop(belief, h)
-    assert not planner.should_stop(belief, h)
-    assert planner.stop_held(h)
-    goal = planner.next_goal(belief, (5, 6), g.distances_from((5, 6)), h)
-    assert goal is not None and goal not in ((5, 5), (5, 6))
-    assert np.hypot(goal[0] - 5, goal[1] - 5) * 0.5 <= 1.0
-    h.observations.gas[2] = 25.0  # 2.5 floors
-    assert planner.should_stop(belief, h) and not planner.stop_held(h)
-    # a belief that states no noise floor: any reading above 0 ppm counts
-    del belief.info["noise_floor_ppm"]
-    h.observations.gas[2] = 0.0
-    assert not planner.should_stop(belief, h)
-    h.observations.gas[1] = 0.5
-    assert planner.should_stop(belief, h)
-    # a flat belief holds nothing; other planners hold nothing
-    flat = _belief(belief.occupancy, np.ones((10, 10)), res=0.5)
-    assert not planner.should_stop(flat, h) and not planner.stop_held(h)
-    assert not PlannerBase().stop_held(h)
-    for bad in (-1.0, math.inf, math.nan):
-        with pytest.raises(InputDataError, match=r"stop\.confirm_sigmas"):
-            UtilityPlanner(stop=StopRule(confirm_sigmas=bad))
-
-
-def test_a_stop_waits_for_a_flow_that_explains_the_wind():
-    """stop.max_wind_misfit: a sharp posterior on a flow that misses the wind readings holds the stop."""
-    belief, g = _peaked_room()
-    h = _history(g, [(0, 0), (5, 5)])
-    h.step = 2
-    planner = UtilityPlanner(stop=StopRule(max_wind_misfit=0.7))
-    assert planner.should_stop(belief, h)  # states no misfit: not held
-    belief.info["wind_misfit"] = 0.8
-    assert not planner.should_stop(belief, h)
-    assert planner.stop_held(h)
-    assert UtilityPlanner().should_stop(belief, h)  # the option off: the paper's stop
-    belief.info["wind_misfit"] = 0.6
-    assert planner.should_stop(belief, h) and not planner.stop_held(h)
-    belief.info["wind_misfit"] = math.nan  # unknown fit: not a reason to trust the flow
-    assert not planner.should_stop(belief, h)
-    # the deadline still ends a held search
-    h.time_limit_s, h.time_s = 100.0, 95.0
-    assert UtilityPlanner(stop=StopRule(max_wind_misfit=0.7), deadline=Deadline(margin_s=10.0)).should_stop(
-        belief, h
-    )
-    for bad in (0.0, -1.0, math.inf, math.nan):
-        with pytest.raises(InputDataError, match=r"stop\.max_wind_misfit"):
-            UtilityPlanner(stop=StopRule(max_wind_misfit=bad))
-
-
 def test_a_deadline_stop_can_declare_the_disk_with_the_most_mass():
     """deadline.estimate_radius_m: a split posterior's mean lies between its parts; the disk doesn't."""
     occ = np.zeros((20, 20), np.uint8)
@@ -234,17 +143,17 @@ def test_a_deadline_stop_can_declare_the_disk_with_the_most_mass():
     p[10, 2] = 0.45  # one sharp cell on the west
     p[9:12, 16:19] = 0.55 / 9  # a broader blob on the east holding more
     belief = _belief(occ, p, res=0.1)
-    plain = UtilityPlanner()
-    disk = UtilityPlanner(deadline=Deadline(estimate_radius_m=0.15))
+    disk = Deadline(estimate_radius_m=0.15)
     mean = belief.source_estimate()
-    assert plain.declare(belief, True) == mean
-    assert disk.declare(belief, False) == mean  # a mass stop declares the mean
+    assert Deadline().declare(belief, True) == mean
+    assert disk.declare(belief, False) == mean  # a stop before the deadline declares the mean
     x, y = disk.declare(belief, True)
     assert (x, y) == pytest.approx((1.75, 1.05))  # the east blob's centre cell
     assert abs(mean[0] - 1.0) < 0.1  # the mean: between the two, where neither is
-    assert PlannerBase().declare(belief, True) == mean  # other planners: the mean
+    assert PlannerBase().declare(belief, True) == mean  # planners without a deadline: the mean
+    assert UtilityPlanner().declare(belief, True) == mean
     with pytest.raises(InputDataError, match=r"deadline\.estimate_radius_m"):
-        UtilityPlanner(deadline=Deadline(estimate_radius_m=-1.0))
+        Deadline(estimate_radius_m=-1.0)
     # every reading of it at once: the mode is the sharp west cell, 0.5-2 m disks the east blob
     est = point_estimates(belief)
     assert est["mean"] == mean and est["mode"] == pytest.approx((0.25, 1.05))
@@ -259,24 +168,6 @@ def test_a_deadline_stop_can_declare_the_disk_with_the_most_mass():
     assert est["local2m"] == pytest.approx(mean, abs=1e-6)
 
 
-def test_mass_near_the_mode_stop_rule():
-    """stop.mass_radius_m: stop once the posterior holds stop.mass_level within the radius of its mode."""
-    occ = np.zeros((20, 20), np.uint8)
-    p = np.full((20, 20), 1e-6)
-    p[10, 10] = 0.5
-    p[10, 11] = p[10, 9] = 0.2  # 0.9 within 0.1 m of the mode (cells of 0.1 m)
-    p[2, 2] = 0.1  # 0.1 far away
-    belief = _belief(occ, p, res=0.1)
-    assert mass_near_mode(belief, 0.1) == pytest.approx(0.9, abs=1e-3)
-    assert mass_near_mode(belief, 0.05) == pytest.approx(0.5, abs=1e-3)
-    assert UtilityPlanner(stop=StopRule(mass_radius_m=0.1, mass_level=0.85)).should_stop(belief, None)
-    assert not UtilityPlanner(stop=StopRule(mass_radius_m=0.1, mass_level=0.95)).should_stop(belief, None)
-    assert not UtilityPlanner(stop=StopRule(mass_radius_m=0.05, mass_level=0.85)).should_stop(belief, None)
-    for bad in ({"mass_radius_m": -1.0}, {"mass_level": 0.0}, {"mass_level": 1.5}):
-        with pytest.raises(InputDataError, match=r"stop\.mass_"):
-            UtilityPlanner(stop=StopRule(**bad))
-
-
 def test_mass_within_is_the_disk_sum():
     rng = np.random.default_rng(3)
     p = rng.random((15, 12))
@@ -287,102 +178,49 @@ def test_mass_within_is_the_disk_sum():
         assert got[i, j] == pytest.approx(p[disk].sum(), rel=1e-9, abs=1e-12)
 
 
-def test_disk_source_term_visits_a_broad_region():
-    """weights.source_radius_m: a room the posterior covers thinly beats a peak already measured beside.
-
-    Issue 12's timeouts: the posterior held 97 % in a room nobody had measured in, a few
-    1e-4 per cell, while the robot kept measuring beside a mode of 0.5 % per cell.
-    """
-    occ = np.zeros((30, 60), np.uint8)
-    p = np.zeros((30, 60))
-    p[:, 35:] = 0.9 / (30 * 25)  # a thin, broad region on the right
-    p[15, 10] = 0.05  # a sharp peak on the left, 5 % of the mass
-    p[14:17, 9:12] += 0.05 / 9
-    belief = _belief(occ, p, res=0.1)
-    graph = FreeSpaceGraph(occ, 0.1)
-    robot = (15, 12)
-    d = graph.distances_from(robot)
-    h = _history(graph, [(15, 12)])
-    paper = UtilityPlanner(weights=UtilityWeights(w_w=0.0, w_c=0.0)).next_goal(belief, robot, d, h)
-    disk = UtilityPlanner(weights=UtilityWeights(w_w=0.0, w_c=0.0, source_radius_m=1.0)).next_goal(
-        belief, robot, d, h
-    )
-    assert paper[1] < 20  # the paper's term: the peak
-    assert disk[1] >= 35  # the disk's mass: the broad region
-    with pytest.raises(InputDataError, match=r"weights\.source_radius_m"):
-        UtilityPlanner(weights=UtilityWeights(source_radius_m=0.0))
-
-
-def test_measured_neighbourhoods_lose_their_variance_pull():
-    """A sharp plume edge the model cannot place keeps a high predicted variance.
-
-    On a 1 x 30 corridor of 0.1 m cells, the edge (cells 3-12) has variance 4, the far
-    end (cells 20-29) 1, the source posterior is flat.  With cells 3-11 measured, the
-    paper's terms go on to cell 12 of the edge; ``weights.revisit_radius_m`` divides its pull by
-    the neighbours measured within 0.5 m and sends the robot to the far end.
-    """
-    occ = np.zeros((1, 30), np.uint8)
-    g = FreeSpaceGraph(occ, 0.1)
-    cv = np.zeros((1, 30))
-    cv[0, 3:13] = 4.0
-    cv[0, 20:] = 1.0
-    b = _belief(occ, np.ones((1, 30)), res=0.1, conc_var=cv)
-    hist = _history(g, [(0, j) for j in range(3, 12)])
-    d = g.distances_from((0, 11))
-    assert UtilityPlanner().next_goal(b, (0, 11), d, hist) == (0, 12)
-    planner = UtilityPlanner(weights=UtilityWeights(revisit_radius_m=0.5))
-    goal = planner.next_goal(b, (0, 11), d, hist)
-    assert goal is not None and goal[1] >= 20
-    # the discount: 1 / (1 + measured cells within 0.5 m)
-    u = planner.utility(b, d, hist)
-    u0 = UtilityPlanner().utility(b, d)
-    near12 = sum(abs(j - 12) <= 5 for j in range(3, 12))
-    src = math.exp(-0.1 * 0.1) * 100.0 * b.source_probs[0, 12]
-    assert u[0, 12] - src == pytest.approx((u0[0, 12] - src) / (1 + near12), rel=1e-9)
-    # without readings nothing changes
-    np.testing.assert_array_equal(planner.utility(b, d, _history(g)), u0)
-    with pytest.raises(InputDataError, match=r"weights\.revisit_radius_m"):
-        UtilityPlanner(weights=UtilityWeights(revisit_radius_m=-1.0))
-
-
-def test_deadline_stop():
-    """deadline.margin_s: stop with the current estimate once the time left is below the margin."""
+def test_deadline_is_reached_within_its_margin_and_the_utility_planner_has_none():
+    """Deadline.margin_s: less than the margin (at most a tenth of the limit) left of the time
+    limit; the utility planner (the paper's rule) has no deadline stop."""
     occ = np.zeros((10, 10), np.uint8)
     belief = _belief(occ, np.ones((10, 10)))  # flat: the entropy test never passes
     graph = FreeSpaceGraph(occ, 0.1)
     h = _history(graph, [(1, 1)] * 6)
     h.step, h.time_limit_s = 6, 2000.0
-    pl = UtilityPlanner(stop=StopRule(min_observations=5), deadline=Deadline(margin_s=60.0))
+    deadline = Deadline(margin_s=60.0)
     h.time_s = 1900.0
-    assert not pl.should_stop(belief, h)
+    assert not deadline.reached(h)
     h.time_s = 1945.0
-    assert pl.should_stop(belief, h) and pl.deadline_reached(h)
-    assert not UtilityPlanner(stop=StopRule(min_observations=5)).should_stop(
-        belief, h
-    )  # the paper's rule: no deadline
-    h.step = 3
-    assert not pl.should_stop(belief, h)  # min_observations still holds the stop back
-    h.step, h.time_limit_s, h.time_s = 6, 60.0, 10.0
-    assert not pl.should_stop(belief, h)  # a short limit: at most a tenth of it is the margin
+    assert deadline.reached(h) and not Deadline().reached(h) and not deadline.reached(None)
+    utility = UtilityPlanner(stop=StopRule(min_observations=5))
+    assert not utility.should_stop(belief, h) and not utility.deadline_reached(h)
+    h.time_limit_s, h.time_s = 60.0, 10.0
+    assert not deadline.reached(h)  # a short limit: at most a tenth of it is the margin
     h.time_s = 55.0
-    assert pl.should_stop(belief, h)
+    assert deadline.reached(h)
+    h.time_limit_s = math.inf
+    assert not deadline.reached(h)
     with pytest.raises(InputDataError, match=r"deadline\.margin_s"):
-        UtilityPlanner(deadline=Deadline(margin_s=-1.0))
+        Deadline(margin_s=-1.0)
 
 
 def test_registry():
     assert "utility" in planner_names()
     p = get_planner("utility", **{"stop.eta": 0.75})
     assert isinstance(p, UtilityPlanner) and isinstance(p, Planner) and p.name == "utility"
-    assert p.stop == StopRule(eta=0.75) and p.weights == UtilityWeights() and p.deadline == Deadline()
+    assert p.stop == StopRule(eta=0.75) and p.weights == UtilityWeights()
     with pytest.raises(UnsupportedError, match=r"known planners: .*utility"):
         get_planner("nope")
     with pytest.raises(
         InputDataError, match=r"unknown planner .utility. option\(s\) bogus; known: .*stop\.eta"
     ):
         get_planner("utility", bogus=1)
-    with pytest.raises(InputDataError, match=r"option\(s\) stop\.etta; known: stop\.confirm_radius_m, "):
+    known = r"known: stop\.eta, stop\.min_observations$"
+    with pytest.raises(InputDataError, match=r"option\(s\) stop\.etta; " + known):
         get_planner("utility", **{"stop.etta": 0.7})
+    # the paper's rule and nothing else: no mass stop, no deadline
+    for key in ("stop.mass_radius_m", "weights.source_radius_m", "deadline.margin_s"):
+        with pytest.raises(InputDataError, match=rf"option\(s\) {key}; known"):
+            get_planner("utility", **{key: 1.0})
     with pytest.raises(InputDataError, match=r"option stop\.eta='high' must be a number"):
         get_planner("utility", **{"stop.eta": "high"})
     with pytest.raises(InputDataError, match=r"stop\.eta must lie in \[0, 1\]"):

@@ -162,11 +162,11 @@ def test_param_reaches_the_estimator_and_planner_has_no_short_form(peak, tmp_pat
     # --eta is the utility planner's stop.eta; -P dotted keys set its settings' fields
     assert settings["planner_options"] == {"stop.eta": 0.4}
     dotted = tmp_path / "d.json"
-    args = ("-P", "stop.mass_radius_m=0.5", "-P", "weights.w_d=0.2", "--json", dotted, "--no-progress")
+    args = ("-P", "stop.min_observations=2", "-P", "weights.w_d=0.2", "--json", dotted, "--no-progress")
     code, _, err = _run(capsys, cases, *PEAK, *args)
     assert code == 0, err
     planner_options = json.loads(dotted.read_text())["settings"]["planner_options"]
-    assert planner_options == {"stop.eta": 0.4, "stop.mass_radius_m": 0.5, "weights.w_d": 0.2}
+    assert planner_options == {"stop.eta": 0.4, "stop.min_observations": 2, "weights.w_d": 0.2}
     # --sample-rate: readings on the way, recorded in the settings and in each trial's counts
     moving = tmp_path / "m.json"
     code, _, err = _run(capsys, cases, *PEAK, "--sample-rate", "2", "--json", moving, "--no-progress")
@@ -271,8 +271,6 @@ def test_step_text_and_default_names():
     )
     info = get_planner("info").describe_stop()
     assert info == "95% of the source posterior lies within 2 m of its mean"
-    mass = get_planner("utility", **{"stop.mass_radius_m": 1.0}).describe_stop()
-    assert mass == "90% of the source posterior lies within 1 m of its mode"
     assert str(default_output("search", "my/model x", "utility")) == "dgse-out/search-my_model_x-utility.json"
 
 

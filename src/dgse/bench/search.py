@@ -16,14 +16,12 @@ Methods (estimator + planner, registry names):
   on the validation split, ``benchmarks/results/eta_validation.json``; the
   paper's 0.65 belongs to the paper's model), the entropy test only from the
   5th reading on (``stop.min_observations``: the networks never saw fewer);
-* **DGSE-phys** (``dgse-phys`` + ``utility``): the physics-guided estimator at the run's
-  knowledge level with the planner settings chosen for it on the validation split
-  (its preset, :data:`dgse.presets.PRESETS`: a stop on 90 % of the posterior within 1 m
-  instead of the entropy test, held until gas above the noise floor was read within 1 m of
-  the mode, a deadline stop, revisit damping; at ``map`` also stops held while no flow explains the
-  wind, a deadline stop declaring the heaviest 1 m disk) and the estimator options
-  chosen with them (at ``map`` also the gas evidence tempered as those
-  searches were measured);
+* **DGSE-phys** (``dgse-phys`` + ``info``): the physics-guided estimator at the run's
+  knowledge level with the information planner (its preset, :data:`dgse.presets.PRESETS`:
+  the reading with the most information about the source per second; a stop once 95 % of
+  the posterior lies within 2 m of its mean, or 60 s before the time limit; at ``map`` a
+  deadline stop declares the heaviest 1 m disk) and the estimator options chosen for its
+  searches (at ``map`` also the gas evidence tempered as those searches were measured);
 * **Dual-mode** (``dualmode`` + ``dualmode``): particle filter and the
   local/global information planner;
 * **GrGSL** (``grgsl`` + ``infotaxis``): GrGSL's posterior, Infotaxis moves
@@ -571,9 +569,7 @@ def _report_comparison(
         f"eta = {ETA_TUNED} (the value tuned for the shipped model on the validation split; the "
         f"paper's 0.65 belongs to the paper's model), the entropy test from the {MIN_SENSORS}th reading "
         f"on (the fewest the networks were trained with). DGSE-phys: the physics-guided estimator "
-        f"at the run's knowledge level ({ctx.knowledge!r}), utility planner with the settings "
-        f"chosen for it on the validation split (stop once 90 % of the posterior lies within 1 m "
-        f"of its mode, from the {MIN_SENSORS}th reading; a stop 60 s before the time limit"
+        f"at the run's knowledge level ({ctx.knowledge!r}), {_phys_planner_words(ctx.knowledge)}"
         f"{_level_extras(ctx.knowledge)}). "
         f"Baselines with their own planners: dual-mode "
         f"particle filter + dual-mode planner, GrGSL + Infotaxis, PMFS + PMFS planner, and Infotaxis "
@@ -736,6 +732,26 @@ def _report_process(
         f"{result.n_steps} steps.",
     )
     animate_episode(result, case, ctx.out / "search_process.gif", max_frames=ctx.pick(20, 4), dpi=60)
+
+
+def _phys_planner_words(level: str) -> str:
+    """The report's words for dgse-phys's planner at ``level`` (its stop test as the planner
+    states it, its minimum of readings and its deadline), up to the level's extras."""
+    from dgse.planning.planners import get_planner
+
+    p = PRESETS["dgse-phys"]
+    planner = get_planner(p.planner, **p.planner_options_at(level))
+    words = f"the {p.planner!r} planner ("
+    if p.planner == "info":
+        words = "information planner (the reading with the most information about the source per second; "
+    least = getattr(getattr(planner, "stop", None), "min_observations", 0)
+    words += f"stop once {planner.describe_stop()}"
+    if least:
+        words += f", from the {least}th reading"
+    margin = getattr(getattr(planner, "deadline", None), "margin_s", None)
+    if margin is not None:
+        words += f"; a stop {margin:g} s before the time limit"
+    return words
 
 
 def _level_extras(level: str) -> str:

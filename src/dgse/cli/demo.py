@@ -2,12 +2,12 @@
 
 1. draw a random multi-room scenario of the training distribution and solve
    its flow and one gas release with the built-in solver;
-2. run one active search (paper Algorithm 1) with the method for the
-   knowledge given (``--knowledge``; :data:`dgse.presets.DEFAULT_METHOD`: ``dgse-phys`` at
-   every level) and the utility planner (its search settings for dgse-phys,
-   the entropy test from the 5th reading on for a DGSE network given with
-   ``--method``), the robot starting at least 2 m from the source, showing
-   the step, the simulated clock, the entropy and the error as it goes;
+2. run one active search with the method for the knowledge given (``--knowledge``;
+   :data:`dgse.presets.DEFAULT_METHOD`: ``dgse-phys`` at every level) and its preset's
+   planner (:func:`dgse.presets.resolve`: the information planner for dgse-phys, the
+   utility planner of paper Algorithm 1 with the entropy test from the 5th reading on for
+   DGSE-S given with ``--method``), the robot starting at least 2 m from the source,
+   showing the step, the simulated clock, the entropy and the error as it goes;
 3. print the outcome and write the case figure, the final belief, the last
    search step and the animation of the search into the output folder.
 """

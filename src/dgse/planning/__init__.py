@@ -3,7 +3,8 @@
 * :mod:`~dgse.planning.paths`: the free-space move graph (shortest obstacle-free paths);
 * :mod:`~dgse.planning.planners`: the :class:`~dgse.planning.planners.Planner` protocol,
   :class:`~dgse.planning.planners.SearchHistory` (what a planner may know), the paper's
-  utility planner and the planner registry;
+  utility planner, the deadline stop (:class:`~dgse.planning.planners.Deadline`) and the
+  planner registry;
 * :mod:`~dgse.planning.information`: the information planner (``"info"``): what a reading
   would teach about the source, per second of travel and dwell.
 

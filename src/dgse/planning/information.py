@@ -29,8 +29,9 @@ Stop (:class:`InformationStop`): once ``stop.min_observations`` readings are in,
 stops when the posterior mass within ``stop.radius_m`` (the success radius of
 :mod:`dgse.search.metrics`) of the point it would declare (:meth:`InformationPlanner.declare`)
 reaches ``stop.level``: with a calibrated posterior that is the probability the search
-succeeds if it stops now.  A :class:`~dgse.planning.planners.Deadline` as the utility
-planner's ends it before the time limit.
+succeeds if it stops now.  A :class:`~dgse.planning.planners.Deadline` (``deadline.margin_s``,
+60 s by default) ends it before the time limit, declaring the posterior mean or, with
+``deadline.estimate_radius_m``, the centre of the heaviest disk of that radius.
 """
 
 from __future__ import annotations

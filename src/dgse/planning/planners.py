@@ -28,11 +28,9 @@ the same way.
 with ``(w_d, w_w, w_c, w_s) = (0.1, 0.25, 2.0, 100.0)`` and the termination
 ``H(pi_s) <= eta log N`` (``eta = 0.65``, ``N`` = the belief's candidate
 cells, i.e. the free cells of the map; the paper's "dimension of the source
-posterior").  Its settings are three objects (:class:`UtilityWeights`,
-:class:`StopRule`, :class:`Deadline`), each field settable by a dotted key
-(``-P stop.eta=0.75``); the defaults are the paper's rule, and the extensions
-(a mass stop, its confirmation, a deadline, ...) are off.  Decisions on what
-the paper leaves open:
+posterior").  Its settings are two objects (:class:`UtilityWeights`,
+:class:`StopRule`), each field settable by a dotted key (``-P stop.eta=0.75``);
+the defaults are the paper's rule.  Decisions on what the paper leaves open:
 
 * ``sigma_w^2 = var(u_x) + var(u_y)`` (the belief's ``wind_var`` summed over
   its two components), in (m/s)^2;
@@ -53,14 +51,15 @@ the paper leaves open:
   leaves nothing (a one-cell map), ``next_goal`` returns None;
 * ties (utilities equal to a relative ``1e-12``): the nearest cell by path
   length, then the lowest row-major index;
-* ``stop.confirm_radius_m`` (default None, the paper's rule): see :class:`StopRule`;
-  a posterior can be sharp on a spot nobody has measured at;
 * ``stop.min_observations`` (default 0, the paper's rule): the entropy test waits
   for that many readings.  A network trained on 5 to 300 readings (the
   paper's range, ``dgse.sensing.sensors.MIN_SENSORS``) has never seen fewer
   than 5, and the shipped DGSE-S can be confidently wrong after one
   (``benchmarks/training.py few-readings``).  ``dgse demo`` and the search benchmark
   pass ``MIN_SENSORS``.
+
+:class:`Deadline` is a stop before the time limit and what such a stop declares, for
+planners with a time budget (the information planner, :mod:`dgse.planning.information`).
 """
 
 from __future__ import annotations
@@ -89,8 +88,6 @@ __all__ = [
     "UtilityPlanner",
     "UtilityWeights",
     "get_planner",
-    "mass_around",
-    "mass_near_mode",
     "mass_within",
     "planner_names",
     "register_planner",
@@ -163,11 +160,6 @@ class Planner(Protocol):
         """
         ...
 
-    def stop_held(self, history: SearchHistory) -> bool:
-        """Whether the last :meth:`should_stop`, at this step, passed its stop test but held the
-        stop (the search goes on; episodes record where that happened)."""
-        ...
-
     def deadline_reached(self, history: SearchHistory) -> bool:
         """Whether a stop now is a deadline stop (the time budget is nearly spent), not a
         confident one; episodes end such a stop with reason ``"deadline"``."""
@@ -184,16 +176,12 @@ class Planner(Protocol):
 
 
 class PlannerBase:
-    """What a planner without these rules does: no held stops, no deadline stops, and the
-    belief's posterior mean as the declared source.  Planners derive from it and override
-    what they decide otherwise."""
+    """What a planner without these rules does: no deadline stops, and the belief's posterior
+    mean as the declared source.  Planners derive from it and override what they decide
+    otherwise."""
 
     def reset(self) -> None:
         """Nothing to forget."""
-
-    def stop_held(self, history: SearchHistory) -> bool:
-        """Never holds a stop."""
-        return False
 
     def deadline_reached(self, history: SearchHistory) -> bool:
         """Has no deadline stop."""
@@ -227,20 +215,6 @@ def _count(name: str, value: int, least: int) -> int:
     return int(value)
 
 
-def mass_near_mode(belief: Belief, radius_m: float) -> float:
-    """Source posterior mass within ``radius_m`` of the posterior's mode (cell centres)."""
-    return mass_around(belief.source_probs, belief.resolution, belief.most_likely_cell(), radius_m)
-
-
-def mass_around(probs: np.ndarray, resolution: float, cell: tuple[int, int], radius_m: float) -> float:
-    """The share of ``probs``'s mass within ``radius_m`` of cell ``cell``'s centre."""
-    p = np.asarray(probs, dtype=np.float64)
-    H, W = p.shape
-    ii, jj = np.ogrid[0:H, 0:W]
-    near = np.hypot(ii - cell[0], jj - cell[1]) * resolution <= radius_m + 1e-9
-    return float(p[near].sum() / max(float(p.sum()), 1e-300))
-
-
 def mass_within(probs: np.ndarray, resolution: float, radius_m: float) -> np.ndarray:
     """``float64 (H, W)``: the mass of ``probs`` within ``radius_m`` of each cell's centre (walls ignored)."""
     from scipy.signal import fftconvolve
@@ -261,26 +235,12 @@ class UtilityWeights(Settings):
         w_w: weight of the wind variance ``var(u_x) + var(u_y)``, (m/s)^-2.
         w_c: weight of the log-concentration variance.
         w_s: weight of the source term.
-        source_radius_m: None (the paper's term ``w_s pi_s,i``) or a radius, m: the source
-            term becomes ``w_s`` times the posterior mass within this distance of cell ``i``
-            (:func:`mass_within`).  A reading tests the sources around it, not one cell: a
-            posterior spread thinly over a whole room holds little per cell but much per
-            disk, and the paper's term leaves such a room unvisited while the robot keeps
-            measuring beside a mode it has already measured at.
-        revisit_radius_m: None (the paper's terms) or a radius, m: the wind and
-            concentration variance terms of a cell are divided by ``1 + k``, ``k`` the
-            cells already measured within this radius of it.  Where the model cannot fit
-            the readings (a sharp plume edge that no flow hypothesis puts in the right
-            place) the predicted variance stays high however often the robot measures
-            there; measured neighbourhoods lose that pull, the source term keeps its own.
     """
 
     w_d: float = 0.1
     w_w: float = 0.25
     w_c: float = 2.0
     w_s: float = 100.0
-    source_radius_m: float | None = None
-    revisit_radius_m: float | None = None
 
     def __post_init__(self) -> None:
         for k in ("w_d", "w_w", "w_c", "w_s"):
@@ -288,52 +248,21 @@ class UtilityWeights(Settings):
             if not (math.isfinite(v) and v >= 0):
                 raise InputDataError(f"weights.{k} must be finite and >= 0, got {v}")
             self._set(k, v)
-        self._set("source_radius_m", _radius_or_none("weights.source_radius_m", self.source_radius_m))
-        self._set("revisit_radius_m", _radius_or_none("weights.revisit_radius_m", self.revisit_radius_m))
 
 
 @dataclass(frozen=True)
 class StopRule(Settings):
     """When the search stops with its estimate: the entropy test ``H(pi_s) <= eta log N`` (``N``
-    the belief's free cells) or the mass test, and what holds a stop that passed.
+    the belief's free cells).
 
     Attributes:
         eta: the entropy test's threshold in [0, 1].
         min_observations: the stop test waits for this many readings (0: from the first, as
             the paper).
-        mass_radius_m: None (the entropy test) or a radius, m: the stop test becomes "the
-            posterior holds at least ``mass_level`` within this distance of its mode"; with
-            a calibrated posterior, that share of the stops lies within the radius of the
-            source, whatever the map's size (the entropy test's meaning depends on it).
-        mass_level: the posterior mass the mass test needs within ``mass_radius_m``, (0, 1].
-        confirm_radius_m: None (the paper's rule) or a radius, m: the search may stop only
-            once ``confirm_readings`` readings were taken within this distance of the
-            posterior's mode; while the test passes without them, the next goal is the
-            unmeasured cell nearest the mode.  A mode nobody has measured at is a guess
-            from afar (clipped noise in clean air can make one); measured at, the estimator
-            keeps it only if the readings there agree.
-        confirm_readings: readings near the mode the stop needs (with ``confirm_radius_m``).
-        confirm_sigmas: 0 (any reading counts) or a number: only readings above this many
-            times the belief's noise floor (``belief.info["noise_floor_ppm"]``; a belief that
-            states none: above 0 ppm) count towards ``confirm_readings``: a source nobody has
-            smelt near is a guess.
-        max_wind_misfit: None (no such test) or a number: the stop is held while the belief
-            states a ``wind_misfit`` above it (``belief.info["wind_misfit"]``: how much of the
-            wind readings the best flow hypothesis leaves unexplained, see
-            :func:`~dgse.posterior.mixture.relative_wind_misfit`; a belief that states none is
-            not held).  A posterior drawn on a flow that does not explain the wind can be
-            sharp and wrong; the search goes on (a deadline still ends it) until the
-            estimator finds a flow that does.
     """
 
     eta: float = 0.65
     min_observations: int = 0
-    mass_radius_m: float | None = None
-    mass_level: float = 0.9
-    confirm_radius_m: float | None = None
-    confirm_readings: int = 2
-    confirm_sigmas: float = 0.0
-    max_wind_misfit: float | None = None
 
     def __post_init__(self) -> None:
         eta = float(self.eta)
@@ -341,25 +270,87 @@ class StopRule(Settings):
             raise InputDataError(f"stop.eta must lie in [0, 1], got {self.eta}")
         self._set("eta", eta)
         self._set("min_observations", _count("stop.min_observations", self.min_observations, 0))
-        self._set("mass_radius_m", _radius_or_none("stop.mass_radius_m", self.mass_radius_m))
-        if not (0.0 < float(self.mass_level) <= 1.0):
-            raise InputDataError(f"stop.mass_level must lie in (0, 1], got {self.mass_level}")
-        self._set("mass_level", float(self.mass_level))
-        self._set("confirm_radius_m", _radius_or_none("stop.confirm_radius_m", self.confirm_radius_m))
-        self._set("confirm_readings", _count("stop.confirm_readings", self.confirm_readings, 1))
-        sig = float(self.confirm_sigmas)
-        if not (math.isfinite(sig) and sig >= 0):
-            raise InputDataError(
-                f"stop.confirm_sigmas must be a finite number >= 0, got {self.confirm_sigmas!r}"
-            )
-        self._set("confirm_sigmas", sig)
-        if self.max_wind_misfit is not None:
-            mm = float(self.max_wind_misfit)
-            if not (math.isfinite(mm) and mm > 0):
-                raise InputDataError(
-                    f"stop.max_wind_misfit must be a number > 0 or None, got {self.max_wind_misfit!r}"
-                )
-            self._set("max_wind_misfit", mm)
+
+
+@dataclass
+class UtilityPlanner(PlannerBase):
+    """The paper's utility planner with entropy termination (see the module docstring).
+
+    Args:
+        weights: the utility's weights (:class:`UtilityWeights`).
+        stop: the stop test (:class:`StopRule`).
+
+    Every field of these can be set by a dotted key (``get_planner("utility",
+    **{"stop.eta": 0.75})``, ``-P stop.eta=0.75``).  A search it plans ends at its stop test
+    or the time limit (no deadline stop) and declares the posterior mean.
+    """
+
+    weights: UtilityWeights = UtilityWeights()
+    stop: StopRule = StopRule()
+    name: str = field(default="utility", init=False)
+
+    def __post_init__(self) -> None:
+        for key, cls in (("weights", UtilityWeights), ("stop", StopRule)):
+            if not isinstance(getattr(self, key), cls):
+                raise InputDataError(f"{key} must be a {cls.__name__}, got {getattr(self, key)!r}")
+
+    def should_stop(self, belief: Belief, history: SearchHistory | None = None) -> bool:
+        """The entropy test ``H(pi_s) <= eta log N`` (``N`` the free cells); a one-cell map stops
+        at once.  Never before ``stop.min_observations`` readings (``history`` None: no minimum).
+        """
+        if history is not None and history.step < self.stop.min_observations:
+            return False
+        return belief.entropy() <= self.stop.eta * belief.max_entropy
+
+    def describe_stop(self) -> str:
+        """The entropy test's threshold."""
+        return f"the entropy is at most {self.stop.eta:g} of log N"
+
+    def utility(self, belief: Belief, distances: np.ndarray) -> np.ndarray:
+        """``float64 (H, W)`` utility ``U_i``; ``-inf`` on walls and unreachable cells."""
+        uw = self.weights
+        d = np.asarray(distances, dtype=np.float64)
+        if d.shape != belief.shape:
+            raise InputDataError(f"distances have shape {d.shape}, the belief {belief.shape}")
+        gain = uw.w_s * belief.source_probs
+        wind_var, conc_var = belief.wind_var_to_explore, belief.log_conc_var_to_explore
+        if wind_var is not None and uw.w_w:
+            gain = gain + uw.w_w * wind_var.sum(axis=0)
+        if conc_var is not None and uw.w_c:
+            gain = gain + uw.w_c * conc_var
+        ok = np.isfinite(d) & belief.free
+        u = np.full(belief.shape, -np.inf)
+        u[ok] = np.exp(-uw.w_d * d[ok]) * gain[ok]
+        return u
+
+    def next_goal(
+        self,
+        belief: Belief,
+        robot_cell: Cell,
+        distances: np.ndarray,
+        history: SearchHistory | None = None,
+    ) -> Cell | None:
+        """``argmax_i U_i`` over the candidate cells (see the module docstring), or None if none."""
+        u = self.utility(belief, distances)
+        i0, j0 = int(robot_cell[0]), int(robot_cell[1])
+        u[i0, j0] = -np.inf
+        if history is not None:
+            measured = history.measured
+            if measured.shape == u.shape:
+                masked = np.where(measured, -np.inf, u)
+                if np.isfinite(masked).any():
+                    u = masked
+        finite = np.isfinite(u)
+        if not finite.any():
+            return None
+        best = u[finite].max()
+        ties = np.flatnonzero(finite & (u >= best - 1e-12 * abs(best)))
+        if ties.size > 1:
+            d = np.asarray(distances, dtype=np.float64).reshape(-1)[ties]
+            ties = ties[np.lexsort((ties, d))]
+        k = int(ties[0])
+        W = u.shape[1]
+        return (k // W, k % W)
 
 
 @dataclass(frozen=True)
@@ -374,7 +365,7 @@ class Deadline(Settings):
             apart.
         estimate_radius_m: None (the belief's posterior mean, the paper's ``s_hat``) or a
             radius, m: at a deadline stop the search declares the centre of the free cell
-            whose disk of this radius holds the most posterior mass (:meth:`UtilityPlanner.declare`).
+            whose disk of this radius holds the most posterior mass (:meth:`declare`).
             A search that never passed its stop test often ends with a posterior split
             between two places, whose mean lies between them.
     """
@@ -408,213 +399,6 @@ class Deadline(Settings):
         if self.estimate_radius_m is None or not deadline:
             return belief.source_estimate()
         return disk_estimate(belief, self.estimate_radius_m)
-
-
-@dataclass
-class UtilityPlanner(PlannerBase):
-    """The paper's utility planner with entropy termination (see the module docstring).
-
-    Args:
-        weights: the utility's weights and terms (:class:`UtilityWeights`).
-        stop: the stop test and what holds it (:class:`StopRule`).
-        deadline: the stop before the time limit (:class:`Deadline`).
-
-    Every field of these can be set by a dotted key (``get_planner("utility",
-    **{"stop.eta": 0.75})``, ``-P stop.eta=0.75``).
-    """
-
-    weights: UtilityWeights = UtilityWeights()
-    stop: StopRule = StopRule()
-    deadline: Deadline = Deadline()
-    name: str = field(default="utility", init=False)
-    _held_step: int | None = field(default=None, init=False, repr=False)
-
-    def __post_init__(self) -> None:
-        for key, cls in (("weights", UtilityWeights), ("stop", StopRule), ("deadline", Deadline)):
-            if not isinstance(getattr(self, key), cls):
-                raise InputDataError(f"{key} must be a {cls.__name__}, got {getattr(self, key)!r}")
-
-    def reset(self) -> None:
-        """Forget the last held stop."""
-        self._held_step = None
-
-    def should_stop(self, belief: Belief, history: SearchHistory | None = None) -> bool:
-        """The stop test (entropy ``H(pi_s) <= eta log N``, ``N`` the free cells, or the mass
-        test); a one-cell map stops at once.  Never before ``stop.min_observations`` readings
-        (``history`` None: no minimum); with ``deadline.margin_s``, also at the deadline.
-        """
-        self._held_step = None
-        if history is not None and history.step < self.stop.min_observations:
-            return False
-        if self.deadline_reached(history):
-            return True
-        if not self._entropy_passes(belief):
-            return False
-        if history is None or (
-            self._unconfirmed_mode(belief, history) is None and not self._wind_unexplained(belief)
-        ):
-            return True
-        self._held_step = int(history.step)  # passed, held for confirmation or for a flow
-        return False
-
-    def _wind_unexplained(self, belief: Belief) -> bool:
-        """The belief's ``wind_misfit`` exceeds ``stop.max_wind_misfit`` (False when either is unset)."""
-        v = belief.info.get("wind_misfit")
-        limit = self.stop.max_wind_misfit
-        if limit is None or not isinstance(v, int | float):
-            return False
-        return not (float(v) <= limit)
-
-    def describe_stop(self) -> str:
-        """The mass test's share and radius, or the entropy test's threshold."""
-        st = self.stop
-        if st.mass_radius_m is not None:
-            return (
-                f"{st.mass_level:.0%} of the source posterior lies within {st.mass_radius_m:g} m of its mode"
-            )
-        return f"the entropy is at most {st.eta:g} of log N"
-
-    def deadline_reached(self, history: SearchHistory | None) -> bool:
-        """True when ``deadline.margin_s`` is set and less than it is left of the time limit.
-
-        The margin is at most a tenth of the limit, so that a short search is not ended
-        at its first permitted reading (:meth:`Deadline.reached`).
-        """
-        return self.deadline.reached(history)
-
-    def _entropy_passes(self, belief: Belief) -> bool:
-        """The stop test without its minimum and confirmation: entropy, or mass near the mode."""
-        st = self.stop
-        if st.mass_radius_m is not None:
-            return mass_near_mode(belief, st.mass_radius_m) >= st.mass_level
-        return belief.entropy() <= st.eta * belief.max_entropy
-
-    def _unconfirmed_mode(self, belief: Belief, history: SearchHistory) -> tuple[int, int] | None:
-        """The posterior's mode if fewer than ``stop.confirm_readings`` readings lie near it, else None."""
-        st = self.stop
-        if st.confirm_radius_m is None:
-            return None
-        mode = belief.most_likely_cell()
-        cells = history.observations.cells
-        if len(cells):
-            d = np.hypot(cells[:, 0] - mode[0], cells[:, 1] - mode[1]) * belief.resolution
-            counts = d <= st.confirm_radius_m + 1e-9
-            if st.confirm_sigmas > 0:
-                counts &= np.asarray(history.observations.gas) > st.confirm_sigmas * _noise_floor(belief)
-            if int(counts.sum()) >= st.confirm_readings:
-                return None
-        return mode
-
-    def stop_held(self, history: SearchHistory | None) -> bool:
-        """True when :meth:`should_stop`, asked at this step, passed its stop test but held the
-        stop for the mode's confirmation (``stop.confirm_radius_m``) or a flow that explains the
-        wind (``stop.max_wind_misfit``): where the search would have stopped without them."""
-        return history is not None and self._held_step == int(history.step)
-
-    def declare(self, belief: Belief, deadline: bool) -> tuple[float, float]:
-        """The posterior mean, except at a deadline stop with ``deadline.estimate_radius_m``:
-        there the centre of the free cell whose disk of that radius holds the most posterior
-        mass (:func:`disk_estimate`, :meth:`Deadline.declare`)."""
-        return self.deadline.declare(belief, deadline)
-
-    def utility(
-        self, belief: Belief, distances: np.ndarray, history: SearchHistory | None = None
-    ) -> np.ndarray:
-        """``float64 (H, W)`` utility ``U_i``; ``-inf`` on walls and unreachable cells.
-
-        ``history``: the readings so far (for ``weights.revisit_radius_m``; None: none taken).
-        """
-        uw = self.weights
-        d = np.asarray(distances, dtype=np.float64)
-        if d.shape != belief.shape:
-            raise InputDataError(f"distances have shape {d.shape}, the belief {belief.shape}")
-        if uw.source_radius_m is None:
-            gain = uw.w_s * belief.source_probs
-        else:
-            gain = uw.w_s * mass_within(belief.source_probs, belief.resolution, uw.source_radius_m)
-        fresh: float | np.ndarray = 1.0  # how new a cell's neighbourhood is (revisit_radius_m)
-        measured = None if history is None else history.measured
-        if uw.revisit_radius_m is not None and measured is not None and measured.shape == belief.shape:
-            near = mass_within(measured.astype(np.float64), belief.resolution, uw.revisit_radius_m)
-            fresh = 1.0 / (1.0 + np.rint(near))
-        wind_var, conc_var = belief.wind_var_to_explore, belief.log_conc_var_to_explore
-        if wind_var is not None and uw.w_w:
-            gain = gain + uw.w_w * wind_var.sum(axis=0) * fresh
-        if conc_var is not None and uw.w_c:
-            gain = gain + uw.w_c * conc_var * fresh
-        ok = np.isfinite(d) & belief.free
-        u = np.full(belief.shape, -np.inf)
-        u[ok] = np.exp(-uw.w_d * d[ok]) * gain[ok]
-        return u
-
-    def next_goal(
-        self,
-        belief: Belief,
-        robot_cell: Cell,
-        distances: np.ndarray,
-        history: SearchHistory | None = None,
-    ) -> Cell | None:
-        """``argmax_i U_i`` over the candidate cells (see the module docstring), or None if none.
-
-        With ``stop.confirm_radius_m``, while the stop test passes but the mode is unconfirmed:
-        the reachable unmeasured cell nearest the mode within that radius (the mode's own
-        cell first), if there is one.
-        """
-        if history is not None and self.stop.confirm_radius_m is not None and self._entropy_passes(belief):
-            goal = self._confirming_goal(belief, robot_cell, distances, history)
-            if goal is not None:
-                return goal
-        u = self.utility(belief, distances, history)
-        i0, j0 = int(robot_cell[0]), int(robot_cell[1])
-        u[i0, j0] = -np.inf
-        if history is not None:
-            measured = history.measured
-            if measured.shape == u.shape:
-                masked = np.where(measured, -np.inf, u)
-                if np.isfinite(masked).any():
-                    u = masked
-        finite = np.isfinite(u)
-        if not finite.any():
-            return None
-        best = u[finite].max()
-        ties = np.flatnonzero(finite & (u >= best - 1e-12 * abs(best)))
-        if ties.size > 1:
-            d = np.asarray(distances, dtype=np.float64).reshape(-1)[ties]
-            ties = ties[np.lexsort((ties, d))]
-        k = int(ties[0])
-        W = u.shape[1]
-        return (k // W, k % W)
-
-    def _confirming_goal(
-        self, belief: Belief, robot_cell: Cell, distances: np.ndarray, history: SearchHistory
-    ) -> Cell | None:
-        mode = self._unconfirmed_mode(belief, history)
-        if mode is None:
-            return None
-        radius = self.stop.confirm_radius_m
-        assert radius is not None
-        H, W = belief.shape
-        ii, jj = np.mgrid[0:H, 0:W]
-        near = np.hypot(ii - mode[0], jj - mode[1]) * belief.resolution
-        ok = (
-            belief.free
-            & np.isfinite(np.asarray(distances, dtype=np.float64))
-            & (near <= radius + 1e-9)
-            & ~history.measured
-        )
-        ok[int(robot_cell[0]), int(robot_cell[1])] = False
-        if not ok.any():
-            return None
-        k = int(np.argmin(np.where(ok, near, np.inf)))
-        return (k // W, k % W)
-
-
-def _noise_floor(belief: Belief) -> float:
-    """The belief's stated noise floor, ppm (``info["noise_floor_ppm"]``), else 0."""
-    v = belief.info.get("noise_floor_ppm")
-    if isinstance(v, int | float) and math.isfinite(v) and v > 0:
-        return float(v)
-    return 0.0
 
 
 def disk_estimate(belief: Belief, radius_m: float) -> tuple[float, float]:

@@ -270,7 +270,6 @@ class Decision:
         declared_xy: the declared source in the map frame (when it ends; else the
             belief's mean), m.
         compute_s: the step's computation time (estimate, stop test, plan), s.
-        held: the stop test passed but waits for confirmation.
     """
 
     step: int
@@ -284,7 +283,6 @@ class Decision:
     reason: str | None
     declared_xy: tuple[float, float]
     compute_s: float
-    held: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         """The fields but the belief, and the belief's normalized entropy, JSON-able."""
@@ -534,10 +532,10 @@ class SearchCore:
             self.stream.add(reading)
             h.observations = self.stream.observations
             belief = self.stream.belief
-            return self._record(ppm, wind, clock, belief, None, None, time.perf_counter() - t0, False)
+            return self._record(ppm, wind, clock, belief, None, None, time.perf_counter() - t0)
         step = search_step(self.stream, self.planner, self.graph, h, reading, self.cell)
         compute = step.compute_s
-        return self._record(ppm, wind, clock, step.belief, step.goal, step.reason, compute, step.held)
+        return self._record(ppm, wind, clock, step.belief, step.goal, step.reason, compute)
 
     def _record(
         self,
@@ -548,7 +546,6 @@ class SearchCore:
         goal: Cell | None,
         reason: str | None,
         compute: float,
-        held: bool,
     ) -> Decision:
         assert self.cell is not None and self.planner is not None
         if reason is not None:
@@ -573,7 +570,6 @@ class SearchCore:
             reason=reason,
             declared_xy=declared,
             compute_s=compute,
-            held=held,
         )
         self.decisions.append(d)
         if goal is not None:
@@ -600,9 +596,7 @@ class SearchCore:
         reason = step.reason
         compute = step.compute_s
         self.decisions.pop()
-        return self._record(
-            last.gas, last.wind, last.time_s, step.belief, step.goal, reason, compute, step.held
-        )
+        return self._record(last.gas, last.wind, last.time_s, step.belief, step.goal, reason, compute)
 
     def check_time(self, now: float) -> str | None:
         """End the search at the time limit (``now`` on the messages' clock); the reason if it ended."""

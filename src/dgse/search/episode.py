@@ -117,9 +117,6 @@ class StepRecord:
         goal: the chosen next cell, or None (the search ended at this step).
         n_readings: the readings this step's estimate added: the goal's, and with readings on
             the way (``sample_rate_hz``) those of the drive to it.
-        held: the planner's stop test passed here but the stop waited for readings that
-            confirm the posterior's mode (``StopRule.confirm_radius_m``) or a flow that explains
-            the wind (``StopRule.max_wind_misfit``).
         source_probs: recorded source posterior ``float32 (h, w)`` (or None).
         wind_mean: recorded wind mean ``float32 (2, h, w)`` (or None).
         log_conc_mean: recorded ``log(1 + c)`` mean ``float32 (h, w)`` (or None).
@@ -138,7 +135,6 @@ class StepRecord:
     inference_s: float = 0.0
     planning_s: float = 0.0
     goal: Cell | None = None
-    held: bool = False
     n_readings: int = 1
     source_probs: np.ndarray | None = field(default=None, repr=False)
     wind_mean: np.ndarray | None = field(default=None, repr=False)
@@ -166,7 +162,6 @@ class StepRecord:
             "planning_s": self.planning_s,
             "compute_s": self.compute_s,
             "goal": None if self.goal is None else list(self.goal),
-            "held": self.held,
             "n_readings": self.n_readings,
         }
 
@@ -277,9 +272,6 @@ class EpisodeResult:
             "time_limit_s": self.time_limit_s,
             "n_steps": self.n_steps,
             "n_readings": self.n_readings,
-            "held_stops": sum(s.held for s in self.steps),
-            # the error had the search stopped at its first held stop (without the confirmation)
-            "first_held_error_m": next((s.error_m for s in self.steps if s.held), None),
             "end_errors_m": self.end_errors_m,
             "settings": self.settings,
         }
@@ -340,7 +332,6 @@ class StepDecision:
         belief: the belief given every reading so far.
         stop: the planner's stop test passed (the search ends here).
         goal: the next cell, or None (stopped, or the planner has no goal: the search ends).
-        held: the stop test passed but the stop waits (:attr:`StepRecord.held`).
         reason: why the search ends at this step (:data:`REASONS`: ``"converged"``,
             ``"deadline"``, ``"planner_stop"``), or None when it goes on to ``goal``.
         preprocessing_s, inference_s, planning_s: the step's computation time split, s.
@@ -349,7 +340,6 @@ class StepDecision:
     belief: Belief
     stop: bool
     goal: Cell | None
-    held: bool
     reason: str | None
     preprocessing_s: float
     inference_s: float
@@ -406,14 +396,13 @@ def search_step(
                 distances[i, j] = np.inf
         raw = planner.next_goal(belief, robot_cell, distances, history)
         goal = None if raw is None else graph.check_cell(raw, f"goal of planner {planner.name!r}")
-    held = planner.stop_held(history)
     reason: str | None = None
     if stop:
         reason = "deadline" if planner.deadline_reached(history) else "converged"
     elif goal is None:
         reason = "planner_stop"
     plan = time.perf_counter() - t3
-    return StepDecision(belief, stop, goal, held, reason, pre, inf, plan)
+    return StepDecision(belief, stop, goal, reason, pre, inf, plan)
 
 
 def run_episode(
@@ -536,7 +525,6 @@ def run_episode(
             inference_s=decision.inference_s,
             planning_s=decision.planning_s,
             goal=goal,
-            held=decision.held,
             n_readings=len(new),
         )
         if record:
