@@ -39,7 +39,7 @@ def test_presets_extend_per_level_and_user_options_win() -> None:
     at_openings = resolve("dgse-phys", "openings", search=True)
     assert at_map.planner_options == {**phys.planner_options, **phys.at_level["map"]["planner"]}
     assert at_openings.planner_options == dict(phys.planner_options)
-    assert at_map.estimator_options["evidence.effective_readings"] == 30.0
+    assert at_map.estimator_options["evidence.effective_readings"] == 100.0
     assert at_map.estimator_options["evidence.effective_growth"] == 0.0
     # a search at openings never tempers the gas evidence; a random-readings estimate does
     assert at_openings.estimator_options["evidence.effective_readings"] == math.inf

@@ -185,7 +185,7 @@ PRESETS: dict[str, Preset] = {
                 "openings": {"search_estimator": {"evidence.effective_readings": math.inf}},
                 "map": {
                     "search_estimator": {
-                        "evidence.effective_readings": 30.0,
+                        "evidence.effective_readings": 100.0,
                         "evidence.effective_growth": 0.0,
                     },
                     "planner": {"deadline.estimate_radius_m": 1.0},

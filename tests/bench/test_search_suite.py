@@ -128,11 +128,11 @@ def test_dgse_phys_plans_per_knowledge_level():
     assert words.startswith("information planner (") and get_planner("info").describe_stop() in words
     assert "5th reading" in words and "60 s before the time limit" in words
     # and the estimator options the map searches were measured with, there only
-    assert phys.estimator_options_at("map", search=True)["evidence.effective_readings"] == 30.0
+    assert phys.estimator_options_at("map", search=True)["evidence.effective_readings"] == 100.0
     assert phys.estimator_options_at("openings", search=True) == {
         **phys.search_estimator_options,
         "evidence.effective_readings": math.inf,
     }
     assert "evidence.effective_readings" not in phys.estimator_options_at("openings", search=False)
     assert "not tempered" in _level_extras("openings")
-    assert "at most 30 readings" in _level_extras("map")
+    assert "at most 100 readings" in _level_extras("map")

@@ -513,9 +513,9 @@ def test_search_planner_at_map_declares_the_heaviest_disk_at_a_deadline():
 
 def test_gas_evidence_tempering_follows_the_level_and_searches_keep_theirs(case):
     """The gas evidence's temperature follows the level's law: ``m / 100`` at ``openings``,
-    ``sqrt(m / 18)`` at ``map``, so that 50 readings count as 30 and more count more; a ``map``
-    search keeps ``m / 30``, as its results were measured, and searches at other levels add
-    nothing."""
+    ``sqrt(m / 18)`` at ``map``, so that 50 readings count as 30 and more count more; a search
+    tempers as ``m / 100`` at ``map``, not at all at ``openings``, and as the level does at
+    ``wind`` (the searches' own validation)."""
     defaults = GasEvidence()
     assert defaults.effective_readings == PerLevel(map=18.0, openings=100.0, wind=100.0)
     assert defaults.effective_growth == PerLevel(map=0.5, openings=0.0, wind=0.0)
@@ -526,11 +526,14 @@ def test_gas_evidence_tempering_follows_the_level_and_searches_keep_theirs(case)
     assert at_map._counted_readings(300) > at_map._counted_readings(150) > 30
     assert at_map._readings_factor(10) == 1.0 and at_map._counted_readings(10) == 10
     searching = get_estimator("dgse-phys", knowledge=map_k, **search_estimator("map"))
-    assert searching._readings_factor(150) == pytest.approx(5.0)
-    assert searching._counted_readings(300) == pytest.approx(30.0)
+    assert searching._readings_factor(150) == pytest.approx(1.5)
+    assert searching._counted_readings(300) == pytest.approx(100.0)
     at_openings = get_estimator("dgse-phys", knowledge=Knowledge.from_case(case, "openings"))
     assert at_openings._readings_factor(150) == pytest.approx(1.5)
-    assert search_estimator("openings") == SEARCH_ESTIMATOR == search_estimator("wind")
+    assert search_estimator("wind") == SEARCH_ESTIMATOR
+    openings_k = Knowledge.from_case(case, "openings")
+    searching = get_estimator("dgse-phys", knowledge=openings_k, **search_estimator("openings"))
+    assert searching._readings_factor(300) == 1.0
     off = get_estimator("dgse-phys", knowledge=map_k, **{"evidence.effective_readings": float("inf")})
     assert off._readings_factor(300) == 1.0 and off._readings_factor(0) == 1.0
     for bad in (-0.1, 1.0):
