@@ -952,7 +952,13 @@ def _simplec(
         yplus, nutw = turb.wall_functions(st.k)
         # ---- momentum predictor ---------------------------------------------------------
         gam_b = boundary_gamma(nueff, inlet, nu + nut_in, wall, nu + nutw)
-        aP, a, cb = assemble(F, nueff, fixed_u, gam_b, nb, ft, True)
+        # inletOutlet at outlets: air flowing back in through an outlet face brings no
+        # momentum (u = 0 there) instead of the cell's own (zero gradient), so a backflow
+        # cannot feed itself; only where the face flux points inward, so a flow without
+        # backflow has the zero-gradient outlet's equations unchanged
+        back = outlet & (F < 0.0)
+        fixed_m = fixed_u | back if back.any() else fixed_u
+        aP, a, cb = assemble(F, nueff, fixed_m, gam_b, nb, ft, True)
         bx = row_dot(cb, ubx)
         by = row_dot(cb, uby)
         # the gradients of the velocity and pressure this iteration starts from were computed
