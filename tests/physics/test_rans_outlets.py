@@ -49,3 +49,27 @@ def test_its_gas_field_keeps_the_mass_balance(house):
     sol = BuiltinEngine().solve(layout, v, [Source(tuple(grid.centers_of(np.array([[i, j]]))[0]), 1.0)])
     assert sol.flow.info["converged"]
     assert sol.outlet_flux_ratio[0] == pytest.approx(1.0, abs=0.02)
+
+
+def test_a_gap_the_coarse_grid_closes_starts_at_rest():
+    """A one-cell gap between a block (furniture) and a wall has no free coarse cell around it:
+    the prolonged start holds its air at rest (the nearest coarse cell lies beyond the block, its
+    velocity is another room's), with the nearest cell's turbulence."""
+    from dgse.physics.rans import FlowState, coarsen_layout, prolong_state
+    from dgse.world.layout import Layout, Opening
+
+    occ = np.zeros((20, 20), dtype=np.uint8)
+    occ[4:16, 0] = 1  # outer wall
+    occ[4:16, 2:10] = 1  # a block one cell off it
+    layout = Layout(occ, (Opening("west", 0.0, 0.3),), (Opening("east", 1.7, 2.0),), 0.1)
+    fine, coarse = build_mesh(layout), build_mesh(coarsen_layout(layout))
+    n = coarse.n
+    state = FlowState(
+        ux=np.ones(n), uy=np.full(n, 0.5), p=np.zeros(n), k=np.full(n, 0.01),
+        eps=np.full(n, 0.001), nut=np.full(n, 1e-3), F=np.zeros((n, 4)),
+    )  # fmt: skip
+    st = prolong_state(coarse, state, fine, 1.0)
+    gap = fine.index[6:14, 1]
+    assert (gap >= 0).all()
+    assert np.all(st.ux[gap] == 0.0) and np.all(st.uy[gap] == 0.0)
+    assert np.allclose(st.k[gap], 0.01) and np.allclose(st.ux[fine.index[0:3, 15]], 1.0)

@@ -215,9 +215,10 @@ def prolong_state(coarse: Mesh, state: FlowState, fine: Mesh, inlet_velocity: fl
 
     Bilinear interpolation between the free coarse cells around each fine
     cell centre (weights 3/4 and 1/4 per axis, renormalised over the free
-    ones); a fine cell with no free coarse cell around takes the nearest one's
-    values.  Piecewise-constant injection would leave velocity jumps between
-    blocks of 2 x 2 cells, whose spurious shear makes k-epsilon blow up.
+    ones); a fine cell with no free coarse cell around (a gap the coarse grid
+    closed) takes the nearest one's pressure and turbulence, at rest.
+    Piecewise-constant injection would leave velocity jumps between blocks of
+    2 x 2 cells, whose spurious shear makes k-epsilon blow up.
     """
     Hc, Wc = coarse.shape
     i, j = fine.cells[:, 0], fine.cells[:, 1]
@@ -240,6 +241,9 @@ def prolong_state(coarse: Mesh, state: FlowState, fine: Mesh, inlet_velocity: fl
         _, (ni, nj) = ndi.distance_transform_edt(~coarse.free, return_indices=True)
         near = coarse.index[ni[ci[none], cj[none]], nj[ci[none], cj[none]]]
         acc[:, none] = fields[:, near]
+        # the nearest coarse cell can lie beyond a wall (a gap the coarse grid closed, between
+        # furniture and a wall): its velocity says nothing of the gap's, which starts at rest
+        acc[:2, none] = 0.0
         wsum[none] = 1.0
     ux, uy, p, k, eps, nut = acc / wsum
     return FlowState(ux=ux, uy=uy, p=p, k=k, eps=eps, nut=nut, F=face_fluxes(fine, ux, uy, inlet_velocity))
