@@ -60,7 +60,7 @@ One command per measurement, each writing under ``benchmarks/results/``
   the built-in solution's).  Each finished layout goes to a journal
   (``solver_floorplans.journal.jsonl``), so a rerun resumes; OpenFOAM's runs are kept in
   ``--cache`` (``scratch/``), so ``--restart`` after a change to the built-in solver solves
-  only with it again.  Writes ``solver_floorplans.json``::
+  only with it again.  Writes ``solver_floorplans.{json,md}``::
 
       python benchmarks/solver.py floorplans
 
@@ -966,7 +966,55 @@ def floorplans(argv: list[str]) -> None:
     result["command"] = "python benchmarks/solver.py floorplans " + " ".join(argv)
     result["machine"] = {"cpu_count": os.cpu_count(), "python": platform.python_version()}
     write_text(args.out, json.dumps(result, indent=1))
-    print(json.dumps(result["summary"], indent=1))
+    write_text(args.out.with_suffix(".md"), floorplans_markdown(result))
+    print(floorplans_markdown(result))
+
+
+def floorplans_markdown(result: dict) -> str:
+    """The table of ``floorplans``: one row per layout, then the counts and the 30 m floor."""
+
+    def ok(d: dict) -> str:
+        if not d:
+            return "-"
+        return "yes" if d.get("converged") else ("crashed" if d.get("crashed") else "no")
+
+    lines = [
+        "| layout | free cells | in/out | v_in m/s | built-in | flow s | iterations | OpenFOAM | "
+        "OpenFOAM s | velocity rel. L2 | log(1+ppm) RMSE | within criteria |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in result["layouts"]:
+        b, f, e = r["builtin"], r.get("openfoam", {}), r.get("builtin_vs_openfoam")
+        acc = f"{e['velocity_rel_l2']:.3f} | {max(e['log_conc_rmse']):.3f}" if e else "- | -"
+        within = {True: "yes", False: "no", None: "-"}[r.get("within_criteria")]
+        flow_s = f"{b['flow_s']:.1f}" if b.get("flow_s") else "-"
+        foam_s = f"{f['seconds']:.1f}" if f.get("seconds") else "-"
+        lines.append(
+            f"| {r['name'] if r['scenario'] != FLOOR_30 else '30 x 30 m office'} | {r['free_cells']} | "
+            f"{r['inlets']}/{r['outlets']} | {r['inlet_velocity']:.2f} | {ok(b)} | {flow_s} | "
+            f"{b.get('iterations')} | {ok(f)} | {foam_s} | {acc} | {within} |"
+        )
+    sm = result["summary"]
+    lines += [
+        "",
+        f"{sm['layouts']} drawn plans: the built-in solver converged on {sm['builtin_converged']}, "
+        f"OpenFOAM on {sm['openfoam_converged']}; the built-in solver on "
+        f"{sm['builtin_converged_where_openfoam_did']} of the {sm['openfoam_converged']} that OpenFOAM "
+        f"converged on, {sm['within_criteria']} of them within the reference criteria (velocity "
+        f"relative L2 <= {sm['limits']['velocity_rel_l2']}, log(1+ppm) RMSE <= "
+        f"{sm['limits']['log_ppm_rmse']} per source, outflow within "
+        f"{sm['limits']['outflow_error']:.0%}).",
+    ]
+    fl = sm.get("floor_30")
+    if fl:
+        conv = "converged" if fl["converged"] else "did not converge"
+        flow = f" in {fl['flow_s']:.1f} s of flow time" if fl.get("flow_s") else ""
+        lines.append(
+            f"The 30 x 30 m office floor ({fl['free_cells']} free cells) {conv}{flow}, "
+            f"{fl['iterations']} iterations."
+        )
+    lines.append(f"\n`{result['command'].strip()}`")
+    return "\n".join(lines) + "\n"
 
 
 def floorplans_summary(rows: list[dict]) -> dict:
