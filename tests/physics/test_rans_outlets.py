@@ -1,10 +1,11 @@
-"""Outlets with backflow: air that flows back in through an outlet brings no momentum.
+"""Outlets with backflow: the backflow's momentum joins the relaxation, and its air is clean.
 
 A drawn, furnished house (``dgse.world.plans``) whose outlets see air flowing
 back in during the iteration (and at the steady state): with the outlet's zero
 gradient on those faces the backflow fed itself and the run diverged in about
-a hundred iterations (then stalled on both retries); with ``inletOutlet``
-momentum it converges at the first attempt, conserving mass.
+a hundred iterations (then stalled on both retries); with the backflow's inflow
+in the momentum relaxation it converges at the first attempt, and its gas field
+(clean air flowing back in) conserves mass.
 """
 
 from __future__ import annotations

@@ -956,13 +956,7 @@ def _simplec(
         yplus, nutw = turb.wall_functions(st.k)
         # ---- momentum predictor ---------------------------------------------------------
         gam_b = boundary_gamma(nueff, inlet, nu + nut_in, wall, nu + nutw)
-        # inletOutlet at outlets: air flowing back in through an outlet face brings no
-        # momentum (u = 0 there) instead of the cell's own (zero gradient), so a backflow
-        # cannot feed itself; only where the face flux points inward, so a flow without
-        # backflow has the zero-gradient outlet's equations unchanged
-        back = outlet & (F < 0.0)
-        fixed_m = fixed_u | back if back.any() else fixed_u
-        aP, a, cb = assemble(F, nueff, fixed_m, gam_b, nb, ft, True)
+        aP, a, cb = assemble(F, nueff, fixed_u, gam_b, nb, ft, True)
         bx = row_dot(cb, ubx)
         by = row_dot(cb, uby)
         # the gradients of the velocity and pressure this iteration starts from were computed
@@ -978,6 +972,16 @@ def _simplec(
             by += ho_source(st.uy, gradient(st.uy, uby, fixed_u, nb, ft, h, True), F, nb, ft, h)
         aPr, bx = relax(aP, a, bx, st.ux, s_it.alpha_u)
         by = by + (aPr - aP) * st.uy
+        # air flowing back in through an outlet face: with the outlet's zero gradient it
+        # brings the cell's own momentum, and a backflow can feed itself from one iteration to
+        # the next (a jet through the outlet growing without bound).  Its inflow |F| joins the
+        # relaxation (diagonal |F|, source |F| u_old): the iteration moves such a cell by a
+        # smaller pseudo-time step, the steady equations stay the zero-gradient outlet's
+        back_in = np.where(outlet & (F < 0.0), -F, 0.0).sum(axis=1)
+        if back_in.any():
+            aPr = aPr + back_in
+            bx = bx + back_in * st.ux
+            by = by + back_in * st.uy
         if gp is None:
             gp = gradient(st.p, zero4, outlet, nb, ft, h, False)
         rhs_x = bx - gp[:, 0] * V
