@@ -51,6 +51,19 @@ One command per measurement, each writing under ``benchmarks/results/``
       python benchmarks/solver.py robustness --start 100 --count 40
       python benchmarks/solver.py robustness --ser-small 0 0.9 0.95
 
+* ``floorplans``: both engines on drawn, furnished plans imported from PNG the way ``dgse
+  import-floorplan`` reads them (:mod:`dgse.world.plans`: ``--houses`` house plans and
+  ``--offices`` office floors at 0.01-0.05 m per pixel, resampled to 0.1 m, two sources each),
+  then the built-in flow on a 30 x 30 m office floor (corridor, rooms on both sides): per
+  layout whether each engine converged, its time and iterations, and the built-in fields
+  against OpenFOAM's by the reference cases' criteria (``REFERENCE_LIMITS``; the outflow is
+  the built-in solution's).  Each finished layout goes to a journal
+  (``solver_floorplans.journal.jsonl``), so a rerun resumes; OpenFOAM's runs are kept in
+  ``--cache`` (``scratch/``), so ``--restart`` after a change to the built-in solver solves
+  only with it again.  Writes ``solver_floorplans.{json,md}``::
+
+      python benchmarks/solver.py floorplans
+
 * ``kernels``: the solver's kernels timed alone: one symmetric Gauss-Seidel sweep on a
   300 x 300 random layout for one and two right-hand sides with the plain division and the
   short-chain arithmetic (:func:`dgse.physics.fv.gauss_seidel`), the coarse operators of a
@@ -244,6 +257,8 @@ def draw_scenario(spec: str):
     )
 
     kind, _, rest = spec.partition(":")
+    if kind == "plan":
+        return draw_plan_scenario(rest)
     if kind == "ref":
         cases = [Case.load(p) for p in sorted(REFERENCE.glob(f"{rest}_src*.npz"))]
         sources = [((float(c.source[0]), float(c.source[1])), c.release_rate) for c in cases]
@@ -264,6 +279,28 @@ def draw_scenario(spec: str):
     layout = random_layout(rng, **kw)
     v = random_inlet_velocity(rng)
     return layout, v, random_sources(layout, rng, n=4)
+
+
+#: the plans of ``floorplans``: ``plan:KIND:SEED`` (houses, offices) and the 30 x 30 m office floor
+FLOOR_30 = "plan:office30:0"
+
+
+def draw_plan_scenario(rest: str):
+    """``KIND:SEED`` of ``plan:``: the plan drawn by :mod:`dgse.world.plans` (``house``,
+    ``office``, or ``office30``: a 30 x 30 m office floor at 0.05 m per pixel), saved as a PNG
+    and imported back as ``dgse import-floorplan`` does; its inlet speed and two sources."""
+    from dgse.world.generate import as_generator, random_sources
+    from dgse.world.plans import draw_office, draw_plan, import_plan
+
+    kind, seed = rest.split(":")
+    if kind == "office30":
+        plan = draw_office(int(seed), size=(30.0, 30.0), pixel_size=0.05)
+    else:
+        plan = draw_plan(kind, int(seed))
+    with tempfile.TemporaryDirectory() as tmp:
+        layout = import_plan(plan.save_png(Path(tmp) / f"{plan.name}.png"), plan)
+    sources = random_sources(layout, as_generator(int(seed) + 10_000), n=2)
+    return layout, plan.inlet_velocity, sources
 
 
 def load_scenario(path: str):
@@ -807,6 +844,203 @@ def reference(argv: list[str]) -> None:
     print("\n".join(lines))
 
 
+def _clean(text: str) -> str:
+    """An error message without the machine's paths (temporary case folders and the like)."""
+    import re
+
+    return re.sub(r"(?:/[\w.+-]+){2,}", "<path>", text)
+
+
+def _solve_row(engine: str, scenario: str, tmp: Path, sources: int) -> dict:
+    """:func:`run` of one engine; a crashed worker is a row that says so (not converged)."""
+    try:
+        return run(engine, scenario, tmp, sources=sources)
+    except subprocess.CalledProcessError as e:
+        return {
+            "converged": False,
+            "error": f"the {engine} worker failed (exit {e.returncode})",
+            "crashed": True,
+        }
+
+
+def _public(row: dict) -> dict:
+    out = {k: v for k, v in row.items() if not k.startswith("_")}
+    if "error" in out:
+        out["error"] = _clean(str(out["error"]))
+    return out
+
+
+def floorplans(argv: list[str]) -> None:
+    """``floorplans``: both engines on drawn house and office plans, imported from PNG (module doc)."""
+    import numpy as np
+
+    from dgse.files import write_text
+    from dgse.journal import Journal, journal_path
+    from dgse.physics.engines import engine_names
+
+    ap = _parser("floorplans", "both engines on drawn, furnished house and office plans imported from PNG")
+    ap.add_argument("--houses", type=int, default=14, help="house plans, seeds from --start")
+    ap.add_argument("--offices", type=int, default=8, help="office plans, seeds from --start")
+    ap.add_argument("--start", type=int, default=0)
+    ap.add_argument("--sources", type=int, default=2, choices=(1, 2))
+    ap.add_argument("--no-floor-30", action="store_true", help="skip the 30 x 30 m office floor")
+    ap.add_argument("--floor-30-openfoam", action="store_true", help="OpenFOAM on the 30 x 30 m floor too")
+    ap.add_argument("--restart", action="store_true", help="discard the journal of an earlier run")
+    ap.add_argument(
+        "--cache",
+        type=Path,
+        default=REPO / "scratch" / "solver_floorplans",
+        help="OpenFOAM's runs kept for reruns (--restart solves again only with the built-in solver)",
+    )
+    ap.add_argument("--fresh-openfoam", action="store_true", help="solve with OpenFOAM again too")
+    ap.add_argument("--out", type=Path, default=RESULTS / "solver_floorplans.json")
+    args = ap.parse_args(argv)
+    use_foam = "openfoam" in engine_names()
+    scenarios = [f"plan:house:{args.start + i}" for i in range(args.houses)]
+    scenarios += [f"plan:office:{args.start + i}" for i in range(args.offices)]
+    if not args.no_floor_30:
+        scenarios.append(FLOOR_30)
+    identity = {"sources": args.sources, "openfoam": use_foam, "floor_30_openfoam": args.floor_30_openfoam}
+    args.cache.mkdir(parents=True, exist_ok=True)
+    with (
+        Journal(
+            journal_path(args.out),
+            "solver-floorplans",
+            identity,
+            restart=args.restart,
+            unit="layout",
+        ) as jr,
+        tempfile.TemporaryDirectory() as tmp_s,
+    ):
+        tmp = Path(tmp_s)
+        done = {r["scenario"] for r in jr.records}
+        if set(scenarios) - done:
+            run("builtin", "rand:0:5", tmp)  # numba's cache loaded, bytecode written: not counted
+        for sc in scenarios:
+            if sc in done:
+                continue
+            layout = draw_scenario(sc)[0]
+            row: dict = {
+                "scenario": sc,
+                "name": layout.name,
+                "cells": list(layout.occupancy.shape),
+                "free_cells": int(layout.free.sum()),
+                "inlets": len(layout.inlets),
+                "outlets": len(layout.outlets),
+                "inlet_velocity": json.loads(Path(prepare(sc, tmp)).with_suffix(".json").read_text())[
+                    "inlet_velocity"
+                ],
+            }
+            b = _solve_row("builtin", sc, tmp, args.sources)
+            row["builtin"] = _public(b)
+            f: dict = {}
+            cached = args.cache / f"openfoam_{sc.replace(':', '_')}_{args.sources}"
+            if cached.with_suffix(".json").exists() and not args.fresh_openfoam:
+                f = json.loads(cached.with_suffix(".json").read_text())
+                if f.get("converged"):
+                    with np.load(cached.with_suffix(".npz")) as d:
+                        f["_wind"], f["_conc"] = d["wind"], d["conc"]
+                row["openfoam"] = _public(f)
+            elif use_foam and (sc != FLOOR_30 or args.floor_30_openfoam):
+                f = _solve_row("openfoam", sc, tmp, args.sources)
+                row["openfoam"] = _public(f)
+                if f.get("converged"):
+                    np.savez(cached.with_suffix(".npz"), wind=f["_wind"], conc=f["_conc"])
+                cached.with_suffix(".json").write_text(json.dumps(row["openfoam"], default=float))
+            if b.get("converged") and f.get("converged"):
+                e = errors(b["_wind"], b["_conc"], f["_wind"], f["_conc"], layout.free)
+                ratios = np.atleast_1d(b.get("outlet_flux_ratio", [np.nan]))
+                e["outflow_error"] = float(np.max(np.abs(ratios - 1.0)))
+                row["builtin_vs_openfoam"] = e
+                lim = REFERENCE_LIMITS
+                row["within_criteria"] = bool(
+                    e["velocity_rel_l2"] <= lim["velocity_rel_l2"]
+                    and max(e["log_conc_rmse"]) <= lim["log_ppm_rmse"]
+                    and e["outflow_error"] <= lim["outflow_error"]
+                )
+            jr.append(json.loads(json.dumps(row, default=float)))
+            print(json.dumps(row, default=float)[:600], flush=True)
+        rows = [r for r in jr.records if r["scenario"] in scenarios]
+    rows.sort(key=lambda r: scenarios.index(r["scenario"]))
+    result = floorplans_summary(rows)
+    result["command"] = "python benchmarks/solver.py floorplans " + " ".join(argv)
+    result["machine"] = {"cpu_count": os.cpu_count(), "python": platform.python_version()}
+    write_text(args.out, json.dumps(result, indent=1))
+    write_text(args.out.with_suffix(".md"), floorplans_markdown(result))
+    print(floorplans_markdown(result))
+
+
+def floorplans_markdown(result: dict) -> str:
+    """The table of ``floorplans``: one row per layout, then the counts and the 30 m floor."""
+
+    def ok(d: dict) -> str:
+        if not d:
+            return "-"
+        return "yes" if d.get("converged") else ("crashed" if d.get("crashed") else "no")
+
+    lines = [
+        "| layout | free cells | in/out | v_in m/s | built-in | flow s | iterations | OpenFOAM | "
+        "OpenFOAM s | velocity rel. L2 | log(1+ppm) RMSE | within criteria |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in result["layouts"]:
+        b, f, e = r["builtin"], r.get("openfoam", {}), r.get("builtin_vs_openfoam")
+        acc = f"{e['velocity_rel_l2']:.3f} | {max(e['log_conc_rmse']):.3f}" if e else "- | -"
+        within = {True: "yes", False: "no", None: "-"}[r.get("within_criteria")]
+        flow_s = f"{b['flow_s']:.1f}" if b.get("flow_s") else "-"
+        foam_s = f"{f['seconds']:.1f}" if f.get("seconds") else "-"
+        lines.append(
+            f"| {r['name'] if r['scenario'] != FLOOR_30 else '30 x 30 m office'} | {r['free_cells']} | "
+            f"{r['inlets']}/{r['outlets']} | {r['inlet_velocity']:.2f} | {ok(b)} | {flow_s} | "
+            f"{b.get('iterations')} | {ok(f)} | {foam_s} | {acc} | {within} |"
+        )
+    sm = result["summary"]
+    lines += [
+        "",
+        f"{sm['layouts']} drawn plans: the built-in solver converged on {sm['builtin_converged']}, "
+        f"OpenFOAM on {sm['openfoam_converged']}; the built-in solver on "
+        f"{sm['builtin_converged_where_openfoam_did']} of the {sm['openfoam_converged']} that OpenFOAM "
+        f"converged on, {sm['within_criteria']} of them within the reference criteria (velocity "
+        f"relative L2 <= {sm['limits']['velocity_rel_l2']}, log(1+ppm) RMSE <= "
+        f"{sm['limits']['log_ppm_rmse']} per source, outflow within "
+        f"{sm['limits']['outflow_error']:.0%}).",
+    ]
+    fl = sm.get("floor_30")
+    if fl:
+        conv = "converged" if fl["converged"] else "did not converge"
+        flow = f" in {fl['flow_s']:.1f} s of flow time" if fl.get("flow_s") else ""
+        lines.append(
+            f"The 30 x 30 m office floor ({fl['free_cells']} free cells) {conv}{flow}, "
+            f"{fl['iterations']} iterations."
+        )
+    lines.append(f"\n`{result['command'].strip()}`")
+    return "\n".join(lines) + "\n"
+
+
+def floorplans_summary(rows: list[dict]) -> dict:
+    """The counts of ``floorplans``: converged per engine, both, within the criteria; the 30 m floor."""
+    plans = [r for r in rows if r["scenario"] != FLOOR_30]
+    foam_ok = [r for r in plans if r.get("openfoam", {}).get("converged")]
+    summary = {
+        "limits": REFERENCE_LIMITS,
+        "layouts": len(plans),
+        "builtin_converged": sum(bool(r["builtin"].get("converged")) for r in plans),
+        "openfoam_converged": len(foam_ok),
+        "builtin_converged_where_openfoam_did": sum(bool(r["builtin"].get("converged")) for r in foam_ok),
+        "within_criteria": sum(bool(r.get("within_criteria")) for r in plans),
+        "builtin_flow_s_max": max((r["builtin"].get("flow_s") or 0.0 for r in plans), default=None),
+    }
+    floor = next((r for r in rows if r["scenario"] == FLOOR_30), None)
+    if floor is not None:
+        summary["floor_30"] = {
+            "free_cells": floor["free_cells"],
+            "converged": floor["builtin"].get("converged"),
+            "flow_s": floor["builtin"].get("flow_s"),
+            "iterations": floor["builtin"].get("iterations"),
+        }
+    return {"summary": summary, "layouts": rows}
+
+
 def robustness(argv: list[str]) -> None:
     """``robustness``: how often the flow converges on training layouts, or settings compared (module doc)."""
     from dgse.files import write_text
@@ -1254,6 +1488,7 @@ COMMANDS: dict[str, Callable[[list[str]], None]] = {
     "agreement": agreement,
     "reference": reference,
     "robustness": robustness,
+    "floorplans": floorplans,
     "kernels": kernels,
     "startup": startup,
     "_worker": worker,

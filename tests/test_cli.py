@@ -219,6 +219,20 @@ def test_import_floorplan_of_a_generated_office_floor(capsys, tmp_path):
     assert (lay.inlets, lay.outlets) == ((i,), (o,))
 
 
+def test_import_floorplan_of_a_drawn_plan_is_what_import_plan_gives(capsys, tmp_path):
+    """A drawn plan's PNG through ``dgse import-floorplan`` with its options: the layout the
+    floor plan benchmark solves (``dgse.world.plans.import_plan``)."""
+    from dgse.world.plans import draw_house, import_plan
+
+    plan = draw_house(2, pixel_size=0.025)
+    png = plan.save_png(tmp_path / "house.png")
+    code, _, err = _run(capsys, "import-floorplan", png, *plan.import_args(), "-o", tmp_path / "h.npz")
+    assert code == 0, err
+    lay, ref = load_layout(tmp_path / "h.npz"), import_plan(png, plan)
+    assert np.array_equal(lay.occupancy, ref.occupancy) and lay.walls == ref.walls
+    assert (lay.inlets, lay.outlets) == (plan.inlets, plan.outlets)
+
+
 def test_solve_layout_writes_a_valid_case(solved, capsys):
     case = Case.load(solved["case"])
     assert case.inlet_velocity == pytest.approx(1.0) and case.release_rate == pytest.approx(0.5)

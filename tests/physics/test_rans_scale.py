@@ -151,18 +151,19 @@ def test_relaxation_bounds_outside_the_unit_interval_are_rejected(field):
         FlowSettings(**{field: -0.1})
 
 
-def test_a_flow_that_stalls_from_rest_is_tried_from_the_coarse_grid():
-    """Generated layout 928 (a validation scenario): from rest the iteration falls into a
-    limit cycle (OpenFOAM converges it); from the coarse grid's solution it converges."""
+def test_a_flow_with_outlet_backflow_converges_from_rest():
+    """Generated layout 928 (a validation scenario): from rest the iteration fell into a limit
+    cycle (OpenFOAM converges it) and converged only when tried again from the coarse grid's
+    solution.  The cycle was its outlet's backflow (a tenth of the outflow at the steady state)
+    feeding itself: with the backflow's inflow in the momentum relaxation it converges from
+    rest at the first attempt."""
     from dgse.world.generate import as_generator, random_inlet_velocity, random_layout
 
     rng = as_generator(928)
     layout = random_layout(rng)
     flow, _ = flow_and_transport(layout, random_inlet_velocity(rng))
-    first, relaxed, coarse = flow.info["attempts"]
-    assert first["stalled"] and relaxed["stalled"] and relaxed["alpha_u"] < first["alpha_u"]
-    assert coarse["start"] == "coarse" and coarse["converged"]
-    assert flow.info["converged"] and flow.info["start"] == "coarse"
+    (first,) = flow.info["attempts"]
+    assert first["converged"] and flow.info["start"] == "rest"
 
 
 def test_coarsen_layout_keeps_walls_and_openings():

@@ -215,9 +215,10 @@ def prolong_state(coarse: Mesh, state: FlowState, fine: Mesh, inlet_velocity: fl
 
     Bilinear interpolation between the free coarse cells around each fine
     cell centre (weights 3/4 and 1/4 per axis, renormalised over the free
-    ones); a fine cell with no free coarse cell around takes the nearest one's
-    values.  Piecewise-constant injection would leave velocity jumps between
-    blocks of 2 x 2 cells, whose spurious shear makes k-epsilon blow up.
+    ones); a fine cell with no free coarse cell around (a gap the coarse grid
+    closed) takes the nearest one's pressure and turbulence, at rest.
+    Piecewise-constant injection would leave velocity jumps between blocks of
+    2 x 2 cells, whose spurious shear makes k-epsilon blow up.
     """
     Hc, Wc = coarse.shape
     i, j = fine.cells[:, 0], fine.cells[:, 1]
@@ -240,6 +241,9 @@ def prolong_state(coarse: Mesh, state: FlowState, fine: Mesh, inlet_velocity: fl
         _, (ni, nj) = ndi.distance_transform_edt(~coarse.free, return_indices=True)
         near = coarse.index[ni[ci[none], cj[none]], nj[ci[none], cj[none]]]
         acc[:, none] = fields[:, near]
+        # the nearest coarse cell can lie beyond a wall (a gap the coarse grid closed, between
+        # furniture and a wall): its velocity says nothing of the gap's, which starts at rest
+        acc[:2, none] = 0.0
         wsum[none] = 1.0
     ux, uy, p, k, eps, nut = acc / wsum
     return FlowState(ux=ux, uy=uy, p=p, k=k, eps=eps, nut=nut, F=face_fluxes(fine, ux, uy, inlet_velocity))
@@ -968,6 +972,16 @@ def _simplec(
             by += ho_source(st.uy, gradient(st.uy, uby, fixed_u, nb, ft, h, True), F, nb, ft, h)
         aPr, bx = relax(aP, a, bx, st.ux, s_it.alpha_u)
         by = by + (aPr - aP) * st.uy
+        # air flowing back in through an outlet face: with the outlet's zero gradient it
+        # brings the cell's own momentum, and a backflow can feed itself from one iteration to
+        # the next (a jet through the outlet growing without bound).  Its inflow |F| joins the
+        # relaxation (diagonal |F|, source |F| u_old): the iteration moves such a cell by a
+        # smaller pseudo-time step, the steady equations stay the zero-gradient outlet's
+        back_in = np.where(outlet & (F < 0.0), -F, 0.0).sum(axis=1)
+        if back_in.any():
+            aPr = aPr + back_in
+            bx = bx + back_in * st.ux
+            by = by + back_in * st.uy
         if gp is None:
             gp = gradient(st.p, zero4, outlet, nb, ft, h, False)
         rhs_x = bx - gp[:, 0] * V

@@ -1,8 +1,9 @@
 """Steady gas transport on a frozen flow, its factorization and its adjoint.
 
 ``div(phi c) - div(D_eff grad c) + sigma c = S`` with ``D_eff = D_m + nu_t / Sc_t``
-(spec section 4): inlet ``c = 0``, zero gradient at outlets and walls, the
-source cell receiving ``q / (dx dy h)``.  ``sigma >= 0`` (``sink``, per cell) is
+(spec section 4): inlet ``c = 0``, zero gradient at outlets and walls (air that
+flows back in through an outlet is clean: ``inletOutlet``), the source cell
+receiving ``q / (dx dy h)``.  ``sigma >= 0`` (``sink``, per cell) is
 the air leaving the 2-D slice of a 3-D flow through the cell (a given wind
 whose divergence is kept, :mod:`dgse.physics.projection`): the gas leaves with
 it at the cell's concentration; air entering through the slice is clean and
@@ -93,7 +94,12 @@ def transport_matrix(
         add(P, Nd, -g_f)
         add(P, P, np.where(ft[:, d] == INLET, 2.0 * diffusivity, 0.0))
         out = Fd > 0
-        add(P, P, np.where((inn & out) | (ft[:, d] == OUTLET), Fd, 0.0))
+        # outlets: the cell's gas leaves where air flows out; air flowing back in through an
+        # outlet face is clean (inletOutlet, c = 0 on that face): it adds no term.  With the
+        # cell's own value on such a face (zero gradient) the backflow would carry gas in,
+        # taking the row's diagonal below the sum of its neighbours, and a strong backflow
+        # made the operator indefinite (a gas field of either sign, its balance lost)
+        add(P, P, np.where((inn | (ft[:, d] == OUTLET)) & out, Fd, 0.0))
         add(P, Nd, np.where(inn & ~out, Fd, 0.0))
         if scheme == "linearUpwind":
             sign = 1.0 if d in (0, 2) else -1.0
@@ -276,7 +282,7 @@ class TransportSolver:
         """
         m = self.mesh
         c = m.values(conc)
-        out = float((self.F * (m.ft == OUTLET) * c[:, None]).sum())
+        out = float((np.maximum(self.F, 0.0) * (m.ft == OUTLET) * c[:, None]).sum())  # clean backflow
         inl = float((2.0 * (self.diffusivity * c)[:, None] * (m.ft == INLET)).sum())
         return out, inl
 
