@@ -737,13 +737,11 @@ def _report_process(
 def _phys_planner_words(level: str) -> str:
     """The report's words for dgse-phys's planner at ``level`` (its stop test as the planner
     states it, its minimum of readings and its deadline), up to the level's extras."""
-    from dgse.planning.planners import get_planner
+    from dgse.planning.planners import PLANNERS, get_planner
 
     p = PRESETS["dgse-phys"]
     planner = get_planner(p.planner, **p.planner_options_at(level))
-    words = f"the {p.planner!r} planner ("
-    if p.planner == "info":
-        words = "information planner (the reading with the most information about the source per second; "
+    words = f"{PLANNERS.label(p.planner)} ("
     least = getattr(getattr(planner, "stop", None), "min_observations", 0)
     words += f"stop once {planner.describe_stop()}"
     if least:

@@ -447,7 +447,7 @@ PLANNERS: Registry[Planner] = Registry(
     "planner",
     [
         Entry("utility", UtilityPlanner),
-        Entry("info", "dgse.planning.information:InformationPlanner"),
+        Entry("info", "dgse.planning.information:InformationPlanner", label="information planner"),
         Entry("infotaxis", "dgse.localization.infotaxis:make_infotaxis"),
         Entry("entrotaxis", "dgse.localization.infotaxis:make_entrotaxis"),
         Entry("dualmode", "dgse.localization.particle_filter:DualModePlanner"),

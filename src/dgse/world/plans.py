@@ -301,6 +301,24 @@ def _snap(v: float) -> float:
     return round(round(v / 0.1) * 0.1, 9)
 
 
+def _start(
+    rng_or_seed: RngLike, kind: str, pixel_size: float | None
+) -> tuple[np.random.Generator, str, float]:
+    """A plan's generator, its name (``<kind>-<seed>`` for an integer seed) and its pixel size."""
+    rng = as_generator(rng_or_seed)
+    name = f"{kind}-{rng_or_seed}" if isinstance(rng_or_seed, int) else kind
+    return rng, name, _pixel_size(rng, pixel_size)
+
+
+def _shell(rng: np.random.Generator, W: float, H: float, ps: float) -> tuple[_Canvas, float]:
+    """A ``W x H`` m canvas whose outer wall, of a drawn thickness ``t``, is all that is solid."""
+    canvas = _Canvas(W, H, ps)
+    t = float(rng.uniform(0.15, 0.3))
+    canvas.fill((0.0, 0.0, W, H))
+    canvas.fill((t, t, W - t, H - t), False)
+    return canvas, t
+
+
 def draw_house(
     rng_or_seed: RngLike = None,
     *,
@@ -319,16 +337,11 @@ def draw_house(
         resolution: the cell size the plan must import at with its openings connected.
         max_attempts: draws before giving up.
     """
-    rng = as_generator(rng_or_seed)
-    name = f"house-{rng_or_seed}" if isinstance(rng_or_seed, int) else "house"
-    ps = _pixel_size(rng, pixel_size)
+    rng, name, ps = _start(rng_or_seed, "house", pixel_size)
 
     def draw(rng: np.random.Generator) -> DrawnPlan | None:
         W, H = (_snap(rng.uniform(*size_range)) for _ in range(2))
-        canvas = _Canvas(W, H, ps)
-        t = float(rng.uniform(0.15, 0.3))
-        canvas.fill((0.0, 0.0, W, H))
-        canvas.fill((t, t, W - t, H - t), False)
+        canvas, t = _shell(rng, W, H, ps)
         rooms, walls, doors = _split_rooms(rng, (t, t, W - t, H - t), int(rng.integers(4, 10)), 1.8)
         for w in walls:
             canvas.fill(w)
@@ -363,19 +376,14 @@ def draw_office(
         resolution: the cell size the plan must import at with its openings connected.
         max_attempts: draws before giving up.
     """
-    rng = as_generator(rng_or_seed)
-    name = f"office-{rng_or_seed}" if isinstance(rng_or_seed, int) else "office"
-    ps = _pixel_size(rng, pixel_size)
+    rng, name, ps = _start(rng_or_seed, "office", pixel_size)
 
     def draw(rng: np.random.Generator) -> DrawnPlan | None:
         if size is None:
             W, H = _snap(rng.uniform(14.0, 24.0)), _snap(rng.uniform(10.0, 18.0))
         else:
             W, H = _snap(size[0]), _snap(size[1])
-        canvas = _Canvas(W, H, ps)
-        t = float(rng.uniform(0.15, 0.3))
-        canvas.fill((0.0, 0.0, W, H))
-        canvas.fill((t, t, W - t, H - t), False)
+        canvas, t = _shell(rng, W, H, ps)
         horizontal = W >= H  # the corridor runs along the longer side
         L, D = (W, H) if horizontal else (H, W)
         cw = float(rng.uniform(1.6, 2.4))
