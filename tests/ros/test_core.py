@@ -63,6 +63,37 @@ def test_the_core_takes_the_readings_and_decisions_of_dgse_search():
     assert math.dist(declared, case.source) < 2.0
 
 
+def test_readings_on_the_way_go_in_with_the_goals_as_in_dgse_search():
+    """With a sample rate, the simulated robot publishes the readings of each drive and the core
+    gives them to the estimator with the goal's reading: the same readings, estimates and
+    goals as ``dgse search --sample-rate``; without one, the drive's readings are not used."""
+    from dgse.search.campaign import run_trials
+
+    case = solved_two_rooms()
+    ref = run_trials([("two_rooms.npz", case)], METHOD, METHOD, 1, SEED, estimator_options={"seed": SEED},
+                     min_start_distance=1.0, steps=True, sample_rate_hz=2.0)  # fmt: skip
+    ref = ref["per_case"][0]["trials"][0]
+    core = SearchCore(_setup(sample_rate_hz=2.0))
+    robot = SimRobot(case, seed=SEED, case_name="two_rooms", min_start_distance=1.0, sample_rate_hz=2.0)
+    _drive(core, robot)
+    got = [d.to_dict() for d in core.decisions]
+    per_step = np.diff([0] + [d["step"] for d in got])
+    assert per_step.max() > 1  # some drives were read on the way
+    assert list(per_step) == [s["n_readings"] for s in ref["steps"]]
+    assert [d["goal"] for d in got] == [s["goal"] for s in ref["steps"]]
+    assert [d["cell"] for d in got] == [s["cell"] for s in ref["steps"]]
+    assert [d["gas"] for d in got] == [s["gas"] for s in ref["steps"]]
+    mean_xy = np.array([d["declared_xy"] for d in got[:-1]]) - ORIGIN  # the beliefs' means, grid frame
+    assert np.allclose(mean_xy, [s["estimate_xy"] for s in ref["steps"][:-1]])
+    assert core.reason == ref["reason"]
+    # the paper's protocol: the same robot's drive readings are left out
+    plain = SearchCore(_setup())
+    _drive(
+        plain, SimRobot(case, seed=SEED, case_name="two_rooms", min_start_distance=1.0, sample_rate_hz=2.0)
+    )
+    assert [d.step for d in plain.decisions] == list(range(1, len(plain.decisions) + 1))
+
+
 def test_method_occupancy_resamples_by_whole_factors_and_refuses_others():
     v = np.zeros((4, 6), np.int8)
     v[0, :2] = 100  # a 2 x 2 block half solid: stays free at 0.1 m

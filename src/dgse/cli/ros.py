@@ -24,6 +24,7 @@ from dgse.cli.common import (
     KnowledgeOption,
     MethodOption,
     MinStartDistanceOption,
+    SampleRateOption,
     SpeedOption,
     TimeLimitOption,
     check_output_dir,
@@ -111,6 +112,7 @@ def run_cmd(
     ] = None,
     dwell: DwellOption = PROTOCOL.dwell,
     time_limit: TimeLimitOption = PROTOCOL.time_limit,
+    sample_rate: SampleRateOption = PROTOCOL.sample_rate_hz,
     pose_topic: Annotated[str, typer.Option("--pose-topic", help="The robot's pose topic.")] = "amcl_pose",
     message_types: TypesOption = "auto",
     nav2: Annotated[
@@ -139,6 +141,7 @@ def run_cmd(
         "resolution": resolution or 0.0,
         "dwell": dwell,
         "time_limit": time_limit,
+        "sample_rate_hz": sample_rate or 0.0,
         "pose_topic": pose_topic,
         "message_types": message_types,
         "use_nav2": nav2,
@@ -181,6 +184,7 @@ def sim_cmd(
     dwell: DwellOption = PROTOCOL.dwell,
     time_limit: TimeLimitOption = PROTOCOL.time_limit,
     min_start_distance: MinStartDistanceOption = PROTOCOL.min_start_distance,
+    sample_rate: SampleRateOption = PROTOCOL.sample_rate_hz,
     frames: FramesOption = True,
     message_types: TypesOption = "auto",
     exit_on_stop: ExitOnStopOption = False,
@@ -208,6 +212,7 @@ def sim_cmd(
         "dwell": dwell,
         "time_limit": time_limit,
         "min_start_distance": min_start_distance,
+        "sample_rate_hz": sample_rate or 0.0,
         "frames": frames,
         "message_types": message_types,
     }
@@ -227,6 +232,7 @@ def replay_cmd(
     ],
     setup: dict[str, Any],
     dwell: DwellOption = PROTOCOL.dwell,
+    sample_rate: SampleRateOption = PROTOCOL.sample_rate_hz,
     topic: Annotated[
         list[str] | None,
         typer.Option(
@@ -245,7 +251,7 @@ def replay_cmd(
             raise InputDataError(f"--topic takes KIND=TOPIC with KIND one of {', '.join(DEFAULT_TOPICS)}")
         topics[kind] = name
     check_output_dir(out, "output folder")
-    params = {**setup, "dwell": dwell}
+    params = {**setup, "dwell": dwell, "sample_rate_hz": sample_rate or 0.0}
     result = replay_bag(bag, out, params, topics=topics, figures=figures)
     x, y = result["final"]["estimate_xy"]
     n = result["readings"]

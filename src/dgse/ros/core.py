@@ -14,7 +14,15 @@ Python (the node of :mod:`dgse.ros.nodes` only converts messages and publishes):
   the pair's time is the older of the two. The search takes a reading once the robot has
   been at its goal for the dwell time (:attr:`SearchProtocol.dwell`): the first pair
   whose time is at least the arrival plus the dwell (a gas reading that comes before
-  its wind waits for it). Readings at other times are not used;
+  its wind waits for it). With a sample rate (``sample_rate_hz``, as ``dgse search``'s
+  readings on the way), the pairs that come while the robot drives count too, one per
+  ``1 / sample_rate_hz`` s at most, at the cell of the latest pose; they wait for the next
+  goal's reading and go into the estimator with it (one estimate, one decision). Those are
+  the gas readings stamped after the last reading taken and no later than the arrival at
+  the goal, each at the cell of the latest pose and with the latest wind reading (no older
+  than the sampling period) of its stamp: the messages of three topics can come in any
+  order, so they are matched by their stamps once the goal's reading is taken. Readings
+  at other times are not used;
 * **decision**: the reading goes through :func:`dgse.search.episode.search_step` (the
   same estimator, stop test and planner as ``dgse search``), which gives the next goal or
   the stop and its reason (:data:`dgse.search.episode.REASONS`); a goal the navigation
@@ -163,6 +171,8 @@ class MethodSetup:
         resolution: the method's cell size, m (None: the map's).
         dwell: time at a goal before a reading counts, s.
         time_limit: the search's time limit, s.
+        sample_rate_hz: readings per second taken on the way to a goal (module docstring);
+            None: only the reading at each goal, as the paper's protocol.
         planner_seed: the planner's random stream (``dgse search``'s third stream of the
             trial's seed, :func:`dgse.search.episode.episode_streams`).
         connectivity: the move graph's (8 or 4).
@@ -174,6 +184,7 @@ class MethodSetup:
     resolution: float | None = None
     dwell: float = PROTOCOL.dwell
     time_limit: float = PROTOCOL.time_limit
+    sample_rate_hz: float | None = PROTOCOL.sample_rate_hz
     planner_seed: np.random.Generator | np.random.SeedSequence | int | None = None
     connectivity: int = 8
 
@@ -209,7 +220,10 @@ class MethodSetup:
     def from_parameters(cls, p: Mapping[str, Any]) -> MethodSetup:
         """The setup named by the node's parameters (:data:`dgse.ros.nodes.RUN_PARAMETERS`'s
         ``method``, ``knowledge``, ``knowledge_file``, ``seed``, ``case_name``, ``trial``,
-        ``resolution``, ``dwell``, ``time_limit``; empty strings and 0 mean unset)."""
+        ``resolution``, ``dwell``, ``time_limit``, ``sample_rate_hz``; empty strings and 0 mean
+        unset)."""
+        from dgse.search.robot import check_sample_rate
+
         return cls.create(
             p.get("method") or None,
             p.get("knowledge") or DEFAULT_LEVEL,
@@ -220,6 +234,7 @@ class MethodSetup:
             resolution=float(p.get("resolution") or 0.0) or None,
             dwell=float(p.get("dwell", PROTOCOL.dwell)),
             time_limit=float(p.get("time_limit", PROTOCOL.time_limit)),
+            sample_rate_hz=check_sample_rate(float(p.get("sample_rate_hz") or 0.0) or None),
         )
 
     def knowledge(self, occupancy: np.ndarray, resolution: float) -> Knowledge:
@@ -342,6 +357,12 @@ class SearchCore:
         self.trajectory: list[Cell] = []
         self.wind: tuple[float, float, float] | None = None
         self.pending: tuple[float, float] | None = None
+        # since the last reading taken, with readings on the way: gas (t, ppm), poses
+        # (t, cell) with the one before, winds (t, u, v)
+        self.gas_log: list[tuple[float, float]] = []
+        self.pose_log: list[tuple[float, Cell]] = []
+        self.wind_log: list[tuple[float, float, float]] = []
+        self.readings = 0
         self.rejected: list[Cell] = []
         self.latest_time = -math.inf
         self.reason: str | None = None
@@ -453,6 +474,8 @@ class SearchCore:
             self.t_start = t
             self.target = cell
         if cell != self.cell:
+            if self.setup.sample_rate_hz is not None:
+                self.pose_log.append((t, cell))
             self.trajectory.append(cell)
             self.cell = cell
             self.entered_at = t
@@ -469,6 +492,8 @@ class SearchCore:
             self.log("warning", f"a non-finite wind reading ({u}, {v}) m/s: ignored")
             return None
         self.wind = (float(u), float(v), float(t))
+        if self.setup.sample_rate_hz is not None:
+            self.wind_log.append((float(t), float(u), float(v)))
         if self.pending is None:
             return None
         ppm, t_gas = self.pending
@@ -497,6 +522,8 @@ class SearchCore:
         if self.cell is None or self.t_start is None:
             self.log("warning", "gas reading before any pose: ignored")
             return None
+        if self.setup.sample_rate_hz is not None:
+            self.gas_log.append((float(ppm), float(t)))  # perhaps one on the way (module docstring)
         if self.target != self.cell or self.arrived_at is None:
             return None
         due = self.arrived_at + self.setup.dwell - TIME_TOLERANCE_S
@@ -513,18 +540,49 @@ class SearchCore:
             return None
         return self._take(float(ppm), (u, v), t_read)
 
+    def _on_the_way(self) -> list[tuple[Cell, float, tuple[float, float], float]]:
+        """The readings on the way to the current goal (module docstring): ``(cell, ppm, wind,
+        t)`` in time order, one per sampling period at most; the logs are emptied."""
+        rate = self.setup.sample_rate_hz
+        gas, poses, winds = sorted(self.gas_log, key=lambda g: g[1]), self.pose_log, sorted(self.wind_log)
+        self.gas_log, self.wind_log = [], []
+        self.pose_log = poses[-1:]
+        if rate is None or self.arrived_at is None:
+            return []
+        period = 1.0 / rate
+        out: list[tuple[Cell, float, tuple[float, float], float]] = []
+        last = self.last_time
+        for ppm, t in gas:
+            if t > self.arrived_at + TIME_TOLERANCE_S:
+                break
+            if last is not None and t < last + period - TIME_TOLERANCE_S:
+                continue
+            at = [c for tp, c in poses if tp <= t + TIME_TOLERANCE_S]
+            near = [w for w in winds if t - period <= w[0] <= t + TIME_TOLERANCE_S]
+            if not at or not near:  # no pose or no wind reading of that moment
+                continue
+            _, u, v = near[-1]
+            out.append((at[-1], ppm, (u, v), t))
+            last = t
+        return out
+
     def _take(self, ppm: float, wind: tuple[float, float], t: float) -> Decision:
         from dgse.search.episode import search_step
 
         assert self.stream and self.history is not None and self.planner and self.graph and self.cell
         assert self.t_start is not None
         clock = t - self.t_start
+        taken = [*self._on_the_way(), (self.cell, ppm, wind, t)]
         reading = Observations(
-            np.array([self.cell], np.int64), np.array([ppm]), np.array([wind], np.float64), np.array([clock])
+            np.array([c for c, *_ in taken], np.int64).reshape(-1, 2),
+            np.array([g for _, g, _, _ in taken], np.float64),
+            np.array([w for *_, w, _ in taken], np.float64).reshape(-1, 2),
+            np.array([tr - self.t_start for *_, tr in taken], np.float64),
         )
+        self.readings += len(taken)
         h = self.history
         h.trajectory = np.array(self.trajectory, np.int64).reshape(-1, 2)
-        h.time_s, h.distance_m, h.step = clock, self.distance_m, len(self.decisions) + 1
+        h.time_s, h.distance_m, h.step = clock, self.distance_m, self.readings
         self.last_time = t
         self.rejected = []
         if self.follow_goals:
@@ -559,7 +617,7 @@ class SearchCore:
         else:
             declared = self.to_map_frame(belief.source_estimate())
         d = Decision(
-            step=len(self.decisions) + 1,
+            step=self.readings,
             cell=self.cell,
             time_s=clock,
             gas=ppm,

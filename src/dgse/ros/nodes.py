@@ -78,6 +78,7 @@ RUN_PARAMETERS: dict[str, Any] = {
     "trial": 0,
     "dwell": PROTOCOL.dwell,
     "time_limit": PROTOCOL.time_limit,
+    "sample_rate_hz": 0.0,
     "use_nav2": False,
     "nav2_action": "navigate_to_pose",
     "status_period": 0.5,
@@ -104,6 +105,7 @@ SIM_PARAMETERS: dict[str, Any] = {
     "dwell": PROTOCOL.dwell,
     "time_limit": PROTOCOL.time_limit,
     "min_start_distance": PROTOCOL.min_start_distance,
+    "sample_rate_hz": 0.0,
     "frames": True,
     "rate": 1.0,
     "period": 0.02,
@@ -434,8 +436,9 @@ class SimNode(Node):
 
     Publishes the case's map (latched), ``/clock`` (the simulated clock: run the search with
     ``use_sim_time``), the pose at every cell entered and the reading at the end of each
-    dwell, again every ``repeat_period`` s of wall time while it waits (a sensor that keeps
-    publishing); drives to each goal that arrives on the goal topic.
+    dwell (and on the way, with ``sample_rate_hz``), the last again every ``repeat_period`` s of
+    wall time while it waits (a sensor that keeps publishing); drives to each goal that arrives
+    on the goal topic.
     """
 
     def __init__(self, name: str = "dgse_sim", parameters: dict[str, Any] | None = None, **kw: Any):
@@ -459,6 +462,7 @@ class SimNode(Node):
             time_limit=float(p["time_limit"]),
             use_frames=bool(p["frames"]),
             min_start_distance=float(p["min_start_distance"]),
+            sample_rate_hz=float(p["sample_rate_hz"]) or None,
         )
         self.case = case
         self.origin = (float(p["origin_x"]), float(p["origin_y"]))

@@ -4,10 +4,12 @@
 along free cells at its speed, dwells, reads the case's noisy gas and wind, steady fields
 or filament frames) seeded as ``dgse search`` seeds a trial (:func:`~dgse.search.campaign.trial_seed`
 of the case file's stem, then :func:`~dgse.search.episode.episode_streams`: the start and the
-sensor noise). It turns each goal into timed events: a pose per cell entered, then one
-reading at the end of the dwell; :meth:`SimRobot.due` hands them out as the simulated clock
-reaches them. The clock stands still while the robot waits for a goal, so a search's
-computation time is not counted (as ``dgse search`` without ``--compute-time``).
+sensor noise). It turns each goal into timed events: a pose per cell entered, the readings
+on the way when it samples while driving (``sample_rate_hz``, as ``dgse search``'s; each
+after a pose of the cell it was read in), then one reading at the end of the dwell;
+:meth:`SimRobot.due` hands them out as the simulated clock reaches them. The clock stands
+still while the robot waits for a goal, so a search's computation time is not counted (as
+``dgse search`` without ``--compute-time``).
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ class SimEvent:
     Attributes:
         kind: ``"pose"`` (the robot entered ``cell``) or ``"reading"`` (``gas`` ppm and
             ``wind`` m/s read at ``cell``).
+        at_goal: a reading at the end of a dwell (False: one on the way).
     """
 
     time_s: float
@@ -42,6 +45,7 @@ class SimEvent:
     cell: Cell
     gas: float = math.nan
     wind: tuple[float, float] = (math.nan, math.nan)
+    at_goal: bool = True
 
 
 class SimRobot:
@@ -52,7 +56,8 @@ class SimRobot:
         seed, case_name, trial: the seed of ``dgse search --seed seed`` for trial ``trial`` of
             the case file named ``case_name`` (None: the case's name).
         start: the start cell (None: drawn as ``dgse search`` draws it).
-        speed, dwell, time_limit, use_frames, min_start_distance: as ``dgse search``'s options.
+        speed, dwell, time_limit, use_frames, min_start_distance, sample_rate_hz: as ``dgse
+            search``'s options.
     """
 
     def __init__(
@@ -68,6 +73,7 @@ class SimRobot:
         time_limit: float = PROTOCOL.time_limit,
         use_frames: bool = True,
         min_start_distance: float = PROTOCOL.min_start_distance,
+        sample_rate_hz: float | None = PROTOCOL.sample_rate_hz,
     ) -> None:
         from dgse.search.campaign import trial_seed
         from dgse.search.episode import episode_streams
@@ -88,6 +94,7 @@ class SimRobot:
             dwell=dwell,
             use_frames=use_frames,
             graph=self.graph,
+            sample_rate_hz=sample_rate_hz,
         )
         self.events: deque[SimEvent] = deque([SimEvent(0.0, "pose", self.robot.cell)])
         self.last_reading: SimEvent | None = None
@@ -123,11 +130,23 @@ class SimRobot:
             return False
         if self.robot.clock >= self.time_limit:
             return False
-        n = len(self.robot.trajectory_cells)
+        n, m = len(self.robot.trajectory_cells), self.robot.n_readings
         self.robot.move_to(cell, until=self.time_limit)
         cells, times = self.robot.trajectory_cells[n:], self.robot.trajectory_times[n:]
-        for c, t in zip(cells, times, strict=True):
-            self.events.append(SimEvent(float(t), "pose", (int(c[0]), int(c[1]))))
+        events = [
+            SimEvent(float(t), "pose", (int(c[0]), int(c[1]))) for c, t in zip(cells, times, strict=True)
+        ]
+        on_the_way = self.robot.readings_since(m)
+        for k in range(len(on_the_way)):
+            c = (int(on_the_way.cells[k, 0]), int(on_the_way.cells[k, 1]))
+            t = float(on_the_way.times[k])
+            # the pose of the reading's cell first (a path sample takes the nearest cell centre,
+            # which the robot can reach half a step before it enters the cell)
+            events.append(SimEvent(t, "pose", c))
+            gas, wind = float(on_the_way.gas[k]), (float(on_the_way.wind[k, 0]), float(on_the_way.wind[k, 1]))
+            events.append(SimEvent(t, "reading", c, gas, wind, at_goal=False))
+        events.sort(key=lambda e: e.time_s)  # stable: a reading after the pose of its time
+        self.events.extend(events)
         self._sense()
         return True
 
@@ -141,7 +160,7 @@ class SimRobot:
         while self.events and self.events[0].time_s <= until:
             e = self.events.popleft()
             self._clock = e.time_s
-            if e.kind == "reading":
+            if e.kind == "reading" and e.at_goal:
                 self.last_reading = e
                 self.idle = True
             out.append(e)
