@@ -207,9 +207,7 @@ class PhysicsGuidedEstimator(KnowledgeUser):
                 k.occupancy, prop.inlets, prop.outlets, resolution=k.resolution, name=k.name or "map"
             )
             # the flow's shape is what matters: one speed, the wind fit scales it (see estimate)
-            return flow_model(
-                layout, self.flows.map_speed, self.physics, self.flow_settings, coarse=self.flows.map_coarse
-            )
+            return flow_model(layout, self.flows.map_speed, self.physics, self.flow_settings)
 
         # the proposals' solves are independent (cold starts): one per thread, as many at once
         # as the machine has cores (the solver's kernels release the GIL)

@@ -61,7 +61,6 @@ class FlowHypotheses(Settings):
     warm_start: bool = True
     map_proposals: int = 5
     map_speed: float = 1.0
-    map_coarse: bool = False
     given_wind_prior: float = 0.5
     wind_noise_levels: tuple[float, ...] = (0.1, 0.25, 0.5)
     wind_noise_floor: float = 0.05
@@ -74,7 +73,6 @@ class FlowHypotheses(Settings):
             raise InputDataError(f"flows.refine_ratio must be a number > 1, got {self.refine_ratio!r}")
         self._set("warm_start", check_switch("flows.warm_start", self.warm_start))
         self._set("map_proposals", check_whole("flows.map_proposals", self.map_proposals, 1))
-        self._set("map_coarse", check_switch("flows.map_coarse", self.map_coarse))
         self._set("map_speed", check_positive_numbers("flows.map_speed", (self.map_speed,), " of m/s")[0])
         self._set(
             "given_wind_prior",

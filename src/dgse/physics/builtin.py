@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -16,15 +16,7 @@ from dgse.errors import ConvergenceError, InputDataError
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
 from dgse.physics.engines import FlowField, Solution, Source, check_mass_balance
 from dgse.physics.fv import Mesh, build_mesh
-from dgse.physics.rans import (
-    FlowSettings,
-    FlowState,
-    coarsen_layout,
-    face_fluxes,
-    prolong_state,
-    scale_state,
-    solve_flow,
-)
+from dgse.physics.rans import FlowSettings, FlowState, face_fluxes, scale_state, solve_flow
 from dgse.physics.transport import TransportSolver, check_release_cells
 from dgse.world.layout import Layout
 
@@ -65,40 +57,6 @@ def flow_and_transport(
         info=info,
     )
     return flow, TransportSolver.build(mesh, st.F, st.nut, physics)
-
-
-def coarse_flow_and_transport(
-    layout: Layout,
-    inlet_velocity: float,
-    physics: Physics = DEFAULT_PHYSICS,
-    settings: FlowSettings | None = None,
-) -> tuple[FlowField, TransportSolver]:
-    """A quick approximate flow: the RANS flow solved on a grid twice as coarse (to the settings'
-    ``coarse_tolerance``), interpolated to the layout's grid and made mass-conserving there with
-    the interpolated ``nu_t`` (:func:`dgse.physics.projection.project_wind`), and the transport
-    on it.  The fine solve where coarsening loses an opening's way out."""
-    from dgse.physics.projection import project_wind, transport_from_wind
-
-    v = check_inlet_velocity(inlet_velocity)
-    coarse = coarsen_layout(layout)
-    if coarse is None:
-        flow, ts = flow_and_transport(layout, v, physics, settings)
-        flow.info["grid"] = "fine"
-        return flow, ts
-    cmesh, mesh = build_mesh(coarse), build_mesh(layout)
-    s = settings or FlowSettings()
-    cst, info = solve_flow(coarse, cmesh, v, physics, replace(s, tolerance=max(s.tolerance, s.coarse_tolerance)))
-    info.pop("history", None)
-    st = prolong_state(cmesh, cst, mesh, v)
-    wind = mesh.field(np.stack([st.ux, st.uy]))
-    nut = mesh.field(st.nut)
-    proj = project_wind(layout.occupancy, layout.resolution, wind, layout, nut=nut, physics=physics)
-    info["grid"] = "coarse"
-    flow = FlowField(
-        wind=proj.wind, k=mesh.field(st.k), epsilon=mesh.field(st.eps), nut=nut,
-        pressure=mesh.field(st.p), info=info,
-    )  # fmt: skip
-    return flow, transport_from_wind(proj, physics)
 
 
 def _warm_state(mesh: Mesh, flow: FlowField, inlet_velocity: float) -> FlowState:

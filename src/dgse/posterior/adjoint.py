@@ -152,7 +152,7 @@ from scipy import special
 from dgse import threads
 from dgse.belief.inputs import map_key
 from dgse.errors import InputDataError
-from dgse.physics.builtin import coarse_flow_and_transport, flow_and_transport
+from dgse.physics.builtin import flow_and_transport
 from dgse.physics.constants import DEFAULT_PHYSICS, Physics
 from dgse.physics.engines import FlowField
 from dgse.physics.rans import FlowSettings
@@ -315,7 +315,6 @@ def flow_model(
     physics: Physics = DEFAULT_PHYSICS,
     settings: FlowSettings | None = None,
     warm_start: FlowModel | None = None,
-    coarse: bool = False,
 ) -> FlowModel:
     """The built-in solver's flow of ``layout`` at ``inlet_velocity`` (cached, the last 16 kept).
 
@@ -327,7 +326,7 @@ def flow_model(
     """
     v = float(inlet_velocity)
     start_v = None if warm_start is None else round(float(warm_start.inlet_velocity), 9)
-    key = (_layout_key(layout), round(v, 9), start_v, repr(settings), bool(coarse))
+    key = (_layout_key(layout), round(v, 9), start_v, repr(settings))
     with _FLOWS_LOCK:
         hit = _FLOWS.get(key)
         if hit is not None and hit.physics == physics:
@@ -335,10 +334,7 @@ def flow_model(
             return hit
     t0 = time.perf_counter()
     start = None if warm_start is None else warm_start.solved
-    if coarse:
-        flow, ts = coarse_flow_and_transport(layout, v, physics, settings)
-    else:
-        flow, ts = flow_and_transport(layout, v, physics, settings, warm_start=start)
+    flow, ts = flow_and_transport(layout, v, physics, settings, warm_start=start)
     info = {
         "converged": bool(flow.info.get("converged", False)),
         "iterations": flow.info.get("iterations"),
