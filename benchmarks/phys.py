@@ -8,8 +8,9 @@ only these), 2000-2019 test scenarios (never tuned on); ``../shared/reference-ca
 * ``gsl``: mean and median source-localization error and source cross-entropy from 5 to 300
   random readings (Table I noise) per method at its knowledge level (DGSE-S and dgse-phys at
   ``map``, ``adjoint`` and dgse-phys at ``openings``, dgse-phys and ``adjoint-oracle`` at
-  ``wind``), on the reference cases and generated test scenarios 2000-2007; every estimate
-  journaled; ``--workers N`` runs one process per case and count
+  ``wind``), on the reference cases and generated test scenarios 2000-2007 (``test``), and
+  on a fresh draw of test scenarios 2008-2015 with readings of seed 11 (``fresh``); every
+  estimate journaled; ``--workers N`` runs one process per case and count
   (:func:`dgse.bench.parallel.evaluate_parallel`).  ``OUT/<set>_<method>_<level>.json`` and
   ``OUT/summary.{json,md}``::
 
@@ -20,6 +21,8 @@ only these), 2000-2019 test scenarios (never tuned on); ``../shared/reference-ca
           --trials 20 --workers 2 --rounds 5 -o benchmarks/results/phys_gsl_20_tilt  # and _floor_openings
       python benchmarks/phys.py gsl --sets test reference --methods dgse-phys@wind \\
           --trials 20 --workers 2 --rounds 5 -o benchmarks/results/phys_gsl_20_given
+      python benchmarks/phys.py gsl --sets fresh --methods dgse-s@map dgse-phys@map \
+          --trials 10 -o benchmarks/results/phys_gsl_fresh
 
   ``phys_gsl_20_map_sqrt`` is ``dgse evaluate`` on the same cases: ``dgse evaluate
   benchmarks/results/phys_gsl_20_tilt/_test_cases -m dgse-phys --knowledge map -n N --trials 20
@@ -225,15 +228,19 @@ GSL_METHODS = [
     ("adjoint-oracle", "wind"),
 ]
 GSL_TEST_SEEDS = range(2000, 2008)
+#: the generated scenarios of each set but ``reference`` (OpenFOAM's cases), and each set's seed
+#: of the readings: ``fresh`` is a second draw of test scenarios and readings
+GSL_SCENARIOS = {"test": GSL_TEST_SEEDS, "fresh": range(2008, 2016)}
+GSL_READING_SEEDS = {"reference": 0, "test": 0, "fresh": 11}
 
 
-def _gsl_test_cases(out: Path) -> Path:
-    """The generated test scenarios as case files (made once)."""
+def _gsl_test_cases(out: Path, name: str = "test") -> Path:
+    """The generated scenarios of set ``name`` as case files (made once)."""
     from dgse.physics.scenario import random_cases
 
-    d = out / "_test_cases"
+    d = out / f"_{name}_cases"
     d.mkdir(parents=True, exist_ok=True)
-    for seed in GSL_TEST_SEEDS:
+    for seed in GSL_SCENARIOS[name]:
         path = d / f"test{seed}_src0.npz"
         if not path.exists():
             random_cases(seed, n_sources=1)[0].save(path)
@@ -290,7 +297,9 @@ def gsl(argv: list[str]) -> None:
     ap = _parser("gsl", "source localization from random readings per knowledge level")
     ap.add_argument("-o", "--out", type=Path, default=RESULTS / "phys_gsl")
     ap.add_argument("--trials", type=int, default=2)
-    ap.add_argument("--sets", nargs="+", default=["reference", "test"], choices=["reference", "test"])
+    ap.add_argument(
+        "--sets", nargs="+", default=["reference", "test"], choices=["reference", "test", "fresh"]
+    )
     ap.add_argument(
         "--methods",
         nargs="+",
@@ -316,9 +325,13 @@ def gsl(argv: list[str]) -> None:
         rows = [known[x] for x in args.methods]
     table: dict = {}
     sets = [] if args.summary_only else args.sets
-    sources = {name: args.reference if name == "reference" else _gsl_test_cases(args.out) for name in sets}
+    sources = {
+        name: args.reference if name == "reference" else _gsl_test_cases(args.out, name) for name in sets
+    }
     if args.workers < 1 or (args.rounds is not None and args.rounds < 1):
         ap.error("--workers and --rounds must be at least 1")
+    if args.workers > 1 and "fresh" in sets:
+        ap.error("--sets fresh runs with one worker (its readings have their own seed)")
     if sets and args.workers > 1:
         try:
             done = evaluate_parallel(
@@ -342,14 +355,15 @@ def gsl(argv: list[str]) -> None:
         for method, level in rows:
             out = args.out / f"{name}_{method}_{level}.json"
             res = evaluate(
-                sources[name], method, GSL_COUNTS, trials=args.trials, seed=0, knowledge=level,
+                sources[name], method, GSL_COUNTS, trials=args.trials, seed=GSL_READING_SEEDS[name],
+                knowledge=level,
                 journal=journal_path(out), progress=True,
             )  # fmt: skip
             write_json(res, out)
     # the summary covers every row in the folder, this run's and earlier runs' (one method per
     # process is the way to use both cores)
     per_estimate: dict[str, dict[str, dict[tuple, float]]] = {}
-    for name in ("reference", "test"):
+    for name in ("reference", "test", "fresh"):
         for method, level in GSL_METHODS:
             path = args.out / f"{name}_{method}_{level}.json"
             if not path.exists():

@@ -85,20 +85,22 @@ def test_replay_of_the_recording_gives_the_live_belief(loop):
     assert (replay / "belief.png").stat().st_size > 10_000
 
 
-def _two_commands(d, case_file, name: str) -> tuple[dict, str, str]:
-    """``dgse ros sim`` and ``dgse ros run`` in two processes: the run's stats, its output and
-    the simulation's."""
+def _two_commands(
+    d, case_file, name: str, sim_extra: tuple[str, ...] = (), run_extra: tuple[str, ...] = ()
+) -> tuple[dict, str, str]:
+    """``dgse ros sim`` and ``dgse ros run`` in two processes (each with its extra options): the
+    run's stats, its output and the simulation's."""
     env = ros_env()
     dgse = [PYTHON, "-m", "dgse.cli.main", "ros"]
     sim = subprocess.Popen(
-        [*dgse, "sim", str(case_file), "--seed", str(SEED), "--rate", "0", "--min-start-distance", "1",
-         "--origin", *map(str, ORIGIN), "--exit-on-stop", "--timeout", "60"],
+        [*dgse, "sim", str(case_file), "--seed", str(SEED), "--min-start-distance", "1",
+         "--origin", *map(str, ORIGIN), "--exit-on-stop", "--timeout", "60", *sim_extra],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
     )  # fmt: skip
     try:
         r = subprocess.run(
             [*dgse, "run", "-m", METHOD, "--seed", str(SEED), "--case-name", "two_rooms", "--sim-time",
-             "--stats", str(d / name), "--exit-on-stop", "--timeout", "60"],
+             "--stats", str(d / name), "--exit-on-stop", "--timeout", "60", *run_extra],
             capture_output=True, text=True, env=env, timeout=90,
         )  # fmt: skip
         sim_out, sim_err = sim.communicate(timeout=30)
@@ -112,7 +114,7 @@ def _two_commands(d, case_file, name: str) -> tuple[dict, str, str]:
 def test_the_two_commands_in_two_processes(loop):
     """``dgse ros sim`` and ``dgse ros run`` as a user starts them, in two terminals."""
     d, case_file, _, ref = loop
-    stats, out, sim_out = _two_commands(d, case_file, "cli-stats.json")
+    stats, out, sim_out = _two_commands(d, case_file, "cli-stats.json", ("--rate", "0"))
     assert "search stopped (converged)" in out and "declared source" in out
     assert f"{len(ref['steps']) - 1} goals" in sim_out
     _same_as_search(stats, ref)
@@ -123,25 +125,8 @@ def test_readings_on_the_way_through_the_two_commands(loop):
     and go into its estimates with the goals' (the exact pairing is the core's test: a gas
     message without a stamp is timed on arrival, so the simulation runs paced here)."""
     d, case_file, _, _ = loop
-    extra = ("--sample-rate", "2", "--rate", "20")
-    env = ros_env()
-    dgse = [PYTHON, "-m", "dgse.cli.main", "ros"]
-    sim = subprocess.Popen(
-        [*dgse, "sim", str(case_file), "--seed", str(SEED), "--min-start-distance", "1",
-         "--origin", *map(str, ORIGIN), "--exit-on-stop", "--timeout", "60", *extra],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-    )  # fmt: skip
-    try:
-        r = subprocess.run(
-            [*dgse, "run", "-m", METHOD, "--seed", str(SEED), "--case-name", "two_rooms", "--sim-time",
-             "--stats", str(d / "sampled.json"), "--exit-on-stop", "--timeout", "60", "--sample-rate", "2"],
-            capture_output=True, text=True, env=env, timeout=90,
-        )  # fmt: skip
-        sim.communicate(timeout=30)
-    finally:
-        sim.kill()
-    assert r.returncode == 0, (r.stdout, r.stderr)
-    stats = json.loads((d / "sampled.json").read_text())
+    rate = ("--sample-rate", "2")
+    stats, _, _ = _two_commands(d, case_file, "sampled.json", (*rate, "--rate", "20"), rate)
     steps = [s["step"] for s in stats["decisions"]]
     assert len(steps) > 1 and steps[-1] > len(steps)  # more readings than goals
     assert stats["status"]["state"] == "stopped"
