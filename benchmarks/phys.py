@@ -22,7 +22,7 @@ only these), 2000-2019 test scenarios (never tuned on); ``../shared/reference-ca
       python benchmarks/phys.py gsl --sets test reference --methods dgse-phys@wind \\
           --trials 20 --workers 2 --rounds 5 -o benchmarks/results/phys_gsl_20_given
       python benchmarks/phys.py gsl --sets fresh --methods dgse-s@map dgse-phys@map \
-          --trials 10 -o benchmarks/results/phys_gsl_fresh
+          --trials 20 -o benchmarks/results/phys_gsl_fresh
 
   ``phys_gsl_20_map_sqrt`` is ``dgse evaluate`` on the same cases: ``dgse evaluate
   benchmarks/results/phys_gsl_20_tilt/_test_cases -m dgse-phys --knowledge map -n N --trials 20

@@ -362,7 +362,6 @@ class SearchCore:
         self.gas_log: list[tuple[float, float]] = []
         self.pose_log: list[tuple[float, Cell]] = []
         self.wind_log: list[tuple[float, float, float]] = []
-        self.readings = 0
         self.rejected: list[Cell] = []
         self.latest_time = -math.inf
         self.reason: str | None = None
@@ -523,7 +522,7 @@ class SearchCore:
             self.log("warning", "gas reading before any pose: ignored")
             return None
         if self.setup.sample_rate_hz is not None:
-            self.gas_log.append((float(ppm), float(t)))  # perhaps one on the way (module docstring)
+            self.gas_log.append((float(t), float(ppm)))  # perhaps one on the way (module docstring)
         if self.target != self.cell or self.arrived_at is None:
             return None
         due = self.arrived_at + self.setup.dwell - TIME_TOLERANCE_S
@@ -544,7 +543,7 @@ class SearchCore:
         """The readings on the way to the current goal (module docstring): ``(cell, ppm, wind,
         t)`` in time order, one per sampling period at most; the logs are emptied."""
         rate = self.setup.sample_rate_hz
-        gas, poses, winds = sorted(self.gas_log, key=lambda g: g[1]), self.pose_log, sorted(self.wind_log)
+        gas, poses, winds = sorted(self.gas_log), self.pose_log, sorted(self.wind_log)
         self.gas_log, self.wind_log = [], []
         self.pose_log = poses[-1:]
         if rate is None or self.arrived_at is None:
@@ -552,7 +551,7 @@ class SearchCore:
         period = 1.0 / rate
         out: list[tuple[Cell, float, tuple[float, float], float]] = []
         last = self.last_time
-        for ppm, t in gas:
+        for t, ppm in gas:
             if t > self.arrived_at + TIME_TOLERANCE_S:
                 break
             if last is not None and t < last + period - TIME_TOLERANCE_S:
@@ -579,10 +578,9 @@ class SearchCore:
             np.array([w for *_, w, _ in taken], np.float64).reshape(-1, 2),
             np.array([tr - self.t_start for *_, tr in taken], np.float64),
         )
-        self.readings += len(taken)
         h = self.history
         h.trajectory = np.array(self.trajectory, np.int64).reshape(-1, 2)
-        h.time_s, h.distance_m, h.step = clock, self.distance_m, self.readings
+        h.time_s, h.distance_m, h.step = clock, self.distance_m, len(self.stream.observations) + len(taken)
         self.last_time = t
         self.rejected = []
         if self.follow_goals:
@@ -617,7 +615,7 @@ class SearchCore:
         else:
             declared = self.to_map_frame(belief.source_estimate())
         d = Decision(
-            step=self.readings,
+            step=len(self.stream.observations),
             cell=self.cell,
             time_s=clock,
             gas=ppm,
